@@ -29,6 +29,8 @@ __all__ = [
     "TagSighting",
     "GroundTruthPose",
     "GroundTruthWorld",
+    "ObjectObservation",
+    "LogData",
     "Record",
     "Role",
 ]
@@ -232,4 +234,65 @@ class GroundTruthWorld:
     json_text: str
 
 
+@dataclass(frozen=True, slots=True)
+class ObjectObservation:
+    """A QR-tagged object located from one image (or a pair): the label centre in the base frame at
+    ``stamp_ns`` (``b_position`` (3,) metres) with its covariance ``cov_b_position`` (3x3), produced by the
+    vision layer for the backend's landmark factors (Eq. 16). ``payload`` is the decoded label text."""
+
+    stamp_ns: int
+    object_id: str
+    payload: str
+    b_position: np.ndarray
+    cov_b_position: np.ndarray
+    method: str = "pnp"  # "pnp" (single view, known label size) or "triangulation" (two views)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "b_position", _readonly(np.asarray(self.b_position, dtype=np.float64).reshape(3)))
+        object.__setattr__(
+            self, "cov_b_position", _readonly(np.asarray(self.cov_b_position, dtype=np.float64).reshape(3, 3))
+        )
+
+
 Record = Odometry | Heading | Scan | Image | CameraInfo | Transform | TagSighting | GroundTruthPose | GroundTruthWorld
+
+
+@dataclass(frozen=True, slots=True)
+class LogData:
+    """Every record of one log, grouped by kind and sorted by ``stamp_ns`` (what ingestion returns).
+
+    The ``*_arrays`` helpers give the numeric streams as numpy arrays for the algorithms.
+    """
+
+    source: str
+    odometry: tuple[Odometry, ...] = ()
+    headings: tuple[Heading, ...] = ()
+    scans: tuple[Scan, ...] = ()
+    images: tuple[Image, ...] = ()
+    camera_infos: tuple[CameraInfo, ...] = ()
+    transforms: tuple[Transform, ...] = ()
+    tags: tuple[TagSighting, ...] = ()
+    ground_truth: tuple[GroundTruthPose, ...] = ()
+    world_json: str | None = None
+
+    def odometry_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps_ns (N,) int64, odomTb (N, 3) float64)."""
+        stamps = np.fromiter((o.stamp_ns for o in self.odometry), dtype=np.int64, count=len(self.odometry))
+        poses = np.array([(o.odomTb.x, o.odomTb.y, o.odomTb.theta) for o in self.odometry], dtype=np.float64)
+        return stamps, poses.reshape(-1, 3)
+
+    def heading_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(stamps_ns (N,) int64, yaw (N,) float64, sigma (N,) float64, NaN where unknown)."""
+        h = self.headings
+        return (
+            np.fromiter((r.stamp_ns for r in h), dtype=np.int64, count=len(h)),
+            np.fromiter((r.yaw for r in h), dtype=np.float64, count=len(h)),
+            np.fromiter((r.sigma for r in h), dtype=np.float64, count=len(h)),
+        )
+
+    def ground_truth_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps_ns (N,) int64, wTb (N, 3) float64); empty arrays when the log has no ground truth."""
+        g = self.ground_truth
+        stamps = np.fromiter((r.stamp_ns for r in g), dtype=np.int64, count=len(g))
+        poses = np.array([(r.wTb.x, r.wTb.y, r.wTb.theta) for r in g], dtype=np.float64)
+        return stamps, poses.reshape(-1, 3)
