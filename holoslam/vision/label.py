@@ -12,7 +12,8 @@ Format (ASCII, at most 64 characters so that a version-3/4 QR code holds it at e
 - ``type``  object type: 1-24 of ``a-z 0-9 _`` (``cup``, ``air_conditioner``).
 - attributes: optional comma-separated ``key=value`` pairs; keys 1-8 of ``a-z``, values 0-16 of
   ``A-Z a-z 0-9 . _ -``. Documented keys: ``g`` grasp (``handle``, ``top``, ``side``, ``none``),
-  ``m`` mass in kg, ``f`` fragile (0/1), ``h`` label height above the floor in m.
+  ``m`` mass in kg, ``f`` fragile (0/1), ``s`` printed side of the QR code (outer corners of the finder
+  patterns, quiet zone excluded) in millimetres, which single-view localisation (PnP) needs.
 
 Payloads are untrusted text: they are matched against this grammar and never evaluated. A text that is not
 a holoslam label raises ``PayloadError`` saying why; callers report such codes as foreign, never guess.
@@ -45,6 +46,15 @@ class ObjectLabel:
 
     def attribute(self, key: str, default: str | None = None) -> str | None:
         return dict(self.attributes).get(key, default)
+
+    @property
+    def size_m(self) -> float | None:
+        """The printed code side in metres from the ``s`` attribute (millimetres), or None."""
+        v = self.attribute("s")
+        try:
+            return float(v) / 1000.0 if v else None
+        except ValueError:
+            return None
 
 
 def encode_label(label: ObjectLabel) -> str:
