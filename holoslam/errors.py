@@ -17,6 +17,7 @@ __all__ = [
     "SolverError",
     "MapError",
     "PlanningError",
+    "VisionError",
 ]
 
 
@@ -58,3 +59,8 @@ class MapError(HoloslamError):
 
 class PlanningError(HoloslamError):
     """A planning query has no answer (unknown object, unreachable goal)."""
+
+
+class VisionError(HoloslamError):
+    """Camera geometry or an image measurement is invalid (a non-orthonormal rotation, a point behind the
+    camera, a degenerate view pair, a missing camera calibration)."""

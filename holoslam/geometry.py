@@ -32,6 +32,7 @@ __all__ = [
 def wrap(theta: np.ndarray | float) -> np.ndarray | float:
     """Wrap angles to [-pi, pi)."""
     w = (np.asarray(theta, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+    w = np.where(w >= np.pi, -np.pi, w)  # float rounding can land exactly on +pi
     return float(w) if np.ndim(theta) == 0 else w
 
 

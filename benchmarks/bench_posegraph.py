@@ -1,0 +1,177 @@
+"""Optimise standard 2D pose graphs with holoslam and with a direct gtsam call, in the same process.
+
+For each file: poses, factors, LM iterations, initial and final error, the median time of holoslam's whole path
+(read, build, solve: ``holoslam.solve.solve_g2o_file``) next to gtsam's (``readG2o`` / ``load2D`` +
+``LevenbergMarquardtOptimizer``, with the same prior on the first pose), their ratio (goal <= 1.2) and the relative
+difference of their final errors (goal <= 1e-6). A second table compares initialisations (the file's guess, the
+odometry chain, LAGO, an incremental iSAM2 pass then LM) to show which reaches the best (global) optimum, and an
+iSAM2-only pass over Victoria Park is compared with the batch result.
+
+    python benchmarks/bench_posegraph.py [--quick] [--repeats 3] [--files intel,CSAIL]
+
+Data: the gtsam wheel's ``victoria_park.txt`` and ``w10000.graph``, and the files in ``$HOLOSLAM_POSEGRAPH_DIR``
+(default ``../shared/posegraph`` relative to the repository) when present.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import gtsam
+import numpy as np
+
+from holoslam.solve import Initialisation, Method, SolveOptions, solve, solve_g2o_file
+
+REPO = Path(__file__).resolve().parents[1]
+BIG = 5000  # poses: --quick skips files at least this big
+
+
+def datasets() -> list[tuple[str, Path, str]]:
+    """(name, path, gtsam reader) of every file present."""
+    out = [
+        ("victoria_park (wheel)", Path(gtsam.findExampleDataFile("victoria_park.txt")), "load2D"),
+        ("w10000 (wheel)", Path(gtsam.findExampleDataFile("w10000.graph")), "load2D"),
+    ]
+    folder = Path(os.environ.get("HOLOSLAM_POSEGRAPH_DIR", REPO.parent / "shared" / "posegraph"))
+    for name in (
+        "intel",
+        "CSAIL",
+        "MITb",
+        "FR079",
+        "FRH",
+        "M3500",
+        "manhattan",
+        "intel_g2o943",
+        "manhattanOlson3500",
+        "city10000",
+        "ais2klinik",
+    ):
+        p = folder / f"{name}.g2o"
+        if p.exists():
+            out.append((name, p, "readG2o"))
+    return out
+
+
+def count_poses(path: Path) -> int:
+    ids = set()
+    with open(path) as f:
+        for line in f:
+            parts = line.split()
+            if parts and parts[0] in ("VERTEX_SE2", "VERTEX2", "EDGE_SE2", "EDGE2", "ODOMETRY"):
+                ids.add(int(parts[1]))
+                if parts[0] not in ("VERTEX_SE2", "VERTEX2"):
+                    ids.add(int(parts[2]))
+    return len(ids)
+
+
+def gtsam_direct(path: Path, reader: str) -> tuple[float, float, int, int]:
+    """readG2o / load2D + LM with a prior on the first pose; returns (seconds, final error, iterations, factors)."""
+    t0 = time.perf_counter()
+    if reader == "readG2o":
+        graph, values = gtsam.readG2o(str(path))
+    else:
+        graph, values = gtsam.load2D(str(path))
+    first = min(k for k in values.keys() if gtsam.Symbol(k).chr() == 0)
+    graph.add(
+        gtsam.PriorFactorPose2(
+            first, values.atPose2(first), gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, 1e-5]))
+        )
+    )
+    opt = gtsam.LevenbergMarquardtOptimizer(graph, values, gtsam.LevenbergMarquardtParams())
+    result = opt.optimize()
+    return time.perf_counter() - t0, graph.error(result), opt.iterations(), graph.size()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help=f"skip files with {BIG} poses or more")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--files", default="", help="comma-separated subset of names")
+    ap.add_argument("--no-init", action="store_true", help="skip the initialisation comparison")
+    args = ap.parse_args()
+
+    files = datasets()
+    if args.files:
+        want = set(args.files.split(","))
+        files = [f for f in files if f[0].split(" ")[0] in want]
+    if args.quick:
+        files = [f for f in files if count_poses(f[1]) < BIG]
+
+    print(
+        "## holoslam vs direct gtsam (batch LM from the file's initial guess, first pose fixed), "
+        f"median of {args.repeats}"
+    )
+    hdr = (
+        f"{'file':24s} {'poses':>6s} {'factors':>7s} {'iters':>5s} {'initial E':>12s} {'final E':>12s} "
+        f"{'gtsam E':>12s} {'rel diff':>9s} {'holoslam s':>10s} {'gtsam s':>8s} {'ratio':>6s}"
+    )
+    print(hdr)
+    print("-" * len(hdr))
+    summaries = {}
+    for name, path, reader in files:
+        ours, theirs = [], []
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            summary, _sol = solve_g2o_file(path)
+            ours.append(time.perf_counter() - t0)
+            t, e_g, it_g, nf = gtsam_direct(path, reader)
+            theirs.append(t)
+        summaries[name] = (path, summary)
+        to, tg = statistics.median(ours), statistics.median(theirs)
+        rel = abs(summary.final_error - e_g) / max(abs(e_g), 1e-300)
+        print(
+            f"{name:24s} {summary.num_poses:6d} {nf:7d} {summary.iterations:5d} {summary.initial_error:12.6g} "
+            f"{summary.final_error:12.6g} {e_g:12.6g} {rel:9.1e} {to:10.3f} {tg:8.3f} {to / tg:6.2f}"
+        )
+
+    if args.no_init:
+        return
+    print()
+    print("## initialisation: final error of LM from each start (best = global optimum reached)")
+    inits = (Initialisation.PROBLEM, Initialisation.ODOMETRY, Initialisation.LAGO, Initialisation.INCREMENTAL)
+    hdr = f"{'file':24s} " + " ".join(f"{i.value:>14s}" for i in inits) + f" {'file guess best?':>17s}"
+    print(hdr)
+    print("-" * len(hdr))
+    for name, (path, _) in summaries.items():
+        errs = []
+        for init in inits:
+            try:
+                s, _ = solve_g2o_file(path, initialisation=init)
+                errs.append(s.final_error)
+            except Exception as e:  # noqa: BLE001 - the table reports any failure
+                errs.append(float("nan"))
+                print(f"  {name} {init.value}: {type(e).__name__}: {e}")
+        best = np.nanmin(errs)
+        ok = abs(errs[0] - best) <= 1e-6 * best
+        print(f"{name:24s} " + " ".join(f"{e:14.6g}" for e in errs) + f" {'yes' if ok else 'no':>17s}")
+
+    vp = next((p for n, (p, _) in summaries.items() if n.startswith("victoria")), None)
+    if vp is not None:
+        print()
+        print("## iSAM2 pass over Victoria Park (QR factorisation) vs batch LM after an incremental start")
+        from holoslam.graph.problem import problem_from_g2o
+        from holoslam.io.g2o import read_g2o
+
+        problem = problem_from_g2o(read_g2o(vp))
+        base = SolveOptions(reject_outliers=False, detect_moved=False, final_gaussian=False)
+        base = replace(base, build=base.build.without_kernels())
+        t0 = time.perf_counter()
+        inc = solve(problem, replace(base, method=Method.ISAM2, isam2_extra_updates=2))
+        t1 = time.perf_counter()
+        bat = solve(problem, replace(base, initialisation=Initialisation.INCREMENTAL))
+        t2 = time.perf_counter()
+        dxy = np.abs(inc.wTa[:, :2] - bat.wTa[:, :2]).max()
+        print(
+            f"iSAM2: E {inc.final_error:.6g} in {t1 - t0:.2f} s ({inc.iterations} updates); batch: E "
+            f"{bat.final_error:.6g} in {t2 - t1:.2f} s; max |dxy| {dxy:.3g} m, "
+            f"rel error diff {abs(inc.final_error - bat.final_error) / bat.final_error:.2e}"
+        )
+
+
+if __name__ == "__main__":
+    main()

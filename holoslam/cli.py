@@ -1,0 +1,258 @@
+"""The ``holoslam`` command: parses arguments, calls one library function per command, prints, and maps
+errors to exit codes. Only this module prints or exits.
+
+Exit codes: 0 success; 1 the job ran but something failed (a log in a batch, an unreachable goal);
+2 bad input (a missing or unreadable required input, a malformed file or config, a usage error).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from holoslam import __version__
+from holoslam.errors import ConfigError, HoloslamError, PlanningError
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class Progress:
+    """Stage-by-stage progress on stderr: a line per finished stage with its time; quiet when asked."""
+
+    def __init__(self, quiet: bool = False) -> None:
+        self.quiet = quiet
+        self.tty = sys.stderr.isatty()
+        self._t0 = time.perf_counter()
+        self._last = ""
+
+    def __call__(self, stage: str, done: float | None = None, total: float | None = None) -> None:
+        if self.quiet:
+            return
+        if done is not None and total:
+            line = f"  {stage}: {100.0 * done / total:5.1f}%"
+            if self.tty:
+                sys.stderr.write("\r" + line.ljust(len(self._last)))
+                sys.stderr.flush()
+                self._last = line
+            return
+        if self._last:
+            sys.stderr.write("\n")
+            self._last = ""
+        sys.stderr.write(f"[{time.perf_counter() - self._t0:7.2f}s] {stage}\n")
+        sys.stderr.flush()
+
+
+def _err(msg: str) -> None:
+    sys.stderr.write(f"holoslam: {msg}\n")
+
+
+def _parse_xy(text: str) -> tuple[float, float]:
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected x,y in metres (for example 1.5,-2), got {text!r}") from None
+    return x, y
+
+
+# ---------------------------------------------------------------------------------------------- commands
+
+
+def cmd_simulate(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import simulate
+
+    summary = simulate(
+        a.output, seed=a.seed, duration_s=a.duration, image_rate_hz=a.image_rate, noise_scale=a.noise_scale
+    )
+    print(json.dumps(summary, indent=2) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
+    return EXIT_OK
+
+
+def cmd_inspect(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import inspect
+
+    text, data = inspect(a.log, mapping=a.mapping)
+    print(json.dumps(data, indent=2) if a.json else text)
+    return EXIT_OK
+
+
+def cmd_run(a: argparse.Namespace) -> int:
+    from holoslam.batch import collect_logs
+    from holoslam.pipeline import load_run_config, run_logs
+
+    config = load_run_config(a.config)
+    logs = collect_logs(a.logs)
+    if not logs:
+        raise ConfigError(f"no logs found in {', '.join(map(str, a.logs))}; give .mcap files or folders of them")
+    progress = Progress(quiet=a.quiet or a.json)
+    outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress)
+    if a.json:
+        print(json.dumps(outcome, indent=2))
+    elif not a.quiet:
+        print(outcome["text"])
+    return EXIT_OK if outcome["ok"] else EXIT_FAILED
+
+
+def cmd_solve(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import solve_graph_file
+
+    summary = solve_graph_file(a.input, a.output, tum=a.tum, method=a.method, init=a.init, kernel=a.kernel)
+    print(json.dumps(summary, indent=2) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
+    return EXIT_OK
+
+
+def cmd_plan(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import plan_to_object
+
+    route = plan_to_object(a.run, a.to, from_xy=a.from_xy)
+    if a.json:
+        print(json.dumps(route, indent=2))
+    else:
+        print(route["text"])
+    return EXIT_OK
+
+
+def cmd_export(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import export_run
+
+    written = export_run(a.run, a.to, formats=a.formats)
+    print("\n".join(str(p) for p in written))
+    return EXIT_OK
+
+
+def cmd_datasets(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import list_datasets
+
+    rows = list_datasets()
+    if a.json:
+        print(json.dumps(rows, indent=2))
+        return EXIT_OK
+    for r in rows:
+        where = r.get("path") or f"not here ({r.get('source', 'see manifest')})"
+        print(f"{r['name']:<24} {r.get('kind', ''):<12} {where}")
+    return EXIT_OK
+
+
+def cmd_tags(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import decode_tags
+
+    failed = 0
+    for item in decode_tags(a.images):
+        if "error" in item:
+            failed += 1
+            _err(item["error"])
+            continue
+        if a.json:
+            print(json.dumps(item))
+        else:
+            what = f"label {item['label']['object_id']} ({item['label']['kind']})" if item.get("label") else "foreign"
+            print(f"{item['image']}: {what}: {item['payload']!r}")
+    return EXIT_FAILED if failed and failed == len(a.images) else EXIT_OK
+
+
+def cmd_topology(a: argparse.Namespace) -> int:
+    from holoslam.pipeline import topology_from_map_file
+
+    summary = topology_from_map_file(a.map, a.output)
+    print("\n".join(f"{k}: {v}" for k, v in summary.items()))
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="holoslam",
+        description="Factor-graph SLAM backend for household service robots: logs in, holographic maps out.",
+    )
+    p.add_argument("--version", action="version", version=f"holoslam {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = sub.add_parser("run", help="ingest, optimise and export one or many logs")
+    s.add_argument("logs", nargs="+", help="MCAP files, rosbag2 folders, or folders of them")
+    s.add_argument("-o", "--output", required=True, type=Path, help="output folder (one sub-folder per log)")
+    s.add_argument("--config", type=Path, help="YAML run configuration (see README)")
+    s.add_argument("--workers", type=int, help="parallel processes for many logs (default: all cores)")
+    s.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) to run many logs on a cluster")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    s.add_argument("--json", action="store_true", help="print the summary as JSON only")
+    s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("inspect", help="summarise a log's channels without reading its messages")
+    s.add_argument("log", type=Path)
+    s.add_argument("--mapping", type=Path, help="YAML topic-role mapping for custom topics")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_inspect)
+
+    s = sub.add_parser("simulate", help="write a simulated reference-household log")
+    s.add_argument("-o", "--output", required=True, type=Path, help="MCAP file to write")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--duration", type=float, default=None, help="seconds of robot time (default: whole route)")
+    s.add_argument("--image-rate", type=float, default=None, help="max camera snapshots per second")
+    s.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise by this")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("solve", help="optimise a g2o (or TORO/iSAM text) pose graph")
+    s.add_argument("input", type=Path)
+    s.add_argument("-o", "--output", required=True, type=Path, help="optimised graph (.g2o)")
+    s.add_argument("--tum", type=Path, help="also write the optimised poses as TUM text")
+    s.add_argument("--method", choices=["lm", "isam2"], default="lm")
+    s.add_argument("--init", choices=["file", "odometry", "lago", "incremental"], default="file")
+    s.add_argument("--kernel", choices=["none", "huber", "cauchy", "dcs", "gm"], default="none")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_solve)
+
+    s = sub.add_parser("plan", help="route from a pose to an object in a run's output")
+    s.add_argument("run", type=Path, help="a run's output folder")
+    s.add_argument("--to", required=True, help="object id (or type)")
+    s.add_argument("--from", dest="from_xy", type=_parse_xy, help="start x,y in metres (default: last pose)")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_plan)
+
+    s = sub.add_parser("export", help="re-export a saved run (pictures, results MCAP, graphs)")
+    s.add_argument("run", type=Path)
+    s.add_argument("--to", type=Path, help="folder to write into (default: the run folder)")
+    s.add_argument("--formats", nargs="+", default=["all"], choices=["all", "pictures", "mcap", "graphs", "tum"])
+    s.set_defaults(func=cmd_export)
+
+    s = sub.add_parser("datasets", help="list the bundled and known datasets and where they are")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_datasets)
+
+    s = sub.add_parser("tags", help="decode the QR labels in image files")
+    s.add_argument("images", nargs="+")
+    s.add_argument("--json", action="store_true", help="one JSON object per decoded code")
+    s.set_defaults(func=cmd_tags)
+
+    s = sub.add_parser("topology", help="topology graph of a ROS map_server map (PGM/PNG + YAML)")
+    s.add_argument("map", type=Path, help="map YAML")
+    s.add_argument("-o", "--output", required=True, type=Path, help="GraphML to write (JSON beside it)")
+    s.set_defaults(func=cmd_topology)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except PlanningError as e:
+        _err(str(e))
+        return EXIT_FAILED
+    except HoloslamError as e:
+        _err(str(e))
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        _err("interrupted")
+        return 130
+    except BrokenPipeError:
+        return EXIT_OK
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,207 @@
+"""One small builder per factor family; each returns its own ``gtsam.NonlinearFactorGraph``.
+
+This module (with ``build.py``) is the only place that creates gtsam factors. gtsam is imported inside the
+functions, so importing holoslam stays cheap.
+
+Noise: every factor's Gaussian noise comes from the measurement's covariance (``noiseModel.Gaussian.Covariance``
+with gtsam's "smart" detection of diagonal matrices, shared between equal covariances). A robust kernel, when
+asked for, wraps it (``noiseModel.Robust``): Huber, Cauchy, DCS (dynamic covariance scaling) or Geman-McClure,
+with its parameter in whitened (sigma) units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+import numpy as np
+
+from holoslam.errors import GraphError
+
+__all__ = [
+    "RobustKernel",
+    "Kernel",
+    "NoiseCache",
+    "between_factors",
+    "prior_factors",
+    "heading_factors",
+    "magnetic_frame_prior",
+    "landmark_factors",
+    "bearing_range_from_xy",
+]
+
+
+class RobustKernel(str, Enum):
+    NONE = "none"
+    HUBER = "huber"
+    CAUCHY = "cauchy"
+    DCS = "dcs"
+    GEMAN_MCCLURE = "geman_mcclure"
+
+
+@dataclass(frozen=True, slots=True)
+class Kernel:
+    """A robust kernel and its parameter (whitened units: residual / sigma)."""
+
+    kind: RobustKernel = RobustKernel.NONE
+    parameter: float = 1.0
+
+    def make(self) -> Any:
+        import gtsam
+
+        m = gtsam.noiseModel.mEstimator
+        k = RobustKernel(self.kind)
+        if k is RobustKernel.NONE:
+            return None
+        if not self.parameter > 0:
+            raise GraphError(f"robust kernel {k.value} needs a parameter > 0, got {self.parameter}")
+        return {
+            RobustKernel.HUBER: m.Huber.Create,
+            RobustKernel.CAUCHY: m.Cauchy.Create,
+            RobustKernel.DCS: m.DCS.Create,
+            RobustKernel.GEMAN_MCCLURE: m.GemanMcClure.Create,
+        }[k](float(self.parameter))
+
+
+NO_KERNEL = Kernel()
+
+
+class NoiseCache:
+    """Shares one gtsam noise model between equal covariances (pose graphs often have only a few)."""
+
+    def __init__(self, kernel: Kernel = NO_KERNEL) -> None:
+        self._cache: dict[bytes, Any] = {}
+        self._estimator = kernel.make()
+
+    def covariance(self, cov: np.ndarray) -> Any:
+        import gtsam
+
+        key = np.ascontiguousarray(cov, dtype=np.float64).tobytes()
+        model = self._cache.get(key)
+        if model is None:
+            try:
+                model = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64), True)
+            except RuntimeError as e:
+                raise GraphError(
+                    f"covariance {np.asarray(cov).tolist()} is not usable as noise: {e}"
+                ) from None
+            if self._estimator is not None:
+                model = gtsam.noiseModel.Robust.Create(self._estimator, model)
+            self._cache[key] = model
+        return model
+
+
+def between_factors(
+    keys_i: np.ndarray, keys_j: np.ndarray, iTj: np.ndarray, cov_iTj: np.ndarray, kernel: Kernel = NO_KERNEL
+) -> Any:
+    """BetweenFactorPose2(key_i, key_j, iTj) for each row, noise from ``cov_iTj``."""
+    import gtsam
+
+    graph = gtsam.NonlinearFactorGraph()
+    noise = NoiseCache(kernel)
+    Pose2, Between = gtsam.Pose2, gtsam.BetweenFactorPose2
+    for ki, kj, m, c in zip(keys_i.tolist(), keys_j.tolist(), iTj.tolist(), cov_iTj, strict=True):
+        graph.add(Between(ki, kj, Pose2(m[0], m[1], m[2]), noise.covariance(c)))
+    return graph
+
+
+def prior_factors(keys: np.ndarray, wTa: np.ndarray, cov_wTa: np.ndarray) -> Any:
+    """PriorFactorPose2 on each key."""
+    import gtsam
+
+    graph = gtsam.NonlinearFactorGraph()
+    noise = NoiseCache()
+    for k, m, c in zip(
+        np.asarray(keys).tolist(),
+        np.reshape(wTa, (-1, 3)).tolist(),
+        np.reshape(cov_wTa, (-1, 3, 3)),
+        strict=True,
+    ):
+        graph.add(gtsam.PriorFactorPose2(k, gtsam.Pose2(*m), noise.covariance(c)))
+    return graph
+
+
+def heading_factors(
+    anchor_keys: np.ndarray,
+    yaw: np.ndarray,
+    sigma: np.ndarray,
+    magnetic_key: int,
+    kernel: Kernel = NO_KERNEL,
+    xy_sigma: float = 1e4,
+) -> Any:
+    """Compass headings as BetweenFactorPose2(M, a_i, Pose2(0, 0, yaw_i)) with sigmas (xy_sigma, xy_sigma, sigma_i).
+
+    M is the compass's magnetic frame: its rotation is the angle from the world x axis to the compass's zero, so
+    ``theta_a = theta_M + yaw`` and the compass's constant bias (yaw = theta_a + bias) is ``-theta_M``. The huge
+    x/y sigmas make the factor constrain the heading only.
+    """
+    import gtsam
+
+    graph = gtsam.NonlinearFactorGraph()
+    est = kernel.make()
+    for k, y, s in zip(
+        np.asarray(anchor_keys).tolist(), np.asarray(yaw).tolist(), np.asarray(sigma).tolist(), strict=True
+    ):
+        model = gtsam.noiseModel.Diagonal.Sigmas(np.array([xy_sigma, xy_sigma, s]))
+        if est is not None:
+            model = gtsam.noiseModel.Robust.Create(est, model)
+        graph.add(gtsam.BetweenFactorPose2(magnetic_key, k, gtsam.Pose2(0.0, 0.0, y), model))
+    return graph
+
+
+def magnetic_frame_prior(magnetic_key: int, theta0: float, xy_sigma: float = 1.0) -> Any:
+    """Pins the magnetic frame's (meaningless) position at the origin; its rotation stays free."""
+    import gtsam
+
+    graph = gtsam.NonlinearFactorGraph()
+    graph.add(
+        gtsam.PriorFactorPose2(
+            magnetic_key,
+            gtsam.Pose2(0.0, 0.0, theta0),
+            gtsam.noiseModel.Diagonal.Sigmas(np.array([xy_sigma, xy_sigma, 1e4])),
+        )
+    )
+    return graph
+
+
+def bearing_range_from_xy(
+    a_position: np.ndarray, cov_a_position: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bearing, range and their 2x2 covariance (first-order propagation) of points in an anchor frame."""
+    x, y = a_position[:, 0], a_position[:, 1]
+    r2 = x * x + y * y
+    r = np.sqrt(r2)
+    J = np.stack([np.stack([-y / r2, x / r2], -1), np.stack([x / r, y / r], -1)], -2)
+    cov = J @ cov_a_position @ np.swapaxes(J, 1, 2)
+    return np.arctan2(y, x), r, 0.5 * (cov + np.swapaxes(cov, 1, 2))
+
+
+def landmark_factors(
+    anchor_keys: np.ndarray,
+    landmark_keys: np.ndarray,
+    a_position: np.ndarray,
+    cov_a_position: np.ndarray,
+    kernel: Kernel = NO_KERNEL,
+) -> Any:
+    """Eq. 16 of seed 002: an object seen at ``a_position`` in an anchor frame, as a native BearingRangeFactor2D
+    whose bearing/range covariance is the x/y covariance propagated to first order."""
+    import gtsam
+
+    graph = gtsam.NonlinearFactorGraph()
+    if len(anchor_keys) == 0:
+        return graph
+    bearing, rng, cov = bearing_range_from_xy(
+        np.asarray(a_position, float), np.asarray(cov_a_position, float)
+    )
+    noise = NoiseCache(kernel)
+    for ka, kl, b, r, c in zip(
+        np.asarray(anchor_keys).tolist(),
+        np.asarray(landmark_keys).tolist(),
+        bearing.tolist(),
+        rng.tolist(),
+        cov,
+        strict=True,
+    ):
+        graph.add(gtsam.BearingRangeFactor2D(ka, kl, gtsam.Rot2(b), r, noise.covariance(c)))
+    return graph

@@ -1,0 +1,96 @@
+"""Decode camera images kept encoded by ingestion (``holoslam.types.Image``) into numpy pixels."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from holoslam.errors import ImageDecodeError
+from holoslam.types import Image
+
+__all__ = ["decode_image", "COMPRESSED_FORMATS", "RAW_ENCODINGS"]
+
+COMPRESSED_FORMATS = ("jpeg", "jpg", "png", "bmp", "tiff", "webp")
+
+# raw sensor_msgs/Image encodings: (channels, numpy dtype)
+RAW_ENCODINGS: dict[str, tuple[int, str]] = {
+    "mono8": (1, "u1"),
+    "8uc1": (1, "u1"),
+    "mono16": (1, "u2"),
+    "16uc1": (1, "u2"),
+    "bgr8": (3, "u1"),
+    "rgb8": (3, "u1"),
+    "8uc3": (3, "u1"),
+    "bgra8": (4, "u1"),
+    "rgba8": (4, "u1"),
+    "8uc4": (4, "u1"),
+    "32fc1": (1, "f4"),
+}
+
+
+def _compressed_kind(encoding: str) -> str | None:
+    # CompressedImage.format is 'jpeg', 'png', or e.g. 'rgb8; jpeg compressed bgr8'
+    e = encoding.lower()
+    for fmt in COMPRESSED_FORMATS:
+        if fmt in e:
+            return fmt
+    return None
+
+
+def decode_image(image: Image) -> np.ndarray:
+    """The pixels of ``image``: (H, W) for single-channel images (uint8, or uint16/float32 for depth-like
+    encodings) and (H, W, 3) uint8 BGR for colour ones (alpha dropped, RGB reordered).
+
+    Raises ImageDecodeError naming the stamp, frame and encoding when the bytes are not a valid image.
+    """
+    where = f"image at stamp {image.stamp_ns} ns in frame '{image.frame_id}' (encoding '{image.encoding}')"
+    enc = image.encoding.strip().lower()
+    if enc in RAW_ENCODINGS:
+        return _decode_raw(image, enc, where)
+    kind = _compressed_kind(enc)
+    if kind is None:
+        raise ImageDecodeError(
+            f"{where}: unknown encoding; holoslam decodes compressed {', '.join(COMPRESSED_FORMATS)} and raw "
+            f"{', '.join(sorted(RAW_ENCODINGS))}. Convert the topic (e.g. with image_transport republish)."
+        )
+    import cv2
+
+    buf = np.frombuffer(image.data, dtype=np.uint8)
+    if buf.size == 0:
+        raise ImageDecodeError(f"{where}: the message carries no image bytes")
+    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ImageDecodeError(
+            f"{where}: {buf.size} bytes do not decode as {kind} (corrupted or truncated data; "
+            f"first bytes {bytes(image.data[:8]).hex()})"
+        )
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    elif img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    return img
+
+
+def _decode_raw(image: Image, enc: str, where: str) -> np.ndarray:
+    channels, dt = RAW_ENCODINGS[enc]
+    h, w = int(image.height), int(image.width)
+    if h <= 0 or w <= 0:
+        raise ImageDecodeError(f"{where}: raw image with size {w}x{h}; width and height must be positive")
+    itemsize = np.dtype(dt).itemsize
+    row = w * channels * itemsize
+    step = int(image.step) or row
+    if step < row:
+        raise ImageDecodeError(f"{where}: step {step} is smaller than a row of {w} pixels ({row} bytes)")
+    if len(image.data) < step * h:
+        raise ImageDecodeError(
+            f"{where}: {len(image.data)} bytes, but {h} rows of step {step} need {step * h} (truncated image)"
+        )
+    rows = np.frombuffer(image.data, dtype=np.uint8, count=step * h).reshape(h, step)[:, :row]
+    px = np.ascontiguousarray(rows).view(np.dtype(dt).newbyteorder("<")).reshape(h, w, channels)
+    px = px.astype(np.dtype(dt).newbyteorder("="), copy=False)
+    if channels == 1:
+        return px[:, :, 0].copy()
+    if enc in ("rgb8",):
+        return px[:, :, ::-1].copy()
+    if enc in ("rgba8",):
+        return px[:, :, 2::-1].copy()
+    return px[:, :, :3].copy()

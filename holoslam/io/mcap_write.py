@@ -1,0 +1,363 @@
+"""Write holoslam records as a ROS 2 MCAP log (the inverse of :mod:`holoslam.io.mcap` ingestion).
+
+Used by the ingestion tests and benchmark to build logs with ``mcap_ros2.writer.Writer``; the message
+definitions are the standard ROS 2 ``ros2msg`` texts (as ``ros2 bag record`` embeds them: the type, then each
+dependency after a ``MSG:`` line) plus holoslam's own ``holoslam_msgs/msg/TagDetectionArray``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from holoslam.types import (
+    CameraInfo,
+    GroundTruthPose,
+    GroundTruthWorld,
+    Heading,
+    Image,
+    Odometry,
+    Pose2,
+    Record,
+    Scan,
+    TagSighting,
+    Transform,
+)
+
+__all__ = ["MSGDEFS", "msgdef", "ros2_message", "write_ros2_log", "DEFAULT_TOPICS", "example_records"]
+
+_SEP = "=" * 80
+
+_BASE: dict[str, str] = {
+    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n",
+    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
+    "std_msgs/String": "string data\n",
+    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
+    "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance\n",
+    "geometry_msgs/Twist": "Vector3 linear\nVector3 angular\n",
+    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
+    "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation\n",
+    "geometry_msgs/TransformStamped": "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
+    "geometry_msgs/PoseStamped": "std_msgs/Header header\nPose pose\n",
+    "geometry_msgs/PoseWithCovarianceStamped": "std_msgs/Header header\nPoseWithCovariance pose\n",
+    "nav_msgs/Odometry": (
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
+        "geometry_msgs/TwistWithCovariance twist\n"
+    ),
+    "sensor_msgs/Imu": (
+        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n"
+        "geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n"
+        "geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n"
+    ),
+    "sensor_msgs/MagneticField": (
+        "std_msgs/Header header\ngeometry_msgs/Vector3 magnetic_field\nfloat64[9] magnetic_field_covariance\n"
+    ),
+    "sensor_msgs/LaserScan": (
+        "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n"
+        "float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n"
+        "float32[] ranges\nfloat32[] intensities\n"
+    ),
+    "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data\n",
+    "sensor_msgs/Image": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n"
+        "uint32 step\nuint8[] data\n"
+    ),
+    "sensor_msgs/RegionOfInterest": "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n",
+    "sensor_msgs/CameraInfo": (
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\n"
+        "float64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\n"
+        "sensor_msgs/RegionOfInterest roi\n"
+    ),
+    "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
+    "holoslam_msgs/TagDetection": "string payload\nfloat64[8] corners\n",
+    "holoslam_msgs/TagDetectionArray": "std_msgs/Header header\nholoslam_msgs/TagDetection[] detections\n",
+}
+
+_DEPS: dict[str, tuple[str, ...]] = {
+    "std_msgs/Header": ("builtin_interfaces/Time",),
+    "geometry_msgs/Pose": ("geometry_msgs/Point", "geometry_msgs/Quaternion"),
+    "geometry_msgs/PoseWithCovariance": ("geometry_msgs/Pose",),
+    "geometry_msgs/Twist": ("geometry_msgs/Vector3",),
+    "geometry_msgs/TwistWithCovariance": ("geometry_msgs/Twist",),
+    "geometry_msgs/Transform": ("geometry_msgs/Vector3", "geometry_msgs/Quaternion"),
+    "geometry_msgs/TransformStamped": ("std_msgs/Header", "geometry_msgs/Transform"),
+    "geometry_msgs/PoseStamped": ("std_msgs/Header", "geometry_msgs/Pose"),
+    "geometry_msgs/PoseWithCovarianceStamped": ("std_msgs/Header", "geometry_msgs/PoseWithCovariance"),
+    "nav_msgs/Odometry": (
+        "std_msgs/Header",
+        "geometry_msgs/PoseWithCovariance",
+        "geometry_msgs/TwistWithCovariance",
+    ),
+    "sensor_msgs/Imu": ("std_msgs/Header", "geometry_msgs/Quaternion", "geometry_msgs/Vector3"),
+    "sensor_msgs/MagneticField": ("std_msgs/Header", "geometry_msgs/Vector3"),
+    "sensor_msgs/LaserScan": ("std_msgs/Header",),
+    "sensor_msgs/CompressedImage": ("std_msgs/Header",),
+    "sensor_msgs/Image": ("std_msgs/Header",),
+    "sensor_msgs/CameraInfo": ("std_msgs/Header", "sensor_msgs/RegionOfInterest"),
+    "tf2_msgs/TFMessage": ("geometry_msgs/TransformStamped",),
+    "holoslam_msgs/TagDetectionArray": ("std_msgs/Header", "holoslam_msgs/TagDetection"),
+}
+
+
+def _closure(name: str) -> list[str]:
+    out: list[str] = []
+
+    def visit(n: str) -> None:
+        for d in _DEPS.get(n, ()):
+            if d not in out:
+                out.append(d)
+                visit(d)
+
+    visit(name)
+    return out
+
+
+def msgdef(name: str) -> str:
+    """The full ``ros2msg`` text of ``pkg/Type`` (or ``pkg/msg/Type``) with its dependencies appended."""
+    parts = name.split("/")
+    key = f"{parts[0]}/{parts[-1]}"
+    text = _BASE[key]
+    for dep in _closure(key):
+        pkg, typ = dep.split("/")
+        text += f"{_SEP}\nMSG: {pkg}/msg/{typ}\n{_BASE[dep]}"
+    return text
+
+
+MSGDEFS: dict[str, str] = {f"{k.split('/')[0]}/msg/{k.split('/')[1]}": msgdef(k) for k in _BASE}
+
+DEFAULT_TOPICS: dict[type, tuple[str, str]] = {
+    Odometry: ("/odom", "nav_msgs/msg/Odometry"),
+    Heading: ("/compass", "sensor_msgs/msg/Imu"),
+    Scan: ("/scan", "sensor_msgs/msg/LaserScan"),
+    Image: ("/camera/image/compressed", "sensor_msgs/msg/CompressedImage"),
+    CameraInfo: ("/camera/camera_info", "sensor_msgs/msg/CameraInfo"),
+    TagSighting: ("/tags", "holoslam_msgs/msg/TagDetectionArray"),
+    GroundTruthPose: ("/ground_truth/pose", "geometry_msgs/msg/PoseStamped"),
+    GroundTruthWorld: ("/ground_truth/world", "std_msgs/msg/String"),
+}
+
+
+def _stamp(ns: int) -> dict[str, int]:
+    return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
+
+
+def _header(ns: int, frame: str) -> dict[str, Any]:
+    return {"stamp": _stamp(ns), "frame_id": frame}
+
+
+def _yaw_quat(yaw: float) -> dict[str, float]:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
+
+
+def _cov6(cov3: np.ndarray | None) -> list[float]:
+    c = np.zeros((6, 6))
+    if cov3 is not None:
+        idx = [0, 1, 5]
+        c[np.ix_(idx, idx)] = cov3
+    return c.ravel().tolist()
+
+
+def ros2_message(rec: Record) -> dict[str, Any]:
+    """The ROS 2 message (as a dict for ``mcap_ros2``) that ingests back to ``rec``.
+
+    Transforms give a one-element TFMessage; tag sightings a one-element TagDetectionArray.
+    """
+    if isinstance(rec, Odometry):
+        p = rec.odomTb
+        speed = 0.0 if math.isnan(rec.speed) else rec.speed
+        return {
+            "header": _header(rec.stamp_ns, rec.frame_id),
+            "child_frame_id": rec.child_frame_id,
+            "pose": {
+                "pose": {"position": {"x": p.x, "y": p.y, "z": 0.0}, "orientation": _yaw_quat(p.theta)},
+                "covariance": _cov6(rec.cov_odomTb),
+            },
+            "twist": {
+                "twist": {
+                    "linear": {"x": speed, "y": 0.0, "z": 0.0},
+                    "angular": {"x": 0.0, "y": 0.0, "z": 0.0},
+                },
+                "covariance": [0.0] * 36,
+            },
+        }
+    if isinstance(rec, Heading):
+        var = 0.0 if math.isnan(rec.sigma) else rec.sigma**2
+        return {
+            "header": _header(rec.stamp_ns, rec.frame_id),
+            "orientation": _yaw_quat(rec.yaw),
+            "orientation_covariance": [0.0] * 8 + [var],
+            "angular_velocity": {"x": 0.0, "y": 0.0, "z": 0.0},
+            "angular_velocity_covariance": [-1.0] + [0.0] * 8,
+            "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 0.0},
+            "linear_acceleration_covariance": [-1.0] + [0.0] * 8,
+        }
+    if isinstance(rec, Scan):
+        n = rec.ranges.shape[0]
+        return {
+            "header": _header(rec.stamp_ns, rec.frame_id),
+            "angle_min": rec.angle_min,
+            "angle_max": rec.angle_min + rec.angle_increment * (n - 1),
+            "angle_increment": rec.angle_increment,
+            "time_increment": 0.0,
+            "scan_time": 0.0,
+            "range_min": rec.range_min,
+            "range_max": rec.range_max,
+            "ranges": rec.ranges.tolist(),
+            "intensities": [],
+        }
+    if isinstance(rec, Image):
+        if rec.width and rec.height:
+            return {
+                "header": _header(rec.stamp_ns, rec.frame_id),
+                "height": rec.height,
+                "width": rec.width,
+                "encoding": rec.encoding,
+                "is_bigendian": 0,
+                "step": rec.step,
+                "data": rec.data,
+            }
+        return {"header": _header(rec.stamp_ns, rec.frame_id), "format": rec.encoding, "data": rec.data}
+    if isinstance(rec, CameraInfo):
+        P = np.zeros((3, 4))
+        P[:, :3] = rec.K
+        return {
+            "header": _header(rec.stamp_ns, rec.frame_id),
+            "height": rec.height,
+            "width": rec.width,
+            "distortion_model": rec.distortion_model,
+            "d": rec.D.tolist(),
+            "k": rec.K.ravel().tolist(),
+            "r": np.eye(3).ravel().tolist(),
+            "p": P.ravel().tolist(),
+            "binning_x": 0,
+            "binning_y": 0,
+            "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
+        }
+    if isinstance(rec, Transform):
+        t, q = rec.translation, rec.rotation_xyzw
+        return {
+            "transforms": [
+                {
+                    "header": _header(rec.stamp_ns, rec.parent),
+                    "child_frame_id": rec.child,
+                    "transform": {
+                        "translation": {"x": t[0], "y": t[1], "z": t[2]},
+                        "rotation": {"x": q[0], "y": q[1], "z": q[2], "w": q[3]},
+                    },
+                }
+            ]
+        }
+    if isinstance(rec, TagSighting):
+        return {
+            "header": _header(rec.stamp_ns, rec.frame_id),
+            "detections": [{"payload": rec.payload, "corners": rec.corners.ravel().tolist()}],
+        }
+    if isinstance(rec, GroundTruthPose):
+        p = rec.wTb
+        return {
+            "header": _header(rec.stamp_ns, rec.frame_id),
+            "pose": {"position": {"x": p.x, "y": p.y, "z": rec.z}, "orientation": _yaw_quat(p.theta)},
+        }
+    if isinstance(rec, GroundTruthWorld):
+        return {"data": rec.json_text}
+    raise TypeError(f"no ROS 2 message for {type(rec).__name__}")
+
+
+def write_ros2_log(
+    path: str | Path,
+    records: Iterable[Record],
+    *,
+    topics: dict[type, tuple[str, str]] | None = None,
+    log_time_offset_ns: int = 0,
+    chunk_size: int = 1024 * 1024,
+    compression: str = "zstd",
+) -> Path:
+    """Write ``records`` (in the order given) into a ROS 2 MCAP file with ``mcap_ros2.writer.Writer``.
+
+    Each record type goes to its topic in ``topics`` (``DEFAULT_TOPICS`` otherwise; transforms go to
+    ``/tf_static`` or ``/tf`` by their ``static`` flag). Log time = stamp + ``log_time_offset_ns``.
+    """
+    from mcap.writer import CompressionType
+    from mcap_ros2.writer import Writer
+
+    table = dict(DEFAULT_TOPICS)
+    if topics:
+        table.update(topics)
+    path = Path(path)
+    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
+        compression
+    ]
+    with open(path, "wb") as f:
+        w = Writer(f, chunk_size=chunk_size, compression=comp)
+        schemas: dict[str, Any] = {}
+        for rec in records:
+            if isinstance(rec, Transform):
+                topic, typ = ("/tf_static" if rec.static else "/tf"), "tf2_msgs/msg/TFMessage"
+            elif isinstance(rec, Image) and rec.width and rec.height and type(rec) not in (topics or {}):
+                topic, typ = "/camera/image_raw", "sensor_msgs/msg/Image"
+            else:
+                topic, typ = table[type(rec)]
+            if typ not in schemas:
+                schemas[typ] = w.register_msgdef(typ, MSGDEFS[typ])
+            stamp = getattr(rec, "stamp_ns", 0)
+            w.write_message(
+                topic,
+                schemas[typ],
+                ros2_message(rec),
+                log_time=stamp + log_time_offset_ns,
+                publish_time=stamp + log_time_offset_ns,
+            )
+        w.finish()
+    return path
+
+
+def example_records(
+    seconds: float = 4.0,
+    t0_ns: int = 1_700_000_000_000_000_000,
+    seed: int = 0,
+    image_bytes: bytes | None = None,
+) -> list[Record]:
+    """A small synthetic household drive at the reference log's rates (odometry 20 Hz, compass 10 Hz,
+    scans 5 Hz, camera 2 Hz with intrinsics, /tf at each image, one static laser transform, ground truth),
+    in time order. Used by the ingestion tests and the benchmark; ``image_bytes`` replaces the default JPEG."""
+    rng = np.random.default_rng(seed)
+    if image_bytes is None:
+        import cv2
+
+        img = (rng.random((48, 64)) * 255).astype(np.uint8)
+        ok, enc = cv2.imencode(".jpg", img)
+        image_bytes = enc.tobytes()
+    K = np.array([[300.0, 0, 32], [0, 300.0, 24], [0, 0, 1]])
+    out: list[Record] = [
+        GroundTruthWorld(t0_ns, '{"walls": [], "objects": []}'),
+        Transform(t0_ns, "base_link", "laser", (0.15, 0.0, 0.3), (0.0, 0.0, 0.0, 1.0), static=True),
+        Transform(t0_ns, "base_link", "ptz_base", (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0), static=True),
+    ]
+    step = 50_000_000
+    for i in range(int(seconds * 20)):
+        t = t0_ns + i * step
+        th = 0.05 * i
+        pose = Pose2(0.02 * i * math.cos(0.01 * i), 0.02 * i * math.sin(0.01 * i), th)
+        out.append(Odometry(t, pose, np.diag([1e-4, 1e-4, 4e-4]), 0.4))
+        out.append(GroundTruthPose(t, Pose2(pose.x + 0.01, pose.y, th)))
+        if i % 2 == 0:
+            out.append(Heading(t, th + 0.01 * rng.standard_normal(), 0.02))
+        if i % 4 == 0:
+            r = (1.0 + 5.0 * rng.random(181)).astype(np.float32)
+            r[rng.random(181) < 0.1] = np.inf
+            out.append(Scan(t, "laser", -math.pi / 2, math.pi / 180, 0.05, 8.0, r, np.isfinite(r)))
+        if i % 10 == 0:
+            pan = 0.1 * i
+            q = (0.0, 0.0, math.sin(pan / 2), math.cos(pan / 2))
+            out.append(Transform(t, "ptz_base", "camera_optical", (0.0, 0.0, 0.1), q, static=False))
+            out.append(Image(t, "camera_optical", "jpeg", image_bytes))
+            out.append(CameraInfo(t, "camera_optical", 64, 48, K, np.zeros(5)))
+            out.append(TagSighting(t, "camera_optical", f"HL1;cup{i};cup", np.arange(8.0) + i))
+    return out

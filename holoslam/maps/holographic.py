@@ -1,0 +1,610 @@
+"""The household holographic graph M = {V, E} of seed 002 (SPEC.md §1, Eq. 1-5), and its queries.
+
+The graph is a ``networkx.Graph`` (simple: two places are joined by at most one passage; two doorways between
+the same rooms are two doorway nodes). Every node has ``kind`` = ``"environment"`` or ``"object"``.
+
+**Environment nodes** (V_e, carrying {H, L_m}), keyed ``"room:<i>"``, ``"door:<i>"``, ``"crossing:<i>"``,
+``"dead_end:<i>"``, with ``place`` = room | doorway | crossing | dead_end, position ``x``, ``y`` (world m),
+``region`` (room label) and their local frame: ``anchor`` (index of the nearest submap anchor, -1 without
+anchors), ``submap`` (its submap id), ``frame_x``, ``frame_y``, ``frame_theta`` (wTa of that anchor; without
+anchors the frame is the node's position with theta 0). L_m is summarised by scalars: ``submap``, ``area_m2``
+(rooms), ``clearance`` (m), and ``feat_<name>`` counts when the caller gives per-submap feature counts (H).
+
+How the places are found (all vectorised on the grid, Python loops only over places):
+
+- *Doorways*: along every topology edge, the skeleton cells whose free width (2 x clearance) is at most
+  ``doorway_width_m`` form narrow runs; a run no longer than ``doorway_depth_m`` is a doorway candidate, its
+  point is the run's narrowest cell. The passage is cut there by a line across it (perpendicular to the
+  skeleton, through the free width). With all cuts drawn, the free space falls into regions; a cut with the
+  same region on both sides separates nothing (a gap between a sofa and a wall inside one room) and is
+  dropped, and a region smaller than ``min_room_area_m2`` is merged into its smallest neighbour (the cut
+  between them is dropped), until every cut joins two different rooms. Rooms in a loop (each reachable through
+  two doors) keep all their doorways. Longer narrow runs are corridors, not doorways. Known limit: a pocket of
+  at least ``min_room_area_m2`` reached only through narrow gaps (e.g. behind a long table) becomes a room.
+- *Rooms* (open areas): the 4-connected regions of the free space with all doorway cuts drawn in; a region of
+  at least ``min_room_area_m2`` is a room, its node sits at its cell farthest from obstacles.
+- *Crossings* and *dead ends*: topology junctions in narrow space (free width at most ``corridor_width_m``)
+  are corridor crossings; topology endpoints in narrow space whose edge is at least ``dead_end_min_length_m``
+  long and narrow on average are dead-end corridors. Junctions and endpoints in open rooms (and room corners)
+  belong to the room node; places within ``doorway_depth_m`` of a doorway are the doorway.
+
+**Environment edges** (E_e, {S_ij, w_ij}): doorway - room on each side; crossing / dead end - the room
+(region) containing it. ``passage`` is S_ij: the waypoints (K, 2) world metres of the shortest path along the
+topology skeleton between the two places (a straight segment, with ``passage_on_skeleton`` False, when the
+skeleton does not join them), ``length`` its length in metres; ``w_x``, ``w_y``, ``w_theta`` is w_ij, the pose
+of j's local frame in i's (``between(wTa_i, wTa_j)``) where (i, j) are the edge's ``w_from``, ``w_to``
+attributes.
+
+**Object nodes** (V_o, {F, G_m}), keyed by the object id: ``object_type``, ``attributes`` (``k=v,...``),
+``payload``, ``x``, ``y``, ``z`` (world m), ``cov`` (3x3 position covariance, world frame) and, when vision
+gives them, scalar feature-set summaries ``feat_<name>`` (F: size, texture, colours, keypoint counts).
+
+**Object edges** (E_o, {P_ij, k_ij}) exist only where the robot can reach the object from that room
+(:class:`ReachModel`): some free cell of the room where the base fits (clearance >= ``robot_radius_m``,
+connected to the room's node through such cells) lies within ``arm_reach_m`` (horizontal) of the object, the
+object's height is within [``z_min_m``, ``z_max_m``], and the straight line from that cell to the object is
+clear: from the object's home room (the room of the free cell nearest to the object) obstacles are allowed
+only in the last ``reach_through_m`` (the furniture the object stands on), from any other room none at all (an
+arm does not reach through a wall). ``relation`` (P_ij) is ``"in_room"`` for the home room and ``"near"`` for
+others; ``k_x``, ``k_y``, ``k_z`` (k_ij) is the object's position in the room's local frame; ``reach_x``,
+``reach_y`` is the standing point (the closest one), the goal of ``plan_to_object``. An unreachable object
+stays in the graph without an edge.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from holoslam.errors import MapError, PlanningError
+from holoslam.geometry import between, inverse, transform_points
+from holoslam.maps.grid import OccupancyGrid
+
+if TYPE_CHECKING:
+    import networkx as nx
+
+__all__ = [
+    "ObjectInfo",
+    "ReachModel",
+    "PlaceParams",
+    "build_holographic",
+    "where_is",
+    "route_to_object",
+    "object_reach_points",
+    "environment_nodes",
+    "object_nodes",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectInfo:
+    """An object for the holographic graph: id, type, attributes, world position (3,) and its covariance."""
+
+    object_id: str
+    object_type: str
+    w_position: np.ndarray
+    cov_w_position: np.ndarray | None = None
+    attributes: tuple[tuple[str, str], ...] = ()
+    payload: str = ""
+    features: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.w_position, dtype=np.float64).reshape(-1)
+        if p.shape[0] == 2:
+            p = np.append(p, 0.0)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise MapError(f"object {self.object_id!r}: position must be finite (x, y[, z]) metres, got {p}")
+        object.__setattr__(self, "w_position", p)
+        c = np.full((3, 3), np.nan) if self.cov_w_position is None else np.asarray(self.cov_w_position, float)
+        object.__setattr__(self, "cov_w_position", c.reshape(3, 3))
+
+
+@dataclass(frozen=True, slots=True)
+class ReachModel:
+    """Where the robot can handle an object from (module docstring). Defaults: the reference household's
+    robot (0.25 m radius base, 0.9 m horizontal arm reach, labels 0-2.5 m high)."""
+
+    robot_radius_m: float = 0.25
+    arm_reach_m: float = 0.9
+    z_min_m: float = 0.0
+    z_max_m: float = 2.5
+    reach_through_m: float = 0.35
+
+
+@dataclass(frozen=True, slots=True)
+class PlaceParams:
+    """Thresholds of place detection (module docstring)."""
+
+    doorway_width_m: float = 1.3
+    doorway_depth_m: float = 2.0
+    dead_end_min_length_m: float = 1.0
+    corridor_width_m: float = 1.4
+    min_room_area_m2: float = 1.0
+
+
+def _nearest_anchor(xy: np.ndarray, anchors: np.ndarray | None) -> np.ndarray:
+    if anchors is None or len(anchors) == 0:
+        return np.full(len(xy), -1, dtype=np.int64)
+    d = ((xy[:, None, :] - anchors[None, :, :2]) ** 2).sum(-1)
+    return np.argmin(d, axis=1)
+
+
+def _cut_line(mask: np.ndarray, rc: np.ndarray, direction: np.ndarray, half_len_cells: float) -> None:
+    import cv2
+
+    d = direction / (np.hypot(*direction) or 1.0)
+    n = np.array([-d[1], d[0]])  # perpendicular, in (row, col)
+    a = rc + n * half_len_cells
+    b = rc - n * half_len_cells
+    cv2.line(
+        mask, (int(round(a[1])), int(round(a[0]))), (int(round(b[1])), int(round(b[0]))), 0, 1, cv2.LINE_8
+    )
+
+
+def _doorway_candidates(
+    topology, clr: np.ndarray, res: float, p: PlaceParams
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(cell (row, col), skeleton direction) of the narrowest cell of each short narrow run along the
+    edges."""
+    out = []
+    for _u, _v, data in topology.edges(data=True):
+        path = np.asarray(data.get("path", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
+        if path.shape[0] < 3:
+            continue
+        c = clr[path[:, 0], path[:, 1]]
+        narrow = 2.0 * c <= p.doorway_width_m
+        if not narrow.any():
+            continue
+        # runs of narrow cells
+        d = np.diff(np.concatenate([[0], narrow.astype(np.int8), [0]]))
+        starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
+        step = np.hypot(*np.diff(path, axis=0).T) * res
+        cum = np.concatenate([[0.0], np.cumsum(step)])
+        for s, e in zip(starts.tolist(), ends.tolist(), strict=False):
+            if cum[e - 1] - cum[s] > p.doorway_depth_m:
+                continue
+            i = s + int(np.argmin(c[s:e]))
+            lo, hi = max(i - 3, 0), min(i + 3, path.shape[0] - 1)
+            direction = (path[hi] - path[lo]).astype(np.float64)
+            if not direction.any():
+                continue
+            out.append((path[i], direction))
+    return out
+
+
+def _side_labels(lab: np.ndarray, free: np.ndarray, rc: np.ndarray, direction: np.ndarray, max_cells: int):
+    """Region labels on the two sides of a cut: walk from the cut along +-direction (stopping at the first
+    obstacle cell, so a thin wall is never crossed) and take the first labelled cell."""
+    d = direction / np.hypot(*direction)
+    h, w = lab.shape
+    sides = []
+    for sgn in (1.0, -1.0):
+        t = np.arange(1, max_cells + 1, dtype=np.float64)
+        pts = np.rint(rc[None, :] + sgn * t[:, None] * d[None, :]).astype(np.int64)
+        ok = (pts[:, 0] >= 0) & (pts[:, 0] < h) & (pts[:, 1] >= 0) & (pts[:, 1] < w)
+        stop = np.nonzero(~ok)[0]
+        pts = pts[: stop[0]] if stop.shape[0] else pts
+        blocked = np.nonzero(~free[pts[:, 0], pts[:, 1]])[0]
+        pts = pts[: blocked[0]] if blocked.shape[0] else pts
+        v = lab[pts[:, 0], pts[:, 1]] if pts.shape[0] else np.zeros(0, dtype=lab.dtype)
+        v = v[v > 0]
+        sides.append(int(v[0]) if v.shape[0] else 0)
+    return sides[0], sides[1]
+
+
+def build_holographic(
+    grid: OccupancyGrid,
+    topology,
+    anchors_wTa: np.ndarray | None = None,
+    submap_ids: Sequence[int] | None = None,
+    objects: Sequence[ObjectInfo] = (),
+    reach_model: ReachModel | None = None,
+    params: PlaceParams | None = None,
+    submap_features: Mapping[int, Mapping[str, int]] | None = None,
+) -> nx.Graph:
+    """Build the holographic graph (module docstring) from the global grid, its topology graph
+    (``holoslam.maps.topology``), the optimised submap anchors wTa (K, 3) with their submap ids, and the
+    objects. Raises ``MapError`` for malformed inputs."""
+    import cv2
+    import networkx as nx
+
+    from holoslam.maps.topology import clearance_map
+
+    reach_model = reach_model or ReachModel()
+    p = params or PlaceParams()
+    res, ox, oy = grid.resolution, grid.origin_x, grid.origin_y
+    free = grid.free
+    h, w = free.shape
+    clr = clearance_map(free, res)
+    anchors = None if anchors_wTa is None else np.asarray(anchors_wTa, dtype=np.float64).reshape(-1, 3)
+    if anchors is not None and submap_ids is not None and len(submap_ids) != len(anchors):
+        raise MapError(f"{len(anchors)} anchors but {len(submap_ids)} submap ids; give one id per anchor")
+    sids = (
+        list(range(len(anchors))) if (anchors is not None and submap_ids is None) else list(submap_ids or [])
+    )
+
+    def rc_to_xy(rc: np.ndarray) -> np.ndarray:
+        rc = np.asarray(rc, dtype=np.float64).reshape(-1, 2)
+        return np.column_stack([ox + (rc[:, 1] + 0.5) * res, oy + (rc[:, 0] + 0.5) * res])
+
+    # ---- doorways and rooms -------------------------------------------------------------------------------
+    cands = _doorway_candidates(topology, clr, res, p)
+    free_u8 = free.astype(np.uint8)
+    min_room_cells = p.min_room_area_m2 / (res * res)
+
+    def draw(cs) -> tuple[int, np.ndarray, np.ndarray, list[tuple[int, int]]]:
+        m = free_u8.copy()
+        for rc, d in cs:
+            _cut_line(m, rc.astype(np.float64), d, clr[rc[0], rc[1]] / res + 2.0)
+        n_l, lb = cv2.connectedComponents(m, connectivity=4)
+        ar = np.bincount(lb.ravel(), minlength=n_l)
+        sd = [
+            _side_labels(lb, free, rc.astype(np.float64), d, int(clr[rc[0], rc[1]] / res) + 8) for rc, d in cs
+        ]
+        return n_l, lb, ar, sd
+
+    # all cuts at once; a cut whose sides are one region does not separate anything: drop it. A region
+    # smaller than a room is merged into its smallest neighbour (the cut between them is dropped). Repeat.
+    while True:
+        n_lab, lab, area, sides = draw(cands)
+        keep = [a != b and a > 0 and b > 0 for a, b in sides]
+        if all(keep):
+            small = [k for k in range(1, n_lab) if area[k] < min_room_cells]
+            touching = [
+                (clr[cands[i][0][0], cands[i][0][1]], i)
+                for i, (a, b) in enumerate(sides)
+                if a in small or b in small
+            ]
+            if not touching:
+                break
+            # merge the smallest small region
+            k_small = min(
+                {a for a, _ in sides if a in small} | {b for _, b in sides if b in small},
+                key=lambda k: area[k],
+            )
+            # through the cut to its smallest neighbour (a fragment beside a doorway joins the small room on
+            # its side rather than opening the doorway into the large one)
+            via = min(
+                (area[sides[i][1] if sides[i][0] == k_small else sides[i][0]], -c, i)
+                for c, i in touching
+                if k_small in sides[i]
+            )[2]
+            keep[via] = False
+        cands = [c for c, k in zip(cands, keep, strict=False) if k]
+    # rooms: labels with enough area; node at max clearance
+    room_labels = [int(k) for k in np.nonzero(area >= min_room_cells)[0] if k != 0]
+    flat_lab = lab.ravel()
+    order = np.lexsort((clr.ravel(), flat_lab))
+    last = np.searchsorted(flat_lab[order], np.arange(n_lab), side="right") - 1
+    room_cell = {k: np.array(np.unravel_index(order[last[k]], lab.shape)) for k in room_labels}
+
+    # safe space for the base, and its components (reach model connectivity)
+    safe = (clr >= reach_model.robot_radius_m).astype(np.uint8)
+    _, safe_lab = cv2.connectedComponents(safe, connectivity=8)
+
+    G = nx.Graph(kind="holographic", resolution=res)
+    places: list[tuple[str, str, np.ndarray, int]] = []  # key, place, cell, region label
+    for i, k in enumerate(room_labels):
+        places.append((f"room:{i}", "room", room_cell[k], k))
+    door_keys = []
+    for i, ((rc, _d), (a, b)) in enumerate(zip(cands, sides, strict=False)):
+        places.append((f"door:{i}", "doorway", rc, 0))
+        door_keys.append((f"door:{i}", a, b))
+    # crossings and dead ends in narrow space
+    door_xy = rc_to_xy(np.array([c[0] for c in cands])) if cands else np.zeros((0, 2))
+    n_cross = n_dead = 0
+    for _n, d in topology.nodes(data=True):
+        kind = d.get("kind")
+        if kind not in ("junction", "endpoint"):
+            continue
+        r, c = int(d["row"]), int(d["col"])
+        if 2.0 * clr[r, c] > p.corridor_width_m or lab[r, c] not in room_cell:
+            continue
+        xy = rc_to_xy(np.array([r, c]))[0]
+        if door_xy.shape[0] and np.min(np.hypot(*(door_xy - xy).T)) < p.doorway_depth_m:
+            continue
+        if kind == "endpoint":
+            # a dead-end corridor: the edge leading to the endpoint is long and narrow on average
+            inc = [ed for _a, _b, ed in topology.edges(_n, data=True) if "path" in ed]
+            if not inc:
+                continue
+            pth = np.asarray(inc[0]["path"], dtype=np.int64).reshape(-1, 2)
+            if (
+                float(inc[0].get("length", 0.0)) < p.dead_end_min_length_m
+                or 2.0 * float(np.mean(clr[pth[:, 0], pth[:, 1]])) > p.corridor_width_m
+            ):
+                continue
+        if kind == "junction":
+            places.append((f"crossing:{n_cross}", "crossing", np.array([r, c]), int(lab[r, c])))
+            n_cross += 1
+        else:
+            places.append((f"dead_end:{n_dead}", "dead_end", np.array([r, c]), int(lab[r, c])))
+            n_dead += 1
+
+    cells = np.array([pl[2] for pl in places], dtype=np.int64).reshape(-1, 2)
+    pxy = rc_to_xy(cells)
+    aidx = _nearest_anchor(pxy, anchors)
+    frames = np.zeros((len(places), 3))
+    for i, (key, place, cell, region) in enumerate(places):
+        if aidx[i] >= 0:
+            frames[i] = anchors[aidx[i]]
+        else:
+            frames[i] = (pxy[i, 0], pxy[i, 1], 0.0)
+        sub = int(sids[aidx[i]]) if aidx[i] >= 0 else -1
+        attrs = dict(
+            kind="environment",
+            place=place,
+            x=float(pxy[i, 0]),
+            y=float(pxy[i, 1]),
+            row=int(cell[0]),
+            col=int(cell[1]),
+            region=int(region),
+            clearance=float(clr[cell[0], cell[1]]),
+            anchor=int(aidx[i]),
+            submap=sub,
+            frame_x=float(frames[i, 0]),
+            frame_y=float(frames[i, 1]),
+            frame_theta=float(frames[i, 2]),
+        )
+        if place == "room":
+            attrs["area_m2"] = float(area[region] * res * res)
+        if submap_features and sub in submap_features:
+            for fk, fv in submap_features[sub].items():
+                attrs[f"feat_{fk}"] = int(fv)
+        G.add_node(key, **attrs)
+    index = {pl[0]: i for i, pl in enumerate(places)}
+    room_of_label = {pl[3]: pl[0] for pl in places if pl[1] == "room"}
+
+    # ---- passages along the skeleton ----------------------------------------------------------------------
+    sk_graph, sk_cells = _skeleton_cell_graph(topology, res)
+
+    def passage(i: int, j: int) -> tuple[np.ndarray, float, bool]:
+        a, b = cells[i], cells[j]
+        if sk_cells.shape[0]:
+            ia = int(np.argmin(np.abs(sk_cells - a).sum(1)))
+            ib = int(np.argmin(np.abs(sk_cells - b).sum(1)))
+            try:
+                nodes = nx.shortest_path(sk_graph, ia, ib, weight="weight")
+                pts = np.vstack([pxy[i : i + 1], rc_to_xy(sk_cells[nodes]), pxy[j : j + 1]])
+                return pts, float(np.hypot(*np.diff(pts, axis=0).T).sum()), True
+            except nx.NetworkXNoPath:
+                pass
+        pts = np.vstack([pxy[i], pxy[j]])
+        return pts, float(np.hypot(*(pxy[j] - pxy[i]))), False
+
+    def add_env_edge(ki: str, kj: str) -> None:
+        if ki == kj or G.has_edge(ki, kj):
+            return
+        i, j = index[ki], index[kj]
+        pts, length, on_sk = passage(i, j)
+        wij = between(frames[i], frames[j])
+        G.add_edge(
+            ki,
+            kj,
+            kind="passage",
+            w_from=ki,
+            w_to=kj,
+            passage=pts,
+            length=length,
+            passage_on_skeleton=on_sk,
+            w_x=float(wij[0]),
+            w_y=float(wij[1]),
+            w_theta=float(wij[2]),
+        )
+
+    for key, a, b in door_keys:
+        for lbl in (a, b):
+            if lbl in room_of_label:
+                add_env_edge(room_of_label[lbl], key)
+    for key, place, _cell, region in places:
+        if place in ("crossing", "dead_end") and region in room_of_label:
+            add_env_edge(room_of_label[region], key)
+
+    # ---- objects ------------------------------------------------------------------------------------------
+    rooms = [(pl[0], pl[3], index[pl[0]]) for pl in places if pl[1] == "room"]
+    for ob in objects:
+        attrs = dict(
+            kind="object",
+            object_type=ob.object_type,
+            attributes=",".join(f"{k}={v}" for k, v in ob.attributes),
+            payload=ob.payload,
+            x=float(ob.w_position[0]),
+            y=float(ob.w_position[1]),
+            z=float(ob.w_position[2]),
+            cov=np.asarray(ob.cov_w_position, dtype=np.float64),
+        )
+        for fk, fv in dict(ob.features).items():
+            attrs[f"feat_{fk}"] = fv
+        if ob.object_id in G:
+            raise MapError(f"object id {ob.object_id!r} is used twice (or clashes with a place key)")
+        G.add_node(ob.object_id, **attrs)
+        found = _reach(ob.w_position, reach_model, free, clr, lab, safe_lab, rooms, cells, res, ox, oy)
+        if not found:
+            continue
+        for key, dist, sxy, at_home in found:
+            i = index[key]
+            k = transform_points(inverse(frames[i]), ob.w_position[None, :2])[0]
+            G.add_edge(
+                ob.object_id,
+                key,
+                kind="object_edge",
+                relation="in_room" if at_home else "near",
+                k_x=float(k[0]),
+                k_y=float(k[1]),
+                k_z=float(ob.w_position[2]),
+                reach_x=float(sxy[0]),
+                reach_y=float(sxy[1]),
+                reach_distance=float(dist),
+            )
+    return G
+
+
+def _reach(pos, rm: ReachModel, free, clr, lab, safe_lab, rooms, cells, res, ox, oy):
+    """[(room key, horizontal distance, standing point xy)] of the rooms the object can be handled from."""
+    if not (rm.z_min_m <= pos[2] <= rm.z_max_m):
+        return []
+    h, w = free.shape
+    k = int(np.ceil(rm.arm_reach_m / res)) + 1
+    c0 = int(np.floor((pos[0] - ox) / res))
+    r0 = int(np.floor((pos[1] - oy) / res))
+    ra, rb, ca, cb = max(r0 - k, 0), min(r0 + k + 1, h), max(c0 - k, 0), min(c0 + k + 1, w)
+    if ra >= rb or ca >= cb:
+        return []
+    rr, cc = np.mgrid[ra:rb, ca:cb]
+    rr, cc = rr.ravel(), cc.ravel()
+    sx, sy = ox + (cc + 0.5) * res, oy + (rr + 0.5) * res
+    dist = np.hypot(sx - pos[0], sy - pos[1])
+    # the object's home region: the region of the free cell nearest to it
+    lw = lab[rr, cc]
+    if not np.any(lw > 0):
+        return []
+    home = int(lw[np.argmin(np.where(lw > 0, dist, np.inf))])
+    ok = (dist <= rm.arm_reach_m) & (clr[rr, cc] >= rm.robot_radius_m)
+    rr, cc, sx, sy, dist = rr[ok], cc[ok], sx[ok], sy[ok], dist[ok]
+    if rr.shape[0] == 0:
+        return []
+    # line of sight from the standing point to the object: from the home region obstacles are allowed within
+    # reach_through_m of the object (the furniture it stands on), from any other region none (no wall between)
+    n = max(int(np.ceil(rm.arm_reach_m / (0.5 * res))), 2)
+    t = np.linspace(0.0, 1.0, n + 1)[None, :]
+    px = sx[:, None] + (pos[0] - sx[:, None]) * t
+    py = sy[:, None] + (pos[1] - sy[:, None]) * t
+    from_home = (lab[rr, cc] == home)[:, None]
+    far = ((1.0 - t) * dist[:, None] > rm.reach_through_m) | ~from_home
+    pc = np.floor((px - ox) / res).astype(np.int64)
+    pr = np.floor((py - oy) / res).astype(np.int64)
+    inside = (pr >= 0) & (pr < h) & (pc >= 0) & (pc < w)
+    fr = np.zeros(pr.shape, dtype=bool)
+    fr[inside] = free[pr[inside], pc[inside]]
+    clear = np.all(fr | ~far, axis=1)
+    rr, cc, sx, sy, dist = rr[clear], cc[clear], sx[clear], sy[clear], dist[clear]
+    out = []
+    for key, lbl, i in rooms:
+        m = (lab[rr, cc] == lbl) & (safe_lab[rr, cc] == safe_lab[cells[i][0], cells[i][1]])
+        if m.any():
+            j = int(np.argmin(np.where(m, dist, np.inf)))
+            out.append((key, float(dist[j]), (float(sx[j]), float(sy[j])), lbl == home))
+    return out
+
+
+def _skeleton_cell_graph(topology, res: float):
+    """A graph over the skeleton cells of the topology's edge paths (8-connected steps, weights in metres)."""
+    import networkx as nx
+
+    paths = [
+        np.asarray(d["path"], dtype=np.int64).reshape(-1, 2)
+        for _u, _v, d in topology.edges(data=True)
+        if "path" in d
+    ]
+    if not paths:
+        return nx.Graph(), np.zeros((0, 2), dtype=np.int64)
+    allc = np.concatenate(paths)
+    key = allc[:, 0] * (int(allc[:, 1].max()) + 2) + allc[:, 1]
+    uk, inv = np.unique(key, return_inverse=True)
+    cells = np.zeros((uk.shape[0], 2), dtype=np.int64)
+    cells[inv] = allc
+    lens = np.array([q.shape[0] for q in paths])
+    ends = np.cumsum(lens)
+    a = inv[:-1]
+    b = inv[1:]
+    valid = np.ones(a.shape[0], dtype=bool)
+    valid[ends[:-1] - 1] = False  # no step between two different paths
+    a, b = a[valid], b[valid]
+    wgt = np.hypot(*(cells[a] - cells[b]).T) * res
+    G = nx.Graph()
+    G.add_nodes_from(range(cells.shape[0]))
+    G.add_weighted_edges_from(zip(a.tolist(), b.tolist(), wgt.tolist(), strict=False))
+    return G, cells
+
+
+# ---------------------------------------------------------------------------------------------------- queries
+
+
+def environment_nodes(G) -> list[str]:
+    return [n for n, d in G.nodes(data=True) if d.get("kind") == "environment"]
+
+
+def object_nodes(G) -> list[str]:
+    return [n for n, d in G.nodes(data=True) if d.get("kind") == "object"]
+
+
+def where_is(G, id_or_type: str) -> list[dict]:
+    """Objects whose id or type is ``id_or_type``: dicts with id, type, x, y, z and the places (environment
+    node keys with their relation) the object is reachable from (empty for an unreachable one)."""
+    out = []
+    for n, d in G.nodes(data=True):
+        if d.get("kind") != "object" or (n != id_or_type and d.get("object_type") != id_or_type):
+            continue
+        places = []
+        for m in G.neighbors(n):
+            e = G.edges[n, m]
+            places.append({"place": m, "relation": e.get("relation"), "place_kind": G.nodes[m].get("place")})
+        places.sort(key=lambda q: (q["relation"] != "in_room", q["place"]))
+        out.append(
+            {
+                "id": n,
+                "type": d.get("object_type"),
+                "x": d.get("x"),
+                "y": d.get("y"),
+                "z": d.get("z"),
+                "places": places,
+                "reachable": bool(places),
+            }
+        )
+    out.sort(key=lambda q: q["id"])
+    return out
+
+
+def object_reach_points(G, object_id: str) -> list[tuple[str, np.ndarray]]:
+    """[(place key, standing point xy)] of an object; raises ``PlanningError`` for an unknown object or one no
+    place reaches."""
+    if object_id not in G or G.nodes[object_id].get("kind") != "object":
+        known = sorted(object_nodes(G))
+        raise PlanningError(
+            f"unknown object {object_id!r}; the map knows {len(known)} objects"
+            + (f" (e.g. {', '.join(known[:8])})" if known else "")
+        )
+    out = []
+    for m in G.neighbors(object_id):
+        e = G.edges[object_id, m]
+        out.append((m, np.array([e["reach_x"], e["reach_y"]], dtype=np.float64)))
+    if not out:
+        raise PlanningError(
+            f"object {object_id!r} is in the map but out of the robot's reach from every place "
+            "(it has no object edge)"
+        )
+    return out
+
+
+def route_to_object(G, from_xy, object_id: str, via: str | None = None) -> list[str]:
+    """The places from the environment node nearest ``from_xy`` to the object: environment node keys along
+    the shortest passage route (networkx Dijkstra on passage length), ending with the object id. ``via``
+    forces the last environment node. Raises ``PlanningError`` for unknown / unreachable objects."""
+    import networkx as nx
+
+    reach = object_reach_points(G, object_id)
+    env = environment_nodes(G)
+    if not env:
+        raise PlanningError("the holographic graph has no environment nodes")
+    xy = np.array([[G.nodes[n]["x"], G.nodes[n]["y"]] for n in env])
+    p = np.asarray(from_xy, dtype=np.float64).reshape(2)
+    start = env[int(np.argmin(np.hypot(*(xy - p).T)))]
+    H = G.subgraph(env)
+    targets = [via] if via is not None else [k for k, _ in reach]
+    best: list[str] | None = None
+    best_len = np.inf
+    for t in targets:
+        try:
+            length, path = nx.single_source_dijkstra(H, start, t, weight="length")
+        except nx.NetworkXNoPath:
+            continue
+        if length < best_len:
+            best, best_len = path, length
+    if best is None:
+        raise PlanningError(
+            f"no passage joins the place {start!r} near the start to a place reaching {object_id!r}"
+        )
+    return list(best) + [object_id]

@@ -1,0 +1,474 @@
+"""Skeleton -> topology graph (SPEC.md §2): nodes at junctions and endpoints, edges along the skeleton.
+
+The skeleton is a (H, W) bool mask, 8-connected (``holoslam.maps.thinning.thin``). Every skeleton cell is
+classified by its number of skeleton neighbours: 0 isolated, 1 endpoint, 2 chain, >= 3 junction. Adjacent
+junction cells form one junction node (a cluster); its representative cell is the cluster cell farthest from
+obstacles. Chains of chain cells become edges between the nodes at their two ends. A closed loop with no
+junction (a ring of free space around an obstacle) gets one node of kind ``'loop'`` at its first cell and a
+self-loop edge. Parallel edges (two corridors around an obstacle between the same junctions) are kept: the
+graph is a ``networkx.MultiGraph``.
+
+Tracing is vectorised: every chain cell has exactly two skeleton neighbours, so "walk along the chain" is a
+successor function on (cell, direction) states; pointer jumping (doubling) gives each state its distance to
+the end of its chain and the node it ends at in O(n log L) array operations, without per-cell Python loops.
+Python loops only over edges (when the graph is built) and over pruned spurs.
+
+Spur pruning (documented length): an edge with an endpoint node at one end and a junction at the other is
+a spur; it is removed when its length is below ``max(prune_spur_m, spur_clearance_factor * clearance of its
+junction)`` (a branch that does not leave the junction's free disc is thinning noise from a wall corner).
+Pruning repeats until nothing changes, a junction left with two edges is merged away (its two edges joined),
+and the last edge of a component is never removed. Pruning removes only leaves, so the number of components
+and of independent cycles does not change.
+
+Line tips: a cell with one skeleton neighbour, or with two that touch each other (the end of a diagonal or
+staircase line, which ``thin`` keeps as a line end), is an endpoint.
+
+Known limit: a hole enclosed only by junction cells (an obstacle of one or two cells right at a crossing) is
+inside one junction cluster and not represented by a cycle of the graph; holes of at least 3 x 3 cells are.
+
+Node attributes: ``x``, ``y`` (world metres, the cell centre), ``row``, ``col``, ``kind`` ('junction' |
+'endpoint' | 'isolated' | 'loop'), ``clearance`` (metres to the nearest obstacle), ``submap`` (index of the
+nearest anchor or -1). Edge attributes: ``path`` ((K, 2) int64 (row, col) cells from the node at ``u`` ... to
+the node at the other end),
+``path_from`` (the node id at ``path[0]``), ``length`` (metres, sum of 8-connected steps of 1 or sqrt(2)
+cells x resolution), ``min_clearance`` (metres).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from holoslam.errors import MapError
+
+if TYPE_CHECKING:
+    import networkx as nx
+
+    from holoslam.maps.grid import OccupancyGrid
+
+__all__ = [
+    "skeleton_to_graph",
+    "topology_from_grid",
+    "clearance_map",
+    "prune_spurs",
+    "to_graphml_ready",
+    "path_to_string",
+    "path_from_string",
+    "cycle_rank",
+]
+
+_OFFS = np.array([(-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1)], dtype=np.int64)
+
+
+def clearance_map(free: np.ndarray, resolution: float = 1.0) -> np.ndarray:
+    """(H, W) float64: Euclidean distance (metres) from each free cell's centre to the nearest non-free cell
+    (cells outside the grid count as non-free); 0 on non-free cells."""
+    import cv2
+
+    m = np.pad(np.asarray(free, dtype=np.uint8), 1)
+    d = cv2.distanceTransform(m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+    return d.astype(np.float64) * float(resolution)
+
+
+def _pointer_jump(
+    nxt: np.ndarray, val: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Successor array nxt (-1 = terminal). Returns (rank = steps to the terminal, root = terminal state,
+    done = whether a terminal was reached); with val, also folds min(val) along the way (returned as root for
+    states that never terminate, i.e. lie on a cycle)."""
+    n = nxt.shape[0]
+    rank = (nxt >= 0).astype(np.int64)
+    root = np.where(nxt >= 0, nxt, np.arange(n))
+    ptr = nxt.copy()
+    mn = val.copy() if val is not None else None
+    rounds = max(1, int(np.ceil(np.log2(max(n, 2)))) + 1)
+    for _ in range(rounds):
+        live = ptr >= 0
+        if not live.any():
+            break
+        p = ptr[live]
+        rank[live] += rank[p]
+        root[live] = root[p]
+        if mn is not None:
+            mn[live] = np.minimum(mn[live], mn[p])
+        ptr[live] = ptr[p]
+    done = ptr < 0
+    return rank, (root if mn is None else np.where(done, root, mn)), done
+
+
+class _Skeleton:
+    """Skeleton cells as sorted flat indices of the padded grid, with their neighbour table."""
+
+    def __init__(self, skel: np.ndarray) -> None:
+        h, w = skel.shape
+        self.h, self.w, self.w2 = h, w, w + 2
+        rr, cc = np.nonzero(skel)
+        self.rc = np.column_stack([rr, cc]).astype(np.int64)
+        self.flat = (rr.astype(np.int64) + 1) * self.w2 + (cc + 1)  # sorted (nonzero is row-major)
+        n = self.flat.shape[0]
+        q = self.flat[:, None] + (_OFFS[:, 0] * self.w2 + _OFFS[:, 1])[None, :]
+        pos = np.searchsorted(self.flat, q)
+        pos = np.minimum(pos, max(n - 1, 0))
+        found = self.flat[pos] == q if n else np.zeros((0, 8), dtype=bool)
+        self.nbr = np.where(found, pos, -1)  # (n, 8) index of the neighbour cell or -1
+        self.deg = found.sum(axis=1)
+
+
+def skeleton_to_graph(
+    skeleton: np.ndarray,
+    *,
+    resolution: float = 1.0,
+    origin_x: float = 0.0,
+    origin_y: float = 0.0,
+    clearance: np.ndarray | None = None,
+    anchors_wTa: np.ndarray | None = None,
+    prune_spur_m: float = 0.0,
+    spur_clearance_factor: float = 0.0,
+) -> nx.MultiGraph:
+    """Topology graph of an 8-connected skeleton (module docstring). ``clearance`` is an (H, W) metres map
+    (``clearance_map``); without it clearances are NaN. Cell (row, col) has its centre at
+    (origin_x + (col + 0.5) * resolution, origin_y + (row + 0.5) * resolution), as in OccupancyGrid."""
+    import networkx as nx
+
+    skel = np.asarray(skeleton, dtype=bool)
+    if skel.ndim != 2:
+        raise MapError(f"a skeleton must be a 2-D (H, W) mask, got shape {skel.shape}")
+    if not np.isfinite(resolution) or resolution <= 0:
+        raise MapError(f"resolution must be a positive number of metres per cell, got {resolution}")
+    if clearance is not None and np.shape(clearance) != skel.shape:
+        raise MapError(f"clearance map shape {np.shape(clearance)} differs from the skeleton's {skel.shape}")
+    sk = _Skeleton(skel)
+    n = sk.flat.shape[0]
+    clr = (
+        np.asarray(clearance, dtype=np.float64)[sk.rc[:, 0], sk.rc[:, 1]]
+        if clearance is not None
+        else np.full(n, np.nan)
+    )
+
+    # tips: one neighbour, or two neighbours touching each other (the end of a diagonal line; thin() keeps
+    # such cells as line ends) are endpoints; junctions have >= 3 neighbours; the rest are chain cells
+    two_nb = sk.deg == 2
+    if two_nb.any():
+        pair = np.sort(sk.nbr[two_nb], axis=1)[:, -2:]
+        dr = np.abs(sk.rc[pair[:, 0]] - sk.rc[pair[:, 1]]).max(axis=1)
+        tip2 = np.zeros(n, dtype=bool)
+        tip2[np.flatnonzero(two_nb)[dr == 1]] = True
+    else:
+        tip2 = np.zeros(n, dtype=bool)
+    is_node = (sk.deg != 2) | tip2
+    node_of, kinds, rep = _nodes(sk, is_node, clr, tip2)
+    # loops without any node cell: promote the smallest cell of each to a 'loop' node
+    chains = _trace(sk, is_node, node_of)
+    if chains is None:
+        loop_cells = _loop_breakers(sk, is_node)
+        is_node[loop_cells] = True
+        node_of[loop_cells] = np.arange(kinds.shape[0], kinds.shape[0] + loop_cells.shape[0])
+        kinds = np.concatenate([kinds, np.full(loop_cells.shape[0], "loop", dtype=kinds.dtype)])
+        rep = np.concatenate([rep, loop_cells])
+        chains = _trace(sk, is_node, node_of)
+        assert chains is not None
+    eu, ev, cells, starts = chains
+
+    # edges between adjacent node cells of different nodes (e.g. a one-cell spur off a junction)
+    i_idx, k_idx = np.nonzero((sk.nbr >= 0) & is_node[:, None])
+    j_idx = sk.nbr[i_idx, k_idx]
+    keep = is_node[j_idx] & (i_idx < j_idx) & (node_of[i_idx] != node_of[j_idx])
+    di, dj = _spanning_pairs(i_idx[keep], j_idx[keep], node_of)
+
+    all_u = np.concatenate([eu, node_of[di]])
+    all_v = np.concatenate([ev, node_of[dj]])
+    lengths_cells = np.concatenate([np.diff(starts), np.full(di.shape[0], 2)])
+    cells = np.concatenate([cells, np.column_stack([di, dj]).ravel()])
+    starts = np.concatenate([[0], np.cumsum(lengths_cells)])
+
+    # per-edge length and clearance with reduceat over the concatenated cell sequences
+    rc = sk.rc[cells]
+    step = np.abs(np.diff(rc, axis=0))
+    steplen = np.where(step.sum(axis=1) == 2, np.sqrt(2.0), 1.0)
+    steplen[starts[1:-1] - 1] = 0.0  # no step between two edges' sequences
+    m = all_u.shape[0]
+    if m:
+        cum = np.concatenate([[0.0], np.cumsum(steplen)])
+        length = (cum[starts[1:] - 1] - cum[starts[:-1]]) * resolution
+        min_clr = np.minimum.reduceat(clr[cells], starts[:-1]) if n else np.zeros(0)
+    else:
+        length = min_clr = np.zeros(0)
+
+    G = nx.MultiGraph()
+    node_rc = sk.rc[rep]
+    xs = origin_x + (node_rc[:, 1] + 0.5) * resolution
+    ys = origin_y + (node_rc[:, 0] + 0.5) * resolution
+    submap = _nearest_anchor(np.column_stack([xs, ys]), anchors_wTa)
+    G.add_nodes_from(
+        (
+            i,
+            {
+                "x": float(xs[i]),
+                "y": float(ys[i]),
+                "row": int(node_rc[i, 0]),
+                "col": int(node_rc[i, 1]),
+                "kind": str(kinds[i]),
+                "clearance": float(clr[rep[i]]),
+                "submap": int(submap[i]),
+            },
+        )
+        for i in range(rep.shape[0])
+    )
+    paths = np.split(rc, starts[1:-1])
+    G.add_edges_from(
+        (
+            int(all_u[e]),
+            int(all_v[e]),
+            {
+                "path": paths[e],
+                "path_from": int(all_u[e]),
+                "length": float(length[e]),
+                "min_clearance": float(min_clr[e]),
+            },
+        )
+        for e in range(m)
+    )
+    G.graph.update(resolution=float(resolution), origin_x=float(origin_x), origin_y=float(origin_y))
+    if prune_spur_m > 0 or spur_clearance_factor > 0:
+        prune_spurs(G, prune_spur_m, spur_clearance_factor)
+    return G
+
+
+def _spanning_pairs(di: np.ndarray, dj: np.ndarray, node_of: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Adjacent cells of different nodes (only around line tips, so few): keep one pair per node pair and no
+    pair that closes a cycle among them (three mutually adjacent tip cells enclose no hole)."""
+    parent: dict[int, int] = {}
+
+    def find(x: int) -> int:
+        while parent.get(x, x) != x:
+            x = parent[x]
+        return x
+
+    keep = []
+    for e, (a, b) in enumerate(zip(node_of[di].tolist(), node_of[dj].tolist(), strict=True)):
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[ra] = rb
+            keep.append(e)
+    k = np.asarray(keep, dtype=np.int64)
+    return di[k], dj[k]
+
+
+def _nodes(sk: _Skeleton, is_node: np.ndarray, clr: np.ndarray, tip2: np.ndarray):
+    """node_of (n,) node id per cell (-1 for chain cells), kinds (nodes,), representative cell per node."""
+    n = sk.flat.shape[0]
+    junction = sk.deg >= 3
+    lab = np.arange(n)
+    jidx = np.flatnonzero(junction)
+    jn = sk.nbr[jidx]
+    jn_ok = jn >= 0
+    jn_ok[jn_ok] = junction[jn[jn_ok]]
+    jn = np.where(jn_ok, jn, jidx[:, None])
+    while jidx.size:  # min-label propagation inside junction clusters (clusters are tiny)
+        new = np.minimum(lab[jidx], lab[jn].min(axis=1))
+        new = lab[new]  # jump
+        if np.array_equal(new, lab[jidx]):
+            break
+        lab[jidx] = new
+    node_cells = np.flatnonzero(is_node)
+    roots, inv = np.unique(lab[node_cells], return_inverse=True)
+    node_of = np.full(n, -1, dtype=np.int64)
+    node_of[node_cells] = inv
+    d = sk.deg[roots]
+    kinds = np.where(d >= 3, "junction", np.where((d == 1) | tip2[roots], "endpoint", "isolated"))
+    kinds = kinds.astype("<U8")
+    # representative: the cell of the node farthest from obstacles, then with most skeleton neighbours,
+    # then first in row-major order
+    key = np.where(np.isnan(clr[node_cells]), 0.0, clr[node_cells])
+    order = np.lexsort((-sk.deg[node_cells], -key, inv))
+    first = np.ones(order.shape[0], dtype=bool)
+    first[1:] = inv[order][1:] != inv[order][:-1]
+    rep = node_cells[order[first]]
+    return node_of, kinds, rep
+
+
+def _states(sk: _Skeleton, is_node: np.ndarray):
+    """Chain cells and their (cell, direction) successor function."""
+    chain = np.flatnonzero(~is_node)
+    two = np.sort(sk.nbr[chain], axis=1)[:, -2:]  # the two neighbours (deg == 2)
+    cpos = np.full(sk.flat.shape[0], -1, dtype=np.int64)
+    cpos[chain] = np.arange(chain.shape[0])
+    # state 2*i + d: at chain cell i, arrived from two[i, d], leaving towards two[i, 1 - d]
+    to = np.stack([two[:, 1], two[:, 0]], axis=1).ravel()
+    frm = two.ravel()
+    here = np.repeat(chain, 2)
+    tgt_chain = cpos[to]
+    nxt = np.full(to.shape[0], -1, dtype=np.int64)
+    ok = tgt_chain >= 0
+    # at the target chain cell, the direction whose 'from' is the current cell
+    t2 = two[tgt_chain[ok]]
+    d = np.where(t2[:, 0] == here[ok], 0, 1)
+    nxt[ok] = 2 * tgt_chain[ok] + d
+    return chain, here, frm, to, nxt
+
+
+def _loop_breakers(sk: _Skeleton, is_node: np.ndarray) -> np.ndarray:
+    chain, here, _frm, _to, nxt = _states(sk, is_node)
+    _rank, mn, done = _pointer_jump(nxt, here.copy())
+    return np.unique(mn[~done])
+
+
+def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray):
+    """Edges along chains: (u, v, cells, starts) with cells the concatenated cell sequences (node cell,
+    chain cells ..., node cell) and starts their offsets (len m + 1); None when a chain is a closed loop."""
+    chain, here, frm, to, nxt = _states(sk, is_node)
+    if chain.size == 0:
+        e = np.zeros(0, dtype=np.int64)
+        return e, e, e, np.zeros(1, dtype=np.int64)
+    rank, root, done = _pointer_jump(nxt)
+    if not done.all():
+        return None
+    s = np.arange(nxt.shape[0])
+    keep = root < root[s ^ 1]  # one direction per chain
+    ks = s[keep]
+    order = ks[np.lexsort((-rank[ks], root[ks]))]
+    r = root[order]
+    first = np.ones(order.shape[0], dtype=bool)
+    first[1:] = r[1:] != r[:-1]
+    gstart = np.flatnonzero(first)
+    m = gstart.shape[0]
+    glen = np.diff(np.concatenate([gstart, [order.shape[0]]]))
+    u_cell = frm[order[gstart]]
+    v_cell = to[r[gstart]]
+    # concatenated sequences: [u_cell, chain cells..., v_cell] per edge
+    total = order.shape[0] + 2 * m
+    starts = np.concatenate([[0], np.cumsum(glen + 2)])
+    cells = np.empty(total, dtype=np.int64)
+    grp = np.repeat(np.arange(m), glen)
+    cells[np.arange(order.shape[0]) + 2 * grp + 1] = here[order]
+    cells[starts[:-1]] = u_cell
+    cells[starts[1:] - 1] = v_cell
+    return node_of[u_cell], node_of[v_cell], cells, starts
+
+
+def _nearest_anchor(xy: np.ndarray, anchors_wTa: np.ndarray | None) -> np.ndarray:
+    if anchors_wTa is None or len(anchors_wTa) == 0:
+        return np.full(xy.shape[0], -1, dtype=np.int64)
+    a = np.asarray(anchors_wTa, dtype=np.float64).reshape(-1, 3)[:, :2]
+    d2 = ((xy[:, None, :] - a[None, :, :]) ** 2).sum(axis=2)
+    return np.argmin(d2, axis=1).astype(np.int64)
+
+
+def prune_spurs(G: nx.MultiGraph, prune_spur_m: float, spur_clearance_factor: float = 0.0) -> int:
+    """Remove short spurs in place (module docstring); returns how many edges were removed."""
+    removed = 0
+    changed = True
+    while changed:
+        changed = False
+        for leaf in [v for v in G.nodes if G.degree(v) == 1]:
+            if leaf not in G or G.degree(leaf) != 1:
+                continue
+            (_, other, key, data) = next(iter(G.edges(leaf, keys=True, data=True)))
+            if other == leaf or G.degree(other) <= 1:
+                continue  # the last edge of its component
+            clr = G.nodes[other].get("clearance", np.nan)
+            limit = max(prune_spur_m, spur_clearance_factor * (0.0 if np.isnan(clr) else clr))
+            if data["length"] >= limit:
+                continue
+            G.remove_node(leaf)
+            removed += 1
+            changed = True
+            if G.degree(other) == 2 and G.number_of_edges(other, other) == 0:
+                _merge_through(G, other)
+            elif G.degree(other) == 1:
+                G.nodes[other]["kind"] = "endpoint"
+            elif G.degree(other) == 2:
+                G.nodes[other]["kind"] = "loop"
+    return removed
+
+
+def _merge_through(G: nx.MultiGraph, v) -> None:
+    """Replace node v (two edges, no self-loop) by one edge joining its neighbours."""
+    (_, a, ka, da), (_, b, kb, db) = list(G.edges(v, keys=True, data=True))
+    pa = da["path"] if da["path_from"] == a else da["path"][::-1]  # a ... v
+    pb = db["path"] if db["path_from"] == v else db["path"][::-1]  # v ... b
+    # the two paths end at cells of v: the same cell, or two cells of a junction cluster, joined through the
+    # cells on the straight line between them (octile step lengths)
+    extra = 0.0
+    if np.array_equal(pa[-1], pb[0]):
+        path = np.concatenate([pa, pb[1:]])
+    else:
+        a_end, b_start = pa[-1], pb[0]
+        k = int(np.abs(b_start - a_end).max())
+        t = np.arange(1, k)[:, None] / k
+        mid = np.rint(a_end + t * (b_start - a_end)).astype(pa.dtype)  # straight 8-connected cells between
+        path = np.concatenate([pa, mid, pb])
+        d = np.abs(np.diff(path[len(pa) - 1 : len(pa) + len(mid) + 1], axis=0))
+        extra = float((np.sqrt(2.0) * d.min(axis=1) + (d.max(axis=1) - d.min(axis=1))).sum())
+        extra *= G.graph.get("resolution", 1.0)
+    G.remove_node(v)
+    if a == b:
+        G.nodes[a]["kind"] = "loop" if G.degree(a) == 0 else G.nodes[a]["kind"]
+    G.add_edge(
+        a,
+        b,
+        path=path,
+        path_from=a,
+        length=da["length"] + db["length"] + extra,
+        min_clearance=min(da["min_clearance"], db["min_clearance"]),
+    )
+
+
+def cycle_rank(G: nx.Graph) -> int:
+    """Number of independent cycles: edges - nodes + components (self-loops and parallel edges count)."""
+    import networkx as nx
+
+    return G.number_of_edges() - G.number_of_nodes() + nx.number_connected_components(G)
+
+
+def topology_from_grid(
+    grid: OccupancyGrid,
+    *,
+    anchors_wTa: np.ndarray | None = None,
+    prune_spur_m: float = 0.3,
+    spur_clearance_factor: float = 1.5,
+    erode_cells: int = 0,
+    close_cells: int = 0,
+) -> nx.MultiGraph:
+    """Free space of the grid -> thinned skeleton -> topology graph, in one call (defaults: spurs shorter
+    than 0.3 m or 1.5 x their junction's clearance are pruned; no pre-processing)."""
+    from holoslam.maps.thinning import thin
+
+    free = grid.free
+    skel = thin(free, erode_cells=erode_cells, close_cells=close_cells)
+    return skeleton_to_graph(
+        skel,
+        resolution=grid.resolution,
+        origin_x=grid.origin_x,
+        origin_y=grid.origin_y,
+        clearance=clearance_map(free, grid.resolution),
+        anchors_wTa=anchors_wTa,
+        prune_spur_m=prune_spur_m,
+        spur_clearance_factor=spur_clearance_factor,
+    )
+
+
+def path_to_string(path: np.ndarray) -> str:
+    """(K, 2) int cells -> 'r0,c0;r1,c1;...' (compact, for GraphML)."""
+    p = np.asarray(path, dtype=np.int64).reshape(-1, 2)
+    return ";".join(f"{r},{c}" for r, c in p.tolist())
+
+
+def path_from_string(text: str) -> np.ndarray:
+    """Inverse of path_to_string."""
+    if not text:
+        return np.zeros((0, 2), dtype=np.int64)
+    try:
+        return np.array([[int(v) for v in item.split(",")] for item in text.split(";")], dtype=np.int64)
+    except ValueError as exc:
+        raise MapError(f"edge path {text[:40]!r} is not 'row,col;row,col;...' ({exc})") from exc
+
+
+def to_graphml_ready(G: nx.MultiGraph) -> nx.MultiGraph:
+    """A copy whose attributes are all scalars: edge ``path`` becomes a 'r,c;r,c;...' string."""
+    H = G.copy()
+    for _u, _v, data in H.edges(data=True):
+        if "path" in data and not isinstance(data["path"], str):
+            data["path"] = path_to_string(data["path"])
+    return H

@@ -1,0 +1,489 @@
+"""Noisy sensors of the simulated Pioneer III: odometer, digital compass, SICK LMS-200 laser, PTZ camera.
+
+Every function is pure: it takes the true trajectory (``stamps_ns`` (N,), ``wTb`` (N, 3)), the world, the
+noise settings and a ``numpy.random.Generator`` and returns arrays. The noise models (defaults in
+``holoslam.sim.SimConfig``):
+
+Odometer (``odometry``), 20 Hz. Per step k the true motion in the base frame is (ds_k, 0, dtheta_k).
+- distance: ds_meas = (1 + odom_scale) * ds + N(0, odom_slip_sigma^2 * |ds|)  (a systematic scale error,
+  default +1.5 %, and a random slip whose variance grows with the distance, default 0.01 m per sqrt(m));
+  in addition, with probability ``odom_slip_event_rate`` per metre the wheels slip for one step and
+  over-report the step by a factor U(1.5, 3).
+- heading: dtheta_meas = (1 + odom_turn_scale) * dtheta + odom_drift * ds + N(0, odom_turn_sigma^2 * |dtheta|
+  + heading_sigma^2 * |ds|) (default turn scale +2 %, drift 0.5 deg per metre from unequal wheel
+  radii, turn_sigma 0.02 rad per sqrt(rad), heading_sigma 0.2 deg per sqrt(m)); the wheel-odometry heading
+  therefore drifts without bound.
+- The odometer integrates odomTb_{k+1} = odomTb_k ∘ (ds_meas, 0, dtheta_meas) from the identity and reports
+  its first-order covariance, propagated from the per-step noise, in the ROS convention (the covariance of
+  the numbers x, y, yaw in the odom frame).
+
+Digital compass (``compass``), 10 Hz: yaw_meas = yaw_true + compass_bias + disturbance(x, y) + N(0,
+compass_sigma^2); default sigma 1.5 deg, bias 2.0 deg. disturbance(x, y) = sum_i A_i * (1 - d_i / R)^2 for
+d_i < R (R = ``compass_disturbance_radius``, 1.0 m), with A_i the world's magnetic sources (fridge,
+TV, air conditioner, washing machine, microwave; 3-6 deg) scaled by ``compass_disturbance_scale`` (1.0).
+
+Laser (``laser_scans``), 5 Hz: 181 beams from -90 deg to +90 deg in 1 deg steps, mounted at ``LASER_MOUNT``
+(x 0.12 m ahead of the base centre, 0.30 m high), ranges ray-cast against walls and furniture at the true
+pose plus N(0, laser_sigma^2) (default 0.01 m), rounded to the LMS-200's 1 mm resolution; beams with no
+return within 8 m are +inf.
+
+Camera (``camera_snapshots``): a 640x480 PTZ camera on a mast (``PTZ_MOUNT``, 1.10 m high), focal length
+``F0`` = 525 px at zoom 1, zoom up to ``ZOOM_MAX`` = 10x, pan +-170 deg, tilt -45..+45 deg. Like an operator
+taking snapshots, at most ``image_rate_hz`` times per second it aims at the nearest label (labels never
+photographed before first, then labels photographed once, from a point ``SECOND_VIEW_BASELINE`` = 0.5 m away
+from the first view, so that two views can triangulate) that faces it (within 60 deg), is not behind a wall,
+lies within 3.5 m, and was not photographed in the last ``resnap_s`` seconds (after two views), with a
+pointing error of N(0, 0.5 deg) per axis, zoomed so that a QR module spans about 5 px. A label counts as
+readable in an image (and is published on ``/tags``) when its code lies fully inside the image, faces the
+camera within 60 deg, is not occluded by a wall or by furniture at least as tall as the label, and its
+smallest projected module is at least ``MIN_MODULE_PX`` = 3 px; the corners published are the true projections
+plus N(0, 0.3 px).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from holoslam.geometry import adjoint, compose, inverse, wrap
+from holoslam.sim.world import World, raycast, segments_block
+
+__all__ = [
+    "OdometryStream",
+    "CompassStream",
+    "ScanStream",
+    "Snapshot",
+    "odometry",
+    "compass",
+    "laser_scans",
+    "camera_snapshots",
+    "interpolate_poses",
+    "LASER_MOUNT",
+    "PTZ_MOUNT",
+    "F0",
+    "ZOOM_MAX",
+    "MIN_MODULE_PX",
+    "IMAGE_SIZE",
+    "ptz_rotation",
+    "qr_modules",
+]
+
+LASER_MOUNT = (0.12, 0.0, 0.30)  # bTl: x, y, z (yaw 0)
+PTZ_MOUNT = (0.05, 0.0, 1.10)  # bTptz: x, y, z (axes of the base)
+F0 = 525.0
+ZOOM_MAX = 10.0
+MIN_MODULE_PX = 3.0
+IMAGE_SIZE = (640, 480)
+MAX_FACING_DEG = 60.0
+MAX_SNAPSHOT_RANGE = 3.5
+TARGET_MODULE_PX = 5.0
+SECOND_VIEW_BASELINE = 0.5  # m between the camera positions of a label's first two snapshots
+LABEL_MARGIN_MODULES = 2  # white quiet zone printed around the code, in modules
+
+
+@dataclass(frozen=True)
+class OdometryStream:
+    stamps_ns: np.ndarray  # (N,)
+    odomTb: np.ndarray  # (N, 3)
+    cov_odomTb: np.ndarray  # (N, 3, 3), ROS convention: covariance of (x, y, yaw) in the odom frame
+    speed: np.ndarray  # (N,) m/s
+    yaw_rate: np.ndarray  # (N,) rad/s
+    ds_true: np.ndarray  # (N-1,) true forward distance per step
+    ds_meas: np.ndarray  # (N-1,)
+    dtheta_true: np.ndarray  # (N-1,)
+    dtheta_meas: np.ndarray  # (N-1,)
+
+
+@dataclass(frozen=True)
+class CompassStream:
+    stamps_ns: np.ndarray
+    yaw: np.ndarray  # measured heading, rad, wrapped
+    yaw_true: np.ndarray
+    disturbance: np.ndarray  # rad, the local magnetic disturbance part of the error
+    sigma: float  # white-noise sigma, rad (what the message reports)
+
+
+@dataclass(frozen=True)
+class ScanStream:
+    stamps_ns: np.ndarray  # (K,)
+    ranges: np.ndarray  # (K, 181) float32, +inf for no return
+    ranges_true: np.ndarray  # (K, 181) float64 noise-free ray cast (inf for no return)
+    wTl: np.ndarray  # (K, 3) true laser poses
+    angle_min: float
+    angle_increment: float
+    range_min: float
+    range_max: float
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """One camera image: when, where the head pointed, the intrinsics, the rendered JPEG, the readable
+    labels (object ids), and their published sightings (payload, corners (4, 2) TL, TR, BR, BL)."""
+
+    stamp_ns: int
+    pan: float
+    tilt: float
+    zoom: float
+    K: np.ndarray
+    jpeg: bytes
+    visible_ids: tuple[str, ...]
+    tags: tuple[tuple[str, np.ndarray], ...]
+    target_id: str
+
+
+def wrap_angle(theta: np.ndarray) -> np.ndarray:
+    """``holoslam.geometry.wrap`` made strict: floating-point rounding can give exactly +pi; map it to -pi."""
+    w = np.asarray(wrap(np.asarray(theta, dtype=np.float64)))
+    return np.where(w >= np.pi, w - 2.0 * np.pi, w)
+
+
+def interpolate_poses(stamps_ns: np.ndarray, wTb: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
+    """True poses at ``at_ns`` by linear interpolation (angles unwrapped)."""
+    t = (np.asarray(stamps_ns) - stamps_ns[0]).astype(np.float64)
+    q = (np.asarray(at_ns) - stamps_ns[0]).astype(np.float64)
+    th = np.unwrap(wTb[:, 2])
+    return np.column_stack(
+        [np.interp(q, t, wTb[:, 0]), np.interp(q, t, wTb[:, 1]), wrap_angle(np.interp(q, t, th))]
+    )
+
+
+# ----------------------------------------------------------------------------------------------- odometer
+
+
+def odometry(
+    stamps_ns: np.ndarray,
+    wTb: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    scale: float = 0.015,
+    slip_sigma: float = 0.01,
+    slip_event_rate: float = 0.05,
+    turn_scale: float = 0.02,
+    drift: float = math.radians(0.5),
+    turn_sigma: float = 0.02,
+    heading_sigma: float = math.radians(0.2),
+) -> OdometryStream:
+    """Wheel odometry from the true trajectory (see the module docstring for the model)."""
+    d = compose(inverse(wTb[:-1]), wTb[1:])  # true body-frame increments
+    ds = d[:, 0]
+    dth = d[:, 2]
+    n = len(ds)
+    ads = np.abs(ds)
+    slip = 1.0 + rng.standard_normal(n) * slip_sigma * np.sqrt(ads) / np.maximum(ads, 1e-12) * (ads > 0)
+    ds_meas = (1.0 + scale) * ds * slip
+    events = rng.random(n) < slip_event_rate * ads
+    ds_meas = np.where(events, ds_meas * rng.uniform(1.5, 3.0, n), ds_meas)
+    sig_th = np.sqrt(turn_sigma**2 * np.abs(dth) + heading_sigma**2 * ads)
+    dth_meas = (1.0 + turn_scale) * dth + drift * ds + rng.standard_normal(n) * sig_th
+    # integrate (sequential by nature; floats in a loop are cheap at 20 Hz)
+    P = np.zeros((n + 1, 3))
+    C = np.zeros((n + 1, 3, 3))
+    x = y = th = 0.0
+    cov = np.zeros((3, 3))
+    for k in range(n):
+        c, s = math.cos(th), math.sin(th)
+        x += c * ds_meas[k]
+        y += s * ds_meas[k]
+        th += dth_meas[k]
+        # body-frame covariance propagation: cov' = Ad(u^-1) cov Ad(u^-1)^T + Q
+        u = ds_meas[k]
+        Ad = _adjoint_inv(u, dth_meas[k])
+        q = np.diag(
+            [
+                slip_sigma**2 * abs(u) + 1e-10,
+                (0.1 * slip_sigma) ** 2 * abs(u) + 1e-10,
+                turn_sigma**2 * abs(dth_meas[k]) + heading_sigma**2 * abs(u) + 1e-10,
+            ]
+        )
+        cov = Ad @ cov @ Ad.T + q
+        P[k + 1] = (x, y, th)
+        C[k + 1] = cov
+    P[:, 2] = wrap_angle(P[:, 2])
+    # to the ROS convention: covariance of the numbers (x, y, yaw) in the odom frame
+    c, s = np.cos(P[:, 2]), np.sin(P[:, 2])
+    J = np.zeros((n + 1, 3, 3))
+    J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1], J[:, 2, 2] = c, -s, s, c, 1.0
+    C = J @ C @ np.transpose(J, (0, 2, 1))
+    C[0] = np.diag([1e-9, 1e-9, 1e-9])
+    dt = np.diff(stamps_ns).astype(np.float64) * 1e-9
+    speed = np.r_[0.0, ds_meas / dt]
+    rate = np.r_[0.0, dth_meas / dt]
+    return OdometryStream(np.asarray(stamps_ns), P, C, speed, rate, ds, ds_meas, dth, dth_meas)
+
+
+def _adjoint_inv(u: float, dth: float) -> np.ndarray:
+    """Ad((u, 0, dth)^-1) so that a body-frame covariance at k moves to the body frame at k+1."""
+    return adjoint(inverse(np.array([u, 0.0, dth])))
+
+
+# ----------------------------------------------------------------------------------------------- compass
+
+
+def magnetic_disturbance(world: World, xy: np.ndarray, radius: float = 1.0, scale: float = 1.0) -> np.ndarray:
+    """Heading disturbance (rad) at points (N, 2) from the world's magnetic sources."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(xy))
+    for _, sx, sy, amp in world.magnetic_sources:
+        d = np.hypot(xy[:, 0] - sx, xy[:, 1] - sy)
+        out += math.radians(amp) * scale * np.clip(1.0 - d / radius, 0.0, None) ** 2
+    return out
+
+
+def compass(
+    world: World,
+    stamps_ns: np.ndarray,
+    wTb: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    rate_hz: float = 10.0,
+    offset_ns: int = 25_000_000,
+    sigma: float = math.radians(1.5),
+    bias: float = math.radians(2.0),
+    disturbance_radius: float = 1.0,
+    disturbance_scale: float = 1.0,
+) -> CompassStream:
+    period = int(round(1e9 / rate_hz))
+    at = np.arange(stamps_ns[0] + offset_ns, stamps_ns[-1], period, dtype=np.int64)
+    P = interpolate_poses(stamps_ns, wTb, at)
+    dist = magnetic_disturbance(world, P[:, :2], disturbance_radius, disturbance_scale)
+    yaw = wrap_angle(P[:, 2] + bias + dist + sigma * rng.standard_normal(len(at)))
+    return CompassStream(at, yaw, P[:, 2], dist, float(sigma))
+
+
+# ----------------------------------------------------------------------------------------------- laser
+
+
+def laser_scans(
+    world: World,
+    stamps_ns: np.ndarray,
+    wTb: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    rate_hz: float = 5.0,
+    offset_ns: int = 10_000_000,
+    sigma: float = 0.01,
+    range_max: float = 8.0,
+) -> ScanStream:
+    period = int(round(1e9 / rate_hz))
+    at = np.arange(stamps_ns[0] + offset_ns, stamps_ns[-1], period, dtype=np.int64)
+    P = interpolate_poses(stamps_ns, wTb, at)
+    wTl = compose(P, np.array([LASER_MOUNT[0], LASER_MOUNT[1], 0.0]))
+    beams = np.radians(np.arange(-90, 91, dtype=np.float64))
+    segs = world.obstacle_segments()
+    true = np.empty((len(at), len(beams)))
+    for i in range(0, len(at), 64):
+        sl = slice(i, i + 64)
+        true[sl] = raycast(segs, wTl[sl, :2], wTl[sl, 2:3] + beams[None, :], range_max)
+    noisy = true + sigma * rng.standard_normal(true.shape)
+    noisy = np.round(noisy * 1000.0) / 1000.0
+    noisy[~np.isfinite(true) | (noisy > range_max)] = np.inf
+    return ScanStream(
+        at, noisy.astype(np.float32), true, wTl, float(beams[0]), float(math.radians(1.0)), 0.05, range_max
+    )
+
+
+# ----------------------------------------------------------------------------------------------- camera
+
+
+def qr_modules(payload: str) -> np.ndarray:
+    """The QR code's dark modules (n, n) bool for ``payload`` (segno, error level M, no quiet zone)."""
+    import segno
+
+    q = segno.make_qr(payload, error="m", boost_error=False)
+    return np.array([[bool(v) for v in row] for row in q.matrix], dtype=bool)
+
+
+def ptz_rotation(pan: float, tilt: float) -> np.ndarray:
+    """ptzRc: rotation of the camera_optical frame (z forward, x right, y down) in the ptz_base frame (x
+    forward, y left, z up) after a pan about z and a tilt (positive up) about the panned y axis; orthonormal
+    by construction (Eq. 8-9, seed 002, with t_b = 0)."""
+    cp, sp = math.cos(pan), math.sin(pan)
+    ct, st = math.cos(-tilt), math.sin(-tilt)
+    Rz = np.array([[cp, -sp, 0], [sp, cp, 0], [0, 0, 1.0]])
+    Ry = np.array([[ct, 0, st], [0, 1.0, 0], [-st, 0, ct]])
+    Ropt = np.array([[0, 0, 1.0], [-1.0, 0, 0], [0, -1.0, 0]])
+    return Rz @ Ry @ Ropt
+
+
+def camera_pose_world(wTb: np.ndarray, pan: float, tilt: float) -> tuple[np.ndarray, np.ndarray]:
+    """(wRc (3, 3), wtc (3,)) of the camera_optical frame for a base pose (3,)."""
+    x, y, th = wTb
+    c, s = math.cos(th), math.sin(th)
+    wRb = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    wtc = np.array(
+        [x + c * PTZ_MOUNT[0] - s * PTZ_MOUNT[1], y + s * PTZ_MOUNT[0] + c * PTZ_MOUNT[1], PTZ_MOUNT[2]]
+    )
+    return wRb @ ptz_rotation(pan, tilt), wtc
+
+
+def intrinsics(zoom: float, size: tuple[int, int] = IMAGE_SIZE) -> np.ndarray:
+    """K at a zoom factor: f = F0 * zoom * width / 640, principal point near the image centre."""
+    w, h = size
+    f = F0 * zoom * w / 640.0
+    return np.array([[f, 0, w / 2 - 0.5 + 1.3], [0, f, h / 2 - 0.5 - 0.8], [0, 0, 1.0]])
+
+
+def label_corners_world(obj, margin_modules: float = 0.0, n_modules: int = 29) -> np.ndarray:
+    """The four corners (TL, TR, BR, BL as seen facing the label) of the code (plus a margin in modules),
+    (4, 3) in map."""
+    n = np.array([math.cos(obj.label_yaw), math.sin(obj.label_yaw), 0.0])
+    u = np.cross(-n, [0.0, 0.0, 1.0])  # right, for a viewer facing the label
+    v = np.array([0.0, 0.0, -1.0])  # down
+    h = obj.label_size / 2 * (1 + 2 * margin_modules / n_modules)
+    c = np.asarray(obj.position, dtype=np.float64)
+    return np.stack([c - h * u - h * v, c + h * u - h * v, c + h * u + h * v, c - h * u + h * v])
+
+
+def project(K: np.ndarray, wRc: np.ndarray, wtc: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (M, 2) and depths (M,) of world points X (M, 3)."""
+    Xc = (X - wtc) @ wRc  # = wRc^T (X - t)
+    z = Xc[:, 2]
+    uv = (Xc[:, :2] / z[:, None]) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
+    return uv, z
+
+
+def _occluded(world: World, cam_xy: np.ndarray, obj) -> bool:
+    walls = world.wall_segments()
+    if segments_block(walls, cam_xy[None], np.asarray(obj.position[:2])[None])[0]:
+        return True
+    furn = world.furniture_segments(min_height=obj.position[2], exclude=obj.furniture)
+    return bool(segments_block(furn, cam_xy[None], np.asarray(obj.position[:2])[None])[0])
+
+
+def _facing_cos(obj, cam: np.ndarray) -> float:
+    n = np.array([math.cos(obj.label_yaw), math.sin(obj.label_yaw), 0.0])
+    d = cam - np.asarray(obj.position)
+    return float(n @ d / (np.linalg.norm(d) + 1e-12))
+
+
+def readable_labels(
+    world: World,
+    modules: dict[str, np.ndarray],
+    K: np.ndarray,
+    wRc: np.ndarray,
+    wtc: np.ndarray,
+    size: tuple[int, int] = IMAGE_SIZE,
+) -> tuple[list[str], dict[str, np.ndarray], list[str]]:
+    """(readable ids, their true corner pixels, ids to draw: in front and not occluded)."""
+    w, h = size
+    readable, corners, draw = [], {}, []
+    cosmax = math.cos(math.radians(MAX_FACING_DEG))
+    for o in world.objects:
+        fc = _facing_cos(o, wtc)
+        if fc <= 0.05:
+            continue
+        n = modules[o.object_id].shape[0]
+        plate = label_corners_world(o, LABEL_MARGIN_MODULES, n)
+        uvp, zp = project(K, wRc, wtc, plate)
+        if np.any(zp < 0.1):
+            continue
+        if np.all(uvp[:, 0] < 0) or np.all(uvp[:, 0] > w) or np.all(uvp[:, 1] < 0) or np.all(uvp[:, 1] > h):
+            continue
+        if _occluded(world, wtc[:2], o):
+            continue
+        draw.append(o.object_id)
+        uv, _ = project(K, wRc, wtc, label_corners_world(o, 0.0, n))
+        edges = np.linalg.norm(uv - np.roll(uv, -1, axis=0), axis=1)
+        module_px = edges.min() / n
+        inside = np.all((uvp[:, 0] >= 1) & (uvp[:, 0] <= w - 2) & (uvp[:, 1] >= 1) & (uvp[:, 1] <= h - 2))
+        if inside and fc >= cosmax and module_px >= MIN_MODULE_PX:
+            readable.append(o.object_id)
+            corners[o.object_id] = uv
+    return readable, corners, draw
+
+
+def camera_snapshots(
+    world: World,
+    stamps_ns: np.ndarray,
+    wTb: np.ndarray,
+    rng: np.random.Generator,
+    *,
+    image_rate_hz: float = 0.25,
+    resnap_s: float = 60.0,
+    offset_ns: int = 7_000_000,
+    jpeg_quality: int = 55,
+    size: tuple[int, int] = IMAGE_SIZE,
+    render: bool = True,
+) -> list[Snapshot]:
+    """Operator-style PTZ snapshots along the trajectory (see the module docstring)."""
+    from holoslam.sim.render import render_image
+
+    modules = {o.object_id: qr_modules(o.payload) for o in world.objects}
+    cosmax = math.cos(math.radians(MAX_FACING_DEG))
+    period = int(round(1e9 / image_rate_hz))
+    last_shot = -(10**19)
+    last_of: dict[str, int] = {}
+    shots_of: dict[str, list[np.ndarray]] = {}  # camera positions of the snapshots of each label
+    out: list[Snapshot] = []
+    walls = world.wall_segments()
+    positions = np.array([o.position for o in world.objects])
+    for k in range(0, len(stamps_ns), 2):
+        t = int(stamps_ns[k]) + offset_ns
+        if t - last_shot < period or t > stamps_ns[-1]:
+            continue
+        pose = interpolate_poses(stamps_ns, wTb, np.array([t]))[0]
+        _, cam = camera_pose_world(pose, 0.0, 0.0)
+        d = np.linalg.norm(positions - cam, axis=1)
+        # labels never photographed first, then those photographed once (a second view from a point at
+        # least SECOND_VIEW_BASELINE away, for triangulation), then the nearest
+        count = np.array([min(len(shots_of.get(o.object_id, ())), 2) for o in world.objects])
+        order = np.lexsort((d, count))
+        target = None
+        for i in order:
+            o = world.objects[i]
+            if d[i] > MAX_SNAPSHOT_RANGE:
+                continue
+            if count[i] == 1:
+                if np.linalg.norm(shots_of[o.object_id][0][:2] - cam[:2]) < SECOND_VIEW_BASELINE:
+                    continue
+            elif t - last_of.get(o.object_id, -(10**19)) < resnap_s * 1e9:
+                continue
+            if _facing_cos(o, cam) < cosmax + 0.05:
+                continue
+            if segments_block(walls, cam[None, :2], positions[i : i + 1, :2])[0] or _occluded(
+                world, cam[:2], o
+            ):
+                continue
+            n = modules[o.object_id].shape[0]
+            zoom = TARGET_MODULE_PX * n * d[i] / (F0 * size[0] / 640.0 * o.label_size)
+            if zoom > ZOOM_MAX * 1.25:
+                continue
+            target = o
+            break
+        if target is None:
+            continue
+        # aim the head at the label (pan in the base frame, tilt up positive) with a pointing error
+        rel = target.position - cam
+        yaw_w = math.atan2(rel[1], rel[0])
+        pan = float(wrap(yaw_w - pose[2])) + math.radians(0.5) * rng.standard_normal()
+        tilt = math.atan2(rel[2], math.hypot(rel[0], rel[1])) + math.radians(0.5) * rng.standard_normal()
+        if abs(pan) > math.radians(170) or abs(tilt) > math.radians(45):
+            continue
+        n = modules[target.object_id].shape[0]
+        f_needed = TARGET_MODULE_PX * n * d[target_index(world, target)] / target.label_size
+        zoom = float(np.clip(f_needed / (F0 * size[0] / 640.0), 1.0, ZOOM_MAX))
+        zoom = round(zoom, 2)
+        K = intrinsics(zoom, size)
+        wRc, wtc = camera_pose_world(pose, pan, tilt)
+        ids, corners, draw = readable_labels(world, modules, K, wRc, wtc, size)
+        if target.object_id not in ids:
+            continue
+        last_shot = t
+        for i in ids:
+            last_of[i] = t
+            shots_of.setdefault(i, []).append(cam)
+        jpeg = b""
+        if render:
+            jpeg = render_image(world, modules, K, wRc, wtc, draw, rng, quality=jpeg_quality, size=size)
+        tags = tuple((world.object(i).payload, corners[i] + 0.3 * rng.standard_normal((4, 2))) for i in ids)
+        out.append(Snapshot(t, pan, tilt, zoom, K, jpeg, tuple(ids), tags, target.object_id))
+    return out
+
+
+def target_index(world: World, obj) -> int:
+    for i, o in enumerate(world.objects):
+        if o.object_id == obj.object_id:
+            return i
+    raise KeyError(obj.object_id)

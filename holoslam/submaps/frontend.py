@@ -1,0 +1,319 @@
+"""The SLAM front end: a log and object observations -> submaps and a :class:`holoslam.graph.problem.SlamProblem`.
+
+Steps (seed 002 §2, SPEC §4):
+
+1. Dead reckoning of the whole run (Eq. 14, compass heading changes with the odometry fallback) gives
+   ``wTb`` at every odometry stamp: the seed of everything else and the "dead reckoning alone" baseline.
+2. Scans are walked in time order. A keyframe (see ``holoslam.submaps.segment``) is registered by point-to-line
+   ICP into the active submap's points, seeded by dead reckoning from the previous keyframe; a failed match
+   keeps the seed with the dead-reckoning covariance added. The policy of ``segment.py`` decides when a new
+   submap starts; its anchor is the base pose at that keyframe.
+3. Between consecutive anchors m and n two independent relative poses are emitted: ``dead_reckoning`` (Eq. 14
+   from m's anchor to n's anchor stamp, with its analytic covariance) and, when the arrival scan registers into
+   submap m, ``scan_match`` (Eq. 15 with nTr = identity, since n's anchor is the arrival pose).
+4. Compass yaw at every anchor stamp (raw, with its bias) -> HeadingMeasurements.
+5. Revisits: every ``revisit_every`` keyframes the scan is registered into every older submap (not the
+   previous one) whose anchor lies within ``revisit_radius`` of the current estimate; a match that passes
+   ICP's quality gate and lies within ``max_loop_correction`` of its seed gives a ``loop`` relative pose by
+   Eq. 15, mTn = mTr ∘ (nTr)^-1 with nTr the keyframe's pose in its own submap.
+6. Landmarks (Eq. 16): an observation at stamp t is put into the anchor frame of the submap active at t, using
+   the robot's pose there (last keyframe ∘ dead reckoning to t): a_xy = R(theta) b_xy + t, z kept; its 2x2
+   covariance is R cov_b R^T + J cov_aTb J^T.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from holoslam import geometry as g
+from holoslam.errors import IngestError
+from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interpolate_poses, interpolate_yaw
+from holoslam.submaps.features import ScanFeatures, extract_features, transform_features
+from holoslam.submaps.localize import register_points, scan_normals
+from holoslam.submaps.segment import (
+    SegmentConfig,
+    Submap,
+    local_grid,
+    side_width,
+    split_reason,
+    transform_normals,
+    voxel_downsample,
+)
+from holoslam.types import LogData, ObjectObservation
+
+__all__ = ["FrontEndConfig", "FrontEnd", "build_problem", "base_to_laser", "landmark_in_anchor"]
+
+
+@dataclass(frozen=True, slots=True)
+class FrontEndConfig:
+    dead_reckoning: DeadReckoningConfig = field(default_factory=DeadReckoningConfig)
+    segment: SegmentConfig = field(default_factory=SegmentConfig)
+    revisit_every: int = 3  # keyframes
+    revisit_radius: float = 3.0  # m
+    max_loop_correction: float = 0.5  # m between a loop's seed and its match
+    default_heading_sigma: float = 0.03  # rad, when the log gives none
+    base_frame: str = "base_link"
+    build_grids: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class FrontEnd:
+    """Submaps, the SLAM problem, the whole-run dead reckoning (``dr_stamps_ns``, ``dr_wTb``), the anchors'
+    stamps, the base->laser pose ``bTs`` used, and what was skipped (observations before the first anchor)."""
+
+    submaps: tuple[Submap, ...]
+    problem: object  # holoslam.graph.problem.SlamProblem
+    dr_stamps_ns: np.ndarray
+    dr_wTb: np.ndarray
+    anchor_stamps_ns: np.ndarray
+    bTs: np.ndarray
+    skipped_observations: int = 0
+    loops_tried: int = 0
+
+
+def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "base_link") -> np.ndarray:
+    """The planar pose (x, y, yaw) of the laser in the base frame from the log's static transforms."""
+    try:
+        from holoslam.frames import TransformTree
+
+        tree = TransformTree(log.transforms)
+        stamp = log.scans[0].stamp_ns if log.scans else 0
+        return np.asarray(tree.planar(base_frame, laser_frame, stamp), dtype=np.float64)
+    except ImportError:  # pragma: no cover - frames.py is part of the package now
+        pass
+    for t in log.transforms:
+        if t.parent == base_frame and t.child == laser_frame:
+            M = t.matrix()
+            return np.array([M[0, 3], M[1, 3], np.arctan2(M[1, 0], M[0, 0])])
+    if laser_frame == base_frame:
+        return np.zeros(3)
+    raise IngestError(f"no transform from {base_frame!r} to the laser frame {laser_frame!r} in {log.source}; "
+                      "the log needs /tf_static base_link->laser")
+
+
+def landmark_in_anchor(
+    aTb: np.ndarray, cov_aTb: np.ndarray, b_position: np.ndarray, cov_b_position: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Eq. 16: an object at ``b_position`` (3,) in the base frame -> (a_xy (2,), cov (2x2), z)."""
+    T = np.asarray(aTb, dtype=np.float64)
+    pb = np.asarray(b_position, dtype=np.float64)
+    R = g.rot2(T[2])
+    a_xy = g.transform_points(T, pb[None, :2])[0]
+    Jxi = np.zeros((2, 3))
+    Jxi[:, :2] = R
+    Jxi[:, 2] = R @ np.array([-pb[1], pb[0]])
+    cov = R @ np.asarray(cov_b_position)[:2, :2] @ R.T + Jxi @ np.asarray(cov_aTb) @ Jxi.T
+    return a_xy, 0.5 * (cov + cov.T), float(pb[2])
+
+
+class _Open:
+    """The submap being built."""
+
+    def __init__(self, index: int, stamp: int, reason: str, cfg: SegmentConfig, travelled0: float) -> None:
+        self.index, self.stamp, self.reason, self.cfg = index, stamp, reason, cfg
+        self.stamps: list[int] = []
+        self.poses: list[np.ndarray] = []
+        self.covs: list[np.ndarray] = []
+        self.bpts: list[np.ndarray] = []
+        self.ranges: list[np.ndarray] = []
+        self.angles: list[np.ndarray] = []
+        self.pts = np.zeros((0, 2))
+        self.nrm = np.zeros((0, 2))
+        self.feats: list[ScanFeatures] = []
+        self.narrow = False
+        self.travelled0 = travelled0
+
+    def add(self, stamp, aTb, cov, bpts, bnrm, ranges, angles, bTs) -> None:
+        self.stamps.append(int(stamp))
+        self.poses.append(np.asarray(aTb, float))
+        self.covs.append(np.asarray(cov, float))
+        self.bpts.append(bpts)
+        self.ranges.append(ranges)
+        self.angles.append(angles)
+        p = g.transform_points(aTb, bpts)
+        n = transform_normals(aTb, bnrm)
+        self.pts, self.nrm = voxel_downsample(np.vstack([self.pts, p]), np.vstack([self.nrm, n]), self.cfg.voxel)
+        self.feats.append(transform_features(aTb, extract_features(bpts, self.cfg.features)))
+
+    def close(self, bTs: np.ndarray, build_grid: bool) -> Submap:
+        f = self.feats
+        feats = ScanFeatures(*(np.vstack([getattr(x, k) for x in f]) for k in
+                               ("segments", "lines", "corners", "crossings", "points")))
+        P = np.array(self.poses)
+        grid = None
+        if build_grid:
+            aTs = g.compose(P, np.broadcast_to(bTs, P.shape))
+            grid = local_grid(aTs, self.ranges, self.angles, self.cfg.grid_resolution, self.cfg.clear_range)
+        return Submap(self.index, self.stamp, np.array(self.stamps, np.int64), P, np.array(self.covs),
+                      tuple(self.bpts), self.pts, self.nrm, feats, grid, self.reason)
+
+
+def build_problem(
+    log: LogData, observations: Sequence[ObjectObservation] = (), config: FrontEndConfig | None = None
+) -> FrontEnd:
+    """Run the front end over a log (see the module docstring). Raises IngestError when the log lacks
+    odometry or scans."""
+    from holoslam.graph.problem import (
+        HeadingMeasurements,
+        LandmarkMeasurements,
+        RelativePoseMeasurements,
+        SlamProblem,
+    )
+
+    cfg = config or FrontEndConfig()
+    scfg = cfg.segment
+    if len(log.odometry) < 2:
+        raise IngestError(f"{log.source}: the front end needs odometry (/odom), found {len(log.odometry)} records")
+    if not log.scans:
+        raise IngestError(f"{log.source}: the front end needs laser scans (/scan), found none")
+    ost, opose = log.odometry_arrays()
+    hst, hyaw, hsig = log.heading_arrays()
+    hsig = np.where(np.isfinite(hsig) & (hsig > 0), hsig, cfg.default_heading_sigma)
+    have_h = hst.size >= 2
+    hargs = dict(heading_stamps_ns=hst if have_h else None, heading_yaw=hyaw if have_h else None,
+                 heading_sigma=hsig if have_h else None, config=cfg.dead_reckoning)
+    scans = [s for s in log.scans if ost[0] <= s.stamp_ns <= ost[-1]]
+    if not scans:
+        raise IngestError(f"{log.source}: no scan lies within the odometry's time span")
+    bTs = base_to_laser(log, scans[0].frame_id, cfg.base_frame)
+    # 1. whole-run dead reckoning, starting at the odometry pose of the first scan
+    t_first = int(scans[0].stamp_ns)
+    start = interpolate_poses(ost, opose, np.array([t_first]))[0]
+    whole = dead_reckon(ost, opose, t_first, int(ost[-1]), start=start, **hargs)
+    dr_st, dr_wTb = whole.stamps_ns, whole.aTb
+    path_len = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(dr_wTb[:, :2], axis=0).T))])
+
+    def dr_at(t: int) -> np.ndarray:
+        return interpolate_poses(dr_st, dr_wTb, np.array([t]))[0]
+
+    def travelled_at(t: int) -> float:
+        return float(np.interp(float(t - dr_st[0]), (dr_st - dr_st[0]).astype(float), path_len))
+
+    rel_i, rel_j, rel_T, rel_cov, rel_kind = [], [], [], [], []
+
+    def add_rel(i, j, T, cov, kind):
+        rel_i.append(i), rel_j.append(j), rel_T.append(np.asarray(T, float)), rel_kind.append(kind)
+        rel_cov.append(np.asarray(cov, float) + np.eye(3) * 1e-10)
+
+    closed: list[Submap] = []
+    est_wTa: list[np.ndarray] = [dr_at(t_first)]
+    cur = _Open(0, t_first, "start", scfg, 0.0)
+    last_kf_t, last_kf_pose, last_kf_cov = None, None, None
+    kf_count = 0
+    loops_tried = 0
+    for scan in scans:
+        t = int(scan.stamp_ns)
+        spts_all = np.column_stack([scan.ranges * np.cos(scan.angles), scan.ranges * np.sin(scan.angles)])
+        valid = scan.valid
+        s_pts = spts_all[valid].astype(np.float64)
+        if s_pts.shape[0] < scfg.icp.min_points:
+            continue
+        bpts = g.transform_points(bTs, s_pts)
+        snrm, nok = scan_normals(s_pts)
+        bnrm = transform_normals(bTs, snrm)
+        ranges = np.where(valid, scan.ranges, np.inf).astype(np.float64)
+        angles = scan.angles
+        if last_kf_t is None:  # the very first scan anchors submap 0
+            cur.add(t, np.zeros(3), np.eye(3) * 1e-12, bpts, bnrm, ranges, angles, bTs)
+            last_kf_t, last_kf_pose, last_kf_cov = t, np.zeros(3), np.zeros((3, 3))
+            continue
+        dT = g.between(dr_at(last_kf_t), dr_at(t))
+        if np.hypot(dT[0], dT[1]) < scfg.keyframe_distance and abs(dT[2]) < np.radians(scfg.keyframe_turn_deg):
+            continue
+        kf_count += 1
+        seed = g.compose(last_kf_pose, dT)
+        reg = register_points(bpts[nok], cur.pts, cur.nrm, seed, scfg.icp)
+        if reg.ok:
+            aTb, cov = reg.aTb, reg.cov_aTb
+        else:
+            dr = dead_reckon(ost, opose, last_kf_t, t, start=last_kf_pose, cov_start=last_kf_cov, **hargs)
+            aTb, cov = seed, dr.cov_aTb_end
+        width = side_width(bpts)
+        if width < scfg.doorway_width:
+            cur.narrow = True
+        reason = split_reason(scfg, travelled_at(t) - cur.travelled0, aTb, t - cur.stamp, cur.narrow, width)
+        if reason is None:
+            cur.add(t, aTb, cov, bpts, bnrm, ranges, angles, bTs)
+            last_kf_t, last_kf_pose, last_kf_cov = t, aTb, cov
+        else:
+            # 3. a new anchor at this keyframe: dead reckoning and (if it registered) scan match, Eq. 15
+            m, n = cur.index, cur.index + 1
+            dr = dead_reckon(ost, opose, cur.stamp, t, **hargs)
+            add_rel(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
+            if reg.ok:
+                mTn, cov_mTn = _eq15(reg.aTb, reg.cov_aTb, np.zeros(3), np.zeros((3, 3)))
+                add_rel(m, n, mTn, cov_mTn, "scan_match")
+                best = mTn
+            else:
+                best = dr.end
+            closed.append(cur.close(bTs, cfg.build_grids))
+            est_wTa.append(g.compose(est_wTa[m], best))
+            cur = _Open(n, t, reason, scfg, travelled_at(t))
+            cur.add(t, np.zeros(3), np.eye(3) * 1e-12, bpts, bnrm, ranges, angles, bTs)
+            last_kf_t, last_kf_pose, last_kf_cov = t, np.zeros(3), np.zeros((3, 3))
+            aTb, cov = np.zeros(3), np.zeros((3, 3))
+        # 5. revisits
+        if kf_count % cfg.revisit_every == 0 and len(closed) >= 2:
+            wTr = g.compose(est_wTa[cur.index], aTb)
+            for old in closed:
+                if old.index >= cur.index - 1:
+                    continue
+                if np.hypot(*(est_wTa[old.index][:2] - wTr[:2])) > cfg.revisit_radius:
+                    continue
+                loops_tried += 1
+                seed_m = g.between(est_wTa[old.index], wTr)
+                lr = register_points(bpts[nok], old.points, old.normals, seed_m, scfg.icp)
+                if not lr.ok or np.hypot(*(lr.aTb[:2] - seed_m[:2])) > cfg.max_loop_correction:
+                    continue
+                mTn, cov_mTn = _eq15(lr.aTb, lr.cov_aTb, aTb, cov)
+                add_rel(old.index, cur.index, mTn, cov_mTn, "loop")
+    closed.append(cur.close(bTs, cfg.build_grids))
+    anchors = np.array([s.anchor_stamp_ns for s in closed], dtype=np.int64)
+    N = len(closed)
+    # 4. compass headings per anchor
+    if have_h:
+        yaw, idx, w = interpolate_yaw(hst, hyaw, anchors)
+        inside = (anchors >= hst[0]) & (anchors <= hst[-1])
+        sig = np.sqrt(np.sum(w * hsig[idx] ** 2, axis=1))
+        headings = HeadingMeasurements(np.nonzero(inside)[0], g.wrap(yaw[inside]), sig[inside])
+    else:
+        headings = HeadingMeasurements.empty()
+    # 6. landmarks (Eq. 16)
+    li, lid, lxy, lcov, lz = [], [], [], [], []
+    skipped = 0
+    for ob in sorted(observations, key=lambda o: o.stamp_ns):
+        k = int(np.searchsorted(anchors, ob.stamp_ns, side="right")) - 1
+        if k < 0 or ob.stamp_ns > ost[-1]:
+            skipped += 1
+            continue
+        sm = closed[k]
+        q = int(np.searchsorted(sm.scan_stamps_ns, ob.stamp_ns, side="right")) - 1
+        dr = dead_reckon(ost, opose, int(sm.scan_stamps_ns[q]), int(ob.stamp_ns), start=sm.aTb[q],
+                         cov_start=sm.cov_aTb[q], **hargs)
+        xy, c2, z = landmark_in_anchor(dr.end, dr.cov_aTb_end, ob.b_position, ob.cov_b_position)
+        if np.hypot(*xy) < 1e-3:
+            skipped += 1
+            continue
+        li.append(k), lid.append(ob.object_id), lxy.append(xy), lcov.append(c2), lz.append(z)
+    landmarks = (LandmarkMeasurements(np.array(li, np.int64), tuple(lid), np.array(lxy).reshape(-1, 2),
+                                      np.array(lcov).reshape(-1, 2, 2), np.array(lz))
+                 if li else LandmarkMeasurements.empty())
+    relative = (RelativePoseMeasurements(np.array(rel_i), np.array(rel_j), np.array(rel_T), np.array(rel_cov),
+                                         np.array(rel_kind, dtype=object))
+                if rel_i else RelativePoseMeasurements.empty())
+    init = np.array(est_wTa).reshape(N, 3)
+    init_lm: dict[str, np.ndarray] = {}
+    for k, name, xy in zip(li, lid, lxy, strict=True):
+        init_lm.setdefault(name, g.transform_points(init[k], np.asarray(xy)[None])[0])
+    problem = SlamProblem(num_poses=N, relative=relative, headings=headings, landmarks=landmarks,
+                          initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
+    return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops_tried)
+
+
+def _eq15(mTr, cov_mTr, nTr, cov_nTr):
+    from holoslam.submaps.deadreckon import relative_anchor_pose
+
+    return relative_anchor_pose(mTr, cov_mTr, nTr, cov_nTr)

@@ -1,0 +1,300 @@
+"""Pictures of holoslam results (matplotlib, imported lazily; no pyplot: no GUI backend, no global state).
+
+Each ``draw_*`` function draws onto a matplotlib ``Axes`` the caller gives, in world metres, and returns the
+artists it added; :func:`map_figure` and :func:`trajectory_figure` return a new ``Figure`` (render it with
+``fig.savefig(path)``; writing files is the caller's job). Importing this module does not import matplotlib.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+    from holoslam.maps.grid import OccupancyGrid
+    from holoslam.planning.routes import Route
+    from holoslam.planning.twolayer import TwoLayerGraph
+
+__all__ = [
+    "draw_grid",
+    "draw_topology",
+    "draw_holographic",
+    "draw_planning",
+    "draw_route",
+    "draw_trajectory",
+    "covariance_ellipse",
+    "map_figure",
+    "trajectory_figure",
+]
+
+PLACE_COLOURS = {"room": "tab:red", "doorway": "tab:green", "crossing": "tab:blue", "dead_end": "tab:purple"}
+
+
+def _extent(grid: OccupancyGrid) -> tuple[float, float, float, float]:
+    h, w = grid.shape
+    return (
+        grid.origin_x,
+        grid.origin_x + w * grid.resolution,
+        grid.origin_y,
+        grid.origin_y + h * grid.resolution,
+    )
+
+
+def draw_grid(ax: Axes, grid: OccupancyGrid) -> list[Any]:
+    """The occupancy grid: free white, occupied black, unknown grey (row 0 at the bottom)."""
+    img = np.full(grid.shape, 0.6)
+    img[grid.free] = 1.0
+    img[grid.occupied] = 0.0
+    im = ax.imshow(
+        img, origin="lower", extent=_extent(grid), cmap="gray", vmin=0, vmax=1, interpolation="nearest"
+    )
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    return [im]
+
+
+def _cells_xy(path: np.ndarray, res: float, ox: float, oy: float) -> np.ndarray:
+    p = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+    return np.column_stack([ox + (p[:, 1] + 0.5) * res, oy + (p[:, 0] + 0.5) * res])
+
+
+def draw_topology(ax: Axes, topology, grid: OccupancyGrid, colour: str = "tab:cyan") -> list[Any]:
+    """Topology edges along their skeleton paths and nodes coloured by kind."""
+    from matplotlib.collections import LineCollection
+
+    segs = [
+        _cells_xy(d["path"], grid.resolution, grid.origin_x, grid.origin_y)
+        for _u, _v, d in topology.edges(data=True)
+        if "path" in d and not isinstance(d["path"], str)
+    ]
+    arts: list[Any] = [ax.add_collection(LineCollection(segs, colors=colour, linewidths=1.0))]
+    kinds = {"junction": "tab:orange", "endpoint": "tab:pink", "isolated": "k", "loop": "tab:olive"}
+    for kind, c in kinds.items():
+        pts = np.array([(d["x"], d["y"]) for _n, d in topology.nodes(data=True) if d.get("kind") == kind])
+        if pts.size:
+            arts.append(ax.scatter(pts[:, 0], pts[:, 1], s=12, c=c, label=kind, zorder=3))
+    return arts
+
+
+def draw_holographic(ax: Axes, G, labels: bool = True) -> list[Any]:
+    """The holographic graph: passages along their waypoints, environment nodes by place, objects as
+    stars (hollow when unreachable), object edges as dashed lines to their places."""
+    from matplotlib.collections import LineCollection
+
+    arts: list[Any] = []
+    passages, links = [], []
+    for u, v, d in G.edges(data=True):
+        if d.get("kind") == "passage":
+            p = d.get("passage")
+            if isinstance(p, np.ndarray) and p.ndim == 2:
+                passages.append(p)
+        elif d.get("kind") == "object_edge":
+            a, b = G.nodes[u], G.nodes[v]
+            links.append(np.array([[a["x"], a["y"]], [b["x"], b["y"]]]))
+    if passages:
+        arts.append(ax.add_collection(LineCollection(passages, colors="tab:brown", linewidths=1.5, zorder=2)))
+    if links:
+        arts.append(
+            ax.add_collection(
+                LineCollection(links, colors="tab:gray", linewidths=0.6, linestyles="--", zorder=2)
+            )
+        )
+    for place, c in PLACE_COLOURS.items():
+        nodes = [
+            (n, d)
+            for n, d in G.nodes(data=True)
+            if d.get("kind") == "environment" and d.get("place") == place
+        ]
+        if nodes:
+            xy = np.array([(d["x"], d["y"]) for _n, d in nodes])
+            arts.append(ax.scatter(xy[:, 0], xy[:, 1], s=40, c=c, label=place, zorder=4, edgecolors="k"))
+            if labels:
+                for n, d in nodes:
+                    arts.append(
+                        ax.annotate(
+                            str(n), (d["x"], d["y"]), fontsize=6, xytext=(3, 3), textcoords="offset points"
+                        )
+                    )
+    objs = [(n, d, G.degree(n) > 0) for n, d in G.nodes(data=True) if d.get("kind") == "object"]
+    for reach, face in ((True, "gold"), (False, "none")):
+        sel = [(n, d) for n, d, r in objs if r == reach]
+        if sel:
+            xy = np.array([(d["x"], d["y"]) for _n, d in sel])
+            arts.append(
+                ax.scatter(
+                    xy[:, 0],
+                    xy[:, 1],
+                    s=60,
+                    marker="*",
+                    facecolors=face,
+                    edgecolors="darkgoldenrod",
+                    label="object" if reach else "object (unreachable)",
+                    zorder=5,
+                )
+            )
+            if labels:
+                for n, d in sel:
+                    arts.append(
+                        ax.annotate(
+                            str(n), (d["x"], d["y"]), fontsize=5, xytext=(2, -7), textcoords="offset points"
+                        )
+                    )
+    return arts
+
+
+def draw_planning(ax: Axes, tl: TwoLayerGraph, layer: int = 2, edges: bool = False) -> list[Any]:
+    """Layer 1 (free blocks) or layer 2 (convex regions) as rectangles; ``edges`` adds the adjacency."""
+    from matplotlib.collections import LineCollection, PolyCollection
+
+    rects = tl.block_corners_xy if layer == 1 else tl.region_corners_xy
+    polys = (
+        np.stack([rects[:, [0, 1]], rects[:, [2, 1]], rects[:, [2, 3]], rects[:, [0, 3]]], axis=1)
+        if rects.shape[0]
+        else np.zeros((0, 4, 2))
+    )
+    rng = np.random.default_rng(0)
+    colours = rng.uniform(0.3, 0.95, size=(polys.shape[0], 3))
+    alpha = 0.25 if layer == 2 else 0.4
+    arts: list[Any] = [
+        ax.add_collection(
+            PolyCollection(
+                list(polys),
+                facecolors=np.column_stack([colours, np.full(len(colours), alpha)]),
+                edgecolors="k",
+                linewidths=0.3,
+            )
+        )
+    ]
+    if edges:
+        if layer == 1:
+            c, e = tl.block_centres_xy, tl.edges
+        else:
+            r = tl.region_corners_xy
+            c, e = np.column_stack([(r[:, 0] + r[:, 2]) / 2, (r[:, 1] + r[:, 3]) / 2]), tl.region_edges
+        if e.shape[0]:
+            arts.append(
+                ax.add_collection(
+                    LineCollection(np.stack([c[e[:, 0]], c[e[:, 1]]], 1), colors="tab:blue", linewidths=0.5)
+                )
+            )
+    ax.autoscale_view()
+    return arts
+
+
+def draw_route(ax: Axes, route: Route | np.ndarray, colour: str = "tab:red") -> list[Any]:
+    """A planned route's waypoints (or a (K, 2) array) with start (circle) and goal (cross)."""
+    wp = route if isinstance(route, np.ndarray) else route.waypoints
+    wp = np.asarray(wp, dtype=np.float64).reshape(-1, 2)
+    (line,) = ax.plot(wp[:, 0], wp[:, 1], "-", color=colour, lw=2, zorder=6)
+    s = ax.scatter(wp[:1, 0], wp[:1, 1], marker="o", c=colour, zorder=7)
+    g = ax.scatter(wp[-1:, 0], wp[-1:, 1], marker="x", c=colour, s=60, zorder=7)
+    return [line, s, g]
+
+
+def covariance_ellipse(
+    wTb: np.ndarray, cov_wTb: np.ndarray, n_sigma: float = 2.0, n_points: int = 48
+) -> np.ndarray:
+    """(n_points, 2) world outline of the n-sigma position ellipse of a pose whose covariance is in the pose's
+    own frame (the x, y block is rotated into the world by the pose's heading)."""
+    x, y, th = np.asarray(wTb, dtype=np.float64).reshape(3)
+    c, s = np.cos(th), np.sin(th)
+    R = np.array([[c, -s], [s, c]])
+    P = R @ np.asarray(cov_wTb, dtype=np.float64)[:2, :2] @ R.T
+    vals, vecs = np.linalg.eigh(0.5 * (P + P.T))
+    vals = np.clip(vals, 0.0, None)
+    t = np.linspace(0.0, 2.0 * np.pi, n_points)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=1)
+    return np.array([x, y]) + n_sigma * (circle * np.sqrt(vals)) @ vecs.T
+
+
+def draw_trajectory(
+    ax: Axes,
+    wTb: np.ndarray,
+    cov_wTb: np.ndarray | None = None,
+    every: int = 1,
+    n_sigma: float = 2.0,
+    colour: str = "tab:blue",
+    label: str | None = None,
+) -> list[Any]:
+    """A trajectory (N, 3) as a line, with n-sigma covariance ellipses at every ``every``-th pose when
+    ``cov_wTb`` (N, 3, 3) is given."""
+    from matplotlib.collections import LineCollection
+
+    T = np.asarray(wTb, dtype=np.float64).reshape(-1, 3)
+    (line,) = ax.plot(T[:, 0], T[:, 1], "-", color=colour, lw=1.2, label=label)
+    arts: list[Any] = [line]
+    if cov_wTb is not None:
+        C = np.asarray(cov_wTb, dtype=np.float64).reshape(-1, 3, 3)
+        idx = np.arange(0, T.shape[0], max(int(every), 1))
+        ell = [covariance_ellipse(T[i], C[i], n_sigma) for i in idx if np.all(np.isfinite(C[i][:2, :2]))]
+        if ell:
+            arts.append(ax.add_collection(LineCollection(ell, colors=colour, linewidths=0.6, alpha=0.7)))
+    ax.set_aspect("equal")
+    return arts
+
+
+def map_figure(
+    grid: OccupancyGrid,
+    topology=None,
+    holographic=None,
+    planning: TwoLayerGraph | None = None,
+    planning_layer: int = 2,
+    route: Route | np.ndarray | None = None,
+    title: str | None = None,
+    size_in: float = 8.0,
+) -> Figure:
+    """A new figure of the grid with any of: topology, planning layer, holographic graph, route."""
+    from matplotlib.figure import Figure
+
+    h, w = grid.shape
+    fig = Figure(figsize=(size_in, size_in * h / max(w, 1) + 0.5))
+    ax = fig.add_subplot(1, 1, 1)
+    draw_grid(ax, grid)
+    if planning is not None:
+        draw_planning(ax, planning, layer=planning_layer)
+    if topology is not None:
+        draw_topology(ax, topology, grid)
+    if holographic is not None:
+        draw_holographic(ax, holographic)
+    if route is not None:
+        draw_route(ax, route)
+    x0, x1, y0, y1 = _extent(grid)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    if title:
+        ax.set_title(title)
+    if topology is not None or holographic is not None:
+        ax.legend(loc="upper right", fontsize=6)
+    fig.tight_layout()
+    return fig
+
+
+def trajectory_figure(
+    trajectories: dict[str, np.ndarray],
+    covariances: dict[str, np.ndarray] | None = None,
+    grid: OccupancyGrid | None = None,
+    every: int = 10,
+    title: str | None = None,
+) -> Figure:
+    """A new figure with named trajectories (N, 3) (e.g. dead reckoning, optimised, ground truth), optional
+    per-pose covariances (N, 3, 3) drawn as 2-sigma ellipses, over an optional grid."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8, 7))
+    ax = fig.add_subplot(1, 1, 1)
+    if grid is not None:
+        draw_grid(ax, grid)
+    colours = ["tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple"]
+    for i, (name, T) in enumerate(trajectories.items()):
+        cov = (covariances or {}).get(name)
+        draw_trajectory(ax, T, cov, every=every, colour=colours[i % len(colours)], label=name)
+    ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,163 @@
+"""The front end on a small synthetic two-room world with ground truth: submaps, measurements, Eq. 16, solver."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from holoslam import geometry as g
+from holoslam.sim.world import raycast
+from holoslam.submaps.deadreckon import DeadReckoningConfig, integrate
+from holoslam.submaps.frontend import FrontEndConfig, build_problem, landmark_in_anchor
+from holoslam.types import Heading, LogData, ObjectObservation, Odometry, Pose2, Scan, Transform
+
+# two rooms 4 x 4 m side by side joined by a 1 m doorway at x = 4, y in [1.5, 2.5]; a box in each room
+WALLS = np.array([
+    [0, 0, 8, 0], [8, 0, 8, 4], [8, 4, 0, 4], [0, 4, 0, 0], [4, 0, 4, 1.5], [4, 2.5, 4, 4],
+    [1.0, 3.0, 1.6, 3.0], [1.6, 3.0, 1.6, 3.4], [1.6, 3.4, 1.0, 3.4], [1.0, 3.4, 1.0, 3.0],
+    [6.0, 0.6, 6.8, 0.6], [6.8, 0.6, 6.8, 1.0], [6.8, 1.0, 6.0, 1.0], [6.0, 1.0, 6.0, 0.6],
+], float)
+OBJECTS = {"O01": np.array([0.3, 0.5, 0.8]), "O02": np.array([7.6, 3.5, 1.0]), "O03": np.array([2.0, 3.8, 0.5])}
+bTs = np.array([0.1, 0.0, 0.0])
+
+
+def true_route(dt=0.05):
+    """Out through the door to the far room, a loop there, back to the start room: (stamps_ns, wTb)."""
+    way = np.array([[1.0, 1.0], [3.0, 2.0], [5.0, 2.0], [7.0, 2.0], [7.0, 3.0], [5.5, 3.0], [5.0, 2.0],
+                    [3.0, 2.0], [1.5, 2.0], [1.0, 1.2]])
+    pts = [way[0]]
+    for a, b in zip(way[:-1], way[1:], strict=True):
+        n = int(np.ceil(np.hypot(*(b - a)) / (0.3 * dt)))
+        pts.append(a + (b - a) * np.linspace(0, 1, n + 1)[1:, None])
+    xy = np.vstack(pts)
+    head = np.arctan2(np.gradient(xy[:, 1]), np.gradient(xy[:, 0]))
+    head = np.convolve(np.unwrap(head), np.ones(9) / 9, mode="same")
+    head[:5], head[-5:] = head[5], head[-6]
+    t = (np.arange(xy.shape[0]) * dt * 1e9).astype(np.int64) + 10**9
+    return t, np.column_stack([xy, g.wrap(head)])
+
+
+def make_log(seed=0, odo_scale=0.02, slip=0.002, compass_sigma=0.02, laser_sigma=0.01):
+    rng = np.random.default_rng(seed)
+    t, wTb = true_route()
+    # odometry: per-step distance with a scale error and slip, wheel heading changes with noise
+    d = np.hypot(*np.diff(wTb[:, :2], axis=0).T)
+    dth = g.wrap(np.diff(wTb[:, 2]))
+    s = d * (1 + odo_scale) + rng.normal(0, slip, d.size)
+    dd = dth * 1.01 + rng.normal(0, 0.002, d.size)
+    odo = integrate(np.zeros(3), s, dd)
+    odometry = tuple(Odometry(int(k), Pose2(*p)) for k, p in zip(t, odo, strict=True))
+    hs = t[::2] + 7_000_000
+    yaw_true = np.interp(hs, t, np.unwrap(wTb[:, 2]))
+    headings = tuple(Heading(int(k), float(g.wrap(y + 0.3 + rng.normal(0, compass_sigma))), compass_sigma)
+                     for k, y in zip(hs, yaw_true, strict=True))
+    st = t[::4]
+    ang = np.radians(np.arange(-90, 91, 1.0))
+    wTs = g.compose(wTb[::4], np.broadcast_to(bTs, wTb[::4].shape))
+    R = raycast(WALLS, wTs[:, :2], wTs[:, 2:3] + ang[None], 8.0)
+    R = R + rng.normal(0, laser_sigma, R.shape)
+    scans = tuple(Scan(int(k), "laser", -math.pi / 2, math.radians(1.0), 0.05, 8.0, r.astype(np.float32),
+                       np.isfinite(r)) for k, r in zip(st, R, strict=True))
+    tf = (Transform(0, "base_link", "laser", (0.1, 0.0, 0.3), (0.0, 0.0, 0.0, 1.0), static=True),)
+    # object observations: every 2 s when the object is within 3 m, in the base frame with 2 cm noise
+    obs = []
+    for k in range(0, t.size, 40):
+        for oid, pw in OBJECTS.items():
+            pb = g.transform_points(g.inverse(wTb[k]), pw[None, :2])[0]
+            if np.hypot(*pb) < 3.0:
+                cov = np.diag([0.02**2, 0.02**2, 0.02**2])
+                obs.append(ObjectObservation(int(t[k]), oid, f"HL1;{oid};box", np.r_[pb + rng.normal(0, 0.02, 2),
+                                             pw[2]], cov))
+    log = LogData("synthetic", odometry=odometry, headings=headings, scans=scans, transforms=tf)
+    return log, obs, t, wTb
+
+
+def test_eq16_by_hand():
+    # robot at (1, 2, 90 deg) in the anchor frame; an object 2 m ahead, 0.5 m up
+    xy, cov, z = landmark_in_anchor(np.array([1.0, 2.0, math.pi / 2]), np.diag([0.0, 0.0, 0.01]),
+                                    np.array([2.0, 0.0, 0.5]), np.diag([1e-4, 4e-4, 1e-4]))
+    np.testing.assert_allclose(xy, [1.0, 4.0], atol=1e-12)
+    assert z == 0.5
+    # heading sigma 0.1 rad at 2 m range -> 0.2 m sideways (x in the anchor frame); range noise along y
+    np.testing.assert_allclose(cov, [[4e-4 + 0.04, 0.0], [0.0, 1e-4]], atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def frontend_run():
+    log, obs, t, wTb = make_log()
+    # the dead-reckoning noise model of the synthetic log above (2 % scale error taken as random, 2 mm slip,
+    # 0.002 rad wheel-heading noise per step)
+    dr = DeadReckoningConfig(sigma_s_per_m=0.03, sigma_s_floor=0.002, odo_sigma_dtheta_per_rad=0.02,
+                             odo_sigma_dtheta_per_m=0.0, odo_sigma_dtheta_floor=0.002)
+    fe = build_problem(log, obs, FrontEndConfig(dead_reckoning=dr))
+    return fe, log, obs, t, wTb
+
+
+def test_submaps_and_measurements(frontend_run):
+    fe, log, obs, t, wTb = frontend_run
+    P = fe.problem
+    assert P.num_poses == len(fe.submaps) >= 4
+    assert {s.reason for s in fe.submaps} >= {"start", "doorway"}
+    kinds = set(P.relative.kind.tolist())
+    assert {"dead_reckoning", "scan_match"} <= kinds
+    assert "loop" in kinds  # the route returns to the first room
+    np.testing.assert_allclose(fe.bTs, bTs, atol=1e-12)
+    # every relative measurement agrees with the truth within 4 sigma (per axis) after the scan matches
+    truth_wTa = np.array([np.interp(fe.anchor_stamps_ns, t, wTb[:, c]) for c in range(2)] +
+                         [np.interp(fe.anchor_stamps_ns, t, np.unwrap(wTb[:, 2]))]).T
+    for i, j, m, c, kind in zip(P.relative.i, P.relative.j, P.relative.iTj, P.relative.cov_iTj, P.relative.kind,
+                                strict=True):
+        true = g.between(truth_wTa[i], truth_wTa[j])
+        e = g.between(true, m)
+        z = np.abs(e) / np.sqrt(np.diag(c))
+        assert np.all(z < 5.0), (kind, i, j, e, np.sqrt(np.diag(c)))
+    # submap contents: anchor first at the identity, points in the anchor frame lie on walls
+    for sm in fe.submaps:
+        np.testing.assert_allclose(sm.aTb[0], 0.0, atol=1e-12)
+        assert sm.grid is not None and sm.grid.occupied.any() and sm.grid.free.any()
+        assert sm.features.segments.shape[0] > 0
+    # headings: one per anchor, with the compass's bias (0.3 rad) still in them
+    hs = np.array([h.stamp_ns for h in log.headings])
+    inside = (fe.anchor_stamps_ns >= hs[0]) & (fe.anchor_stamps_ns <= hs[-1])
+    assert not inside[0] and inside[1:].all()  # the compass starts 7 ms after the first scan
+    np.testing.assert_array_equal(P.headings.i, np.nonzero(inside)[0])
+    bias = g.wrap(P.headings.yaw - truth_wTa[inside, 2])
+    assert abs(np.median(bias) - 0.3) < 0.05
+    assert len(P.landmarks) > 5 and set(P.landmarks.landmark) == set(OBJECTS)
+
+
+def test_landmarks_in_anchor_frames_match_truth(frontend_run):
+    fe, log, obs, t, wTb = frontend_run
+    P = fe.problem
+    truth_wTa = np.column_stack([np.interp(fe.anchor_stamps_ns, t, wTb[:, 0]),
+                                 np.interp(fe.anchor_stamps_ns, t, wTb[:, 1]),
+                                 np.interp(fe.anchor_stamps_ns, t, np.unwrap(wTb[:, 2]))])
+    for i, name, xy, c in zip(P.landmarks.i, P.landmarks.landmark, P.landmarks.a_position,
+                              P.landmarks.cov_a_position, strict=True):
+        true_xy = g.transform_points(g.inverse(truth_wTa[i]), OBJECTS[name][None, :2])[0]
+        e = xy - true_xy
+        assert e @ np.linalg.solve(c, e) < 20.0, (name, i, e, np.sqrt(np.diag(c)))
+
+
+def test_solver_recovers_truth(frontend_run):
+    solve = pytest.importorskip("holoslam.solve")
+    fe, log, obs, t, wTb = frontend_run
+    if not hasattr(solve, "solve"):
+        pytest.skip("holoslam.solve has no solve() yet")
+    sol = solve.solve(fe.problem)
+    truth = np.column_stack([np.interp(fe.anchor_stamps_ns, t, wTb[:, c]) for c in range(2)])
+    est = sol.wTa[:, :2]
+    # align the first anchor (the gauge) and compare
+    T = g.compose(np.array([*truth[0], np.interp(fe.anchor_stamps_ns[0], t, np.unwrap(wTb[:, 2]))]),
+                  g.inverse(sol.wTa[0]))
+    err = np.hypot(*(g.transform_points(T, est) - truth).T)
+    dr = np.column_stack([np.interp(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb[:, 0]),
+                          np.interp(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb[:, 1]),
+                          np.interp(fe.anchor_stamps_ns, fe.dr_stamps_ns, np.unwrap(fe.dr_wTb[:, 2]))])
+    T_dr = g.compose(np.array([*truth[0], np.interp(fe.anchor_stamps_ns[0], t, np.unwrap(wTb[:, 2]))]),
+                     g.inverse(dr[0]))
+    err_dr = np.hypot(*(g.transform_points(T_dr, dr[:, :2]) - truth).T)
+    rmse, rmse_dr = np.sqrt(np.mean(err**2)), np.sqrt(np.mean(err_dr**2))
+    assert rmse < 0.05 and rmse < 0.5 * rmse_dr, (rmse, rmse_dr)

@@ -1,0 +1,221 @@
+"""The holographic graph (Eq. 1-5): places found on a synthetic flat and on the reference household, passages,
+relative poses, the reach model, the queries and planning to an object."""
+
+from __future__ import annotations
+
+import networkx as nx
+import numpy as np
+import pytest
+from planning_maps import apartment_free
+
+from holoslam.errors import MapError, PlanningError
+from holoslam.geometry import between, inverse, transform_points
+from holoslam.maps.grid import OccupancyGrid
+from holoslam.maps.holographic import (
+    ObjectInfo,
+    ReachModel,
+    build_holographic,
+    environment_nodes,
+    object_nodes,
+    object_reach_points,
+    route_to_object,
+    where_is,
+)
+from holoslam.maps.topology import topology_from_grid
+from holoslam.planning.routes import plan_to_object, segments_free
+from holoslam.planning.twolayer import build_two_layer
+
+RES = 0.05
+# the synthetic flat of tests.test_routes.apartment_free: rooms as (xmin, ymin, xmax, ymax)
+ROOMS = {
+    "west_south": (0.0, 0.0, 4.0, 5.0),
+    "west_north": (0.0, 5.0, 4.0, 9.5),
+    "east_south": (4.0, 0.0, 10.5, 2.5),
+    "east_middle": (4.0, 2.5, 10.5, 5.0),
+    "ne_a": (4.0, 5.0, 7.5, 9.5),
+    "ne_b": (7.5, 5.0, 10.5, 9.5),
+}
+DOORS = {  # centre: the two rooms
+    (4.05, 1.45): ("west_south", "east_south"),
+    (4.05, 6.95): ("west_north", "ne_a"),
+    (1.95, 5.05): ("west_south", "west_north"),
+    (5.45, 5.05): ("east_middle", "ne_a"),
+    (7.55, 7.45): ("ne_a", "ne_b"),
+    (8.45, 2.55): ("east_south", "east_middle"),
+}
+
+
+def room_of(x: float, y: float) -> str:
+    for name, (x0, y0, x1, y1) in ROOMS.items():
+        if x0 <= x < x1 and y0 <= y < y1:
+            return name
+    raise AssertionError((x, y))
+
+
+@pytest.fixture(scope="module")
+def flat():
+    grid = OccupancyGrid.from_free_mask(apartment_free(RES), RES)
+    topo = topology_from_grid(grid)
+    anchors = np.array(
+        [
+            [2.0, 2.5, 0.0],
+            [2.0, 7.0, 1.0],
+            [7.0, 1.2, -2.0],
+            [7.0, 3.8, 0.5],
+            [5.8, 7.5, 3.0],
+            [9.0, 7.5, -1.0],
+        ]
+    )
+    objects = [
+        ObjectInfo(
+            "CUP-1", "cup", np.array([3.0, 0.8, 0.8]), np.eye(3) * 1e-4, (("g", "handle"),), "HL1;CUP-1;cup"
+        ),
+        ObjectInfo("AC-1", "air_conditioner", np.array([0.3, 8.0, 3.2])),  # too high for the arm
+        ObjectInfo("BOX-1", "box", np.array([1.6, 3.4, 0.5])),  # in the middle of the 1.2 x 0.8 m table
+        ObjectInfo("BOOK-1", "book", np.array([4.3, 3.8, 1.0])),  # on the east side of the x = 4 wall
+        ObjectInfo("CUP-2", "cup", np.array([9.5, 8.5, 0.9])),
+    ]
+    G = build_holographic(
+        grid,
+        topo,
+        anchors,
+        [10, 11, 12, 13, 14, 15],
+        objects,
+        ReachModel(robot_radius_m=0.25, arm_reach_m=0.6),
+    )
+    return grid, topo, anchors, G
+
+
+def test_rooms_and_doorways_of_the_flat(flat):
+    _grid, _topo, _anchors, G = flat
+    env = environment_nodes(G)
+    rooms = [n for n in env if G.nodes[n]["place"] == "room"]
+    doors = [n for n in env if G.nodes[n]["place"] == "doorway"]
+    assert sorted(room_of(G.nodes[n]["x"], G.nodes[n]["y"]) for n in rooms) == sorted(ROOMS)
+    assert len(doors) == len(DOORS)
+    for (x, y), pair in DOORS.items():
+        near = [n for n in doors if np.hypot(G.nodes[n]["x"] - x, G.nodes[n]["y"] - y) < 0.5]
+        assert len(near) == 1, (x, y)
+        nb = sorted(
+            room_of(G.nodes[m]["x"], G.nodes[m]["y"])
+            for m in G.neighbors(near[0])
+            if G.nodes[m]["kind"] == "environment"
+        )
+        assert nb == sorted(pair)
+    assert nx.is_connected(G.subgraph(env))
+    for n in rooms:
+        x0, y0, x1, y1 = ROOMS[room_of(G.nodes[n]["x"], G.nodes[n]["y"])]
+        assert 0.6 * (x1 - x0) * (y1 - y0) < G.nodes[n]["area_m2"] <= (x1 - x0) * (y1 - y0)
+
+
+def test_local_frames_passages_and_relative_poses(flat):
+    _grid, _topo, anchors, G = flat
+    for n in environment_nodes(G):
+        d = G.nodes[n]
+        k = int(np.argmin(np.hypot(anchors[:, 0] - d["x"], anchors[:, 1] - d["y"])))
+        assert d["anchor"] == k and d["submap"] == 10 + k
+        assert (d["frame_x"], d["frame_y"], d["frame_theta"]) == tuple(anchors[k])
+    for _u, _v, e in G.edges(data=True):
+        if e["kind"] != "passage":
+            continue
+        a, b = G.nodes[e["w_from"]], G.nodes[e["w_to"]]
+        w = between(
+            np.array([a["frame_x"], a["frame_y"], a["frame_theta"]]),
+            np.array([b["frame_x"], b["frame_y"], b["frame_theta"]]),
+        )
+        assert np.allclose([e["w_x"], e["w_y"], e["w_theta"]], w)
+        p = e["passage"]
+        assert p.shape[1] == 2 and e["passage_on_skeleton"]
+        assert np.allclose(p[0], [a["x"], a["y"]]) and np.allclose(p[-1], [b["x"], b["y"]])
+        assert e["length"] == pytest.approx(np.hypot(*np.diff(p, axis=0).T).sum())
+        assert e["length"] >= np.hypot(a["x"] - b["x"], a["y"] - b["y"]) - 1e-9
+        # the passage runs in free space (cells of its waypoints are free)
+        assert segments_free(apartment_free(RES), p[:-1] / RES, p[1:] / RES).mean() > 0.9
+
+
+def test_object_nodes_and_reach_model(flat):
+    _grid, _topo, _anchors, G = flat
+    assert sorted(object_nodes(G)) == ["AC-1", "BOOK-1", "BOX-1", "CUP-1", "CUP-2"]
+    d = G.nodes["CUP-1"]
+    assert d["kind"] == "object" and d["object_type"] == "cup" and d["attributes"] == "g=handle"
+    assert (d["x"], d["y"], d["z"]) == (3.0, 0.8, 0.8) and np.allclose(d["cov"], np.eye(3) * 1e-4)
+    # unreachable objects stay without edges: too high, and 0.6 m arm cannot reach the table's middle
+    assert G.degree("AC-1") == 0 and G.degree("BOX-1") == 0
+    # the book is reached from its own room only, not through the wall from the west room
+    book = list(G.neighbors("BOOK-1"))
+    assert [room_of(G.nodes[n]["x"], G.nodes[n]["y"]) for n in book] == ["east_middle"]
+    for obj in ("CUP-1", "BOOK-1", "CUP-2"):
+        for place in G.neighbors(obj):
+            e = G.edges[obj, place]
+            n = G.nodes[place]
+            assert n["place"] == "room"
+            frame = np.array([n["frame_x"], n["frame_y"], n["frame_theta"]])
+            k = transform_points(inverse(frame), np.array([[G.nodes[obj]["x"], G.nodes[obj]["y"]]]))[0]
+            assert np.allclose([e["k_x"], e["k_y"], e["k_z"]], [k[0], k[1], G.nodes[obj]["z"]])
+            assert e["relation"] in ("in_room", "near") and e["reach_distance"] <= 0.6
+            assert np.hypot(e["reach_x"] - G.nodes[obj]["x"], e["reach_y"] - G.nodes[obj]["y"]) <= 0.6 + 1e-9
+    assert G.edges["CUP-1", next(iter(G.neighbors("CUP-1")))]["relation"] == "in_room"
+    with pytest.raises(MapError, match="twice"):
+        build_holographic(
+            flat[0], flat[1], objects=[ObjectInfo("A", "x", [1, 1]), ObjectInfo("A", "x", [2, 2])]
+        )
+
+
+def test_queries(flat):
+    _grid, _topo, _anchors, G = flat
+    cups = where_is(G, "cup")
+    assert [c["id"] for c in cups] == ["CUP-1", "CUP-2"] and all(c["reachable"] for c in cups)
+    assert where_is(G, "AC-1")[0]["reachable"] is False and where_is(G, "AC-1")[0]["places"] == []
+    assert where_is(G, "nothing") == []
+    places = route_to_object(G, (1.0, 1.0), "CUP-2")
+    assert places[-1] == "CUP-2"
+    assert room_of(G.nodes[places[0]]["x"], G.nodes[places[0]]["y"]) == "west_south"
+    assert room_of(G.nodes[places[-2]]["x"], G.nodes[places[-2]]["y"]) == "ne_b"
+    assert all(G.has_edge(a, b) for a, b in zip(places[:-1], places[1:], strict=False))
+    with pytest.raises(PlanningError, match="unknown object"):
+        route_to_object(G, (1.0, 1.0), "NOPE")
+    with pytest.raises(PlanningError, match="out of the robot's reach"):
+        object_reach_points(G, "AC-1")
+
+
+def test_plan_to_object(flat):
+    grid, _topo, _anchors, G = flat
+    tl = build_two_layer(grid, 1)
+    r = plan_to_object(tl, G, grid, "CUP-2", np.array([1.0, 1.0]))
+    assert r.places[-1] == "CUP-2" and r.goal_place in r.places
+    e = G.edges["CUP-2", r.goal_place]
+    assert np.allclose(r.waypoints[0], [1.0, 1.0]) and np.allclose(
+        r.waypoints[-1], [e["reach_x"], e["reach_y"]]
+    )
+    assert segments_free(grid.free, r.waypoints[:-1] / RES, r.waypoints[1:] / RES).all()
+    with pytest.raises(PlanningError, match="unknown object"):
+        plan_to_object(tl, G, grid, "NOPE", np.array([1.0, 1.0]))
+    with pytest.raises(PlanningError, match="reach"):
+        plan_to_object(tl, G, grid, "BOX-1", np.array([1.0, 1.0]))
+
+
+def test_reference_household():
+    """The simulator's household: every room has a room node, doorways between them, the graph is connected,
+    and exactly the out-of-reach chair has no object edge."""
+    from holoslam.sim.world import ARM_REACH, ROBOT_RADIUS, free_space, reference_household
+
+    world = reference_household()
+    fs = free_space(world, RES)
+    grid = OccupancyGrid.from_free_mask(fs.clearance > 0, RES)
+    topo = topology_from_grid(grid)
+    objs = [ObjectInfo(o.object_id, o.kind, np.array(o.position), payload=o.payload) for o in world.objects]
+    G = build_holographic(grid, topo, objects=objs, reach_model=ReachModel(ROBOT_RADIUS, ARM_REACH))
+    env = environment_nodes(G)
+    assert nx.is_connected(G.subgraph(env))
+    rooms = {
+        world.room_of(np.array([G.nodes[n]["x"], G.nodes[n]["y"]]))[0]
+        for n in env
+        if G.nodes[n]["place"] == "room"
+    }
+    assert rooms == {r.name for r in world.rooms}
+    doors = np.array([(G.nodes[n]["x"], G.nodes[n]["y"]) for n in env if G.nodes[n]["place"] == "doorway"])
+    for dw in world.doorways:
+        assert np.min(np.hypot(*(doors - np.array(dw.centre)).T)) < 0.8, dw.name
+    reach = {o.object_id: o.reachable for o in world.objects}
+    assert {n: G.degree(n) > 0 for n in object_nodes(G)} == reach
+    assert sum(not v for v in reach.values()) == 1

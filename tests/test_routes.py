@@ -1,0 +1,159 @@
+"""Planning queries: exact segment check, paths collision-free and within LENGTH_FACTOR of grid A*."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pyastar2d  # dev/benchmark only: the reference planner
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from planning_maps import apartment_free, random_map
+
+from holoslam.errors import PlanningError
+from holoslam.maps.grid import OccupancyGrid
+from holoslam.planning.routes import LENGTH_FACTOR, build_planner, path_length, plan_path, segments_free
+from holoslam.planning.twolayer import build_two_layer
+
+
+def astar_length(free: np.ndarray, a: tuple[int, int], b: tuple[int, int]) -> float | None:
+    w = np.where(free, 1.0, np.inf).astype(np.float32)
+    p = pyastar2d.astar_path(w, a, b, allow_diagonal=True)
+    return None if p is None else path_length(p)
+
+
+def point_in_closed_free(free: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Reference: a point lies in the closed union of free cells (cell (r, c) = [c, c+1] x [r, r+1])."""
+    h, w = free.shape
+    ok = np.zeros(u.shape, dtype=bool)
+    for c in (np.floor(u), np.ceil(u) - 1):
+        for r in (np.floor(v), np.ceil(v) - 1):
+            c_, r_ = c.astype(int), r.astype(int)
+            inside = (
+                (c_ >= 0)
+                & (c_ < w)
+                & (r_ >= 0)
+                & (r_ < h)
+                & (c_ <= u)
+                & (u <= c_ + 1)
+                & (r_ <= v)
+                & (v <= r_ + 1)
+            )
+            o = np.zeros(u.shape, dtype=bool)
+            o[inside] = free[r_[inside], c_[inside]]
+            ok |= o
+    return ok
+
+
+quarter = st.integers(0, 40).map(lambda k: k / 4.0)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.integers(0, 2**31 - 1),
+    st.lists(st.tuples(quarter, quarter, quarter, quarter), min_size=1, max_size=8),
+)
+def test_segments_free_matches_dense_sampling(seed, segs):
+    """Endpoints on a quarter-cell lattice in a 10 x 10 grid: every piece of a segment inside one cell is
+    longer than 1/1600 of the segment, so 8000 samples see every cell the segment enters."""
+    free = random_map(seed, 10, 10, 3, 8)
+    s = np.array(segs, dtype=np.float64)
+    got = segments_free(free, s[:, :2], s[:, 2:])
+    t = (np.arange(8000) + 0.5) / 8000
+    for k, (u0, v0, u1, v1) in enumerate(s.tolist()):
+        u = u0 + (u1 - u0) * np.append(t, [0.0, 1.0])
+        v = v0 + (v1 - v0) * np.append(t, [0.0, 1.0])
+        assert got[k] == bool(point_in_closed_free(free, u, v).all()), (k, s[k])
+
+
+def test_segments_free_corner_and_boundary_cases():
+    free = np.array([[True, False], [False, True]])  # two free cells meeting at a corner
+    # through the shared corner point (the diagonal move of an 8-connected planner): free
+    assert segments_free(free, [[0.5, 0.5]], [[1.5, 1.5]]).all()
+    # off the diagonal it enters an occupied cell
+    assert not segments_free(free, [[0.5, 0.5]], [[1.5, 1.2]]).any()
+    # along the boundary line between a free and an occupied cell: free; outside the grid: not free
+    assert segments_free(free, [[0.0, 1.0]], [[2.0, 1.0]]).all()  # each half has a free cell on one side
+    corner = np.array([[True, False], [False, False]])
+    assert not segments_free(corner, [[1.0, 1.0]], [[2.0, 1.0]]).any()  # both sides occupied
+    # float rounding off a grid line does not flip the answer
+    assert segments_free(free, [[0.0, 1.0 + 1e-12]], [[2.0, 1.0 - 1e-12]]).all()
+    assert segments_free(np.ones((2, 2), bool), [[1.0, 0.0]], [[1.0, 2.0]]).all()
+    assert not segments_free(np.ones((2, 2), bool), [[1.0, 1.0]], [[3.0, 1.0]]).any()
+
+
+def _check_route(tl, planner, free, a, b):
+    res = tl.resolution
+    s_xy = np.array([(a[1] + 0.5) * res, (a[0] + 0.5) * res])
+    g_xy = np.array([(b[1] + 0.5) * res, (b[0] + 0.5) * res])
+    r = plan_path(planner, s_xy, g_xy)
+    assert np.allclose(r.waypoints[0], s_xy) and np.allclose(r.waypoints[-1], g_xy)
+    uv = r.waypoints / res
+    assert segments_free(free, uv[:-1], uv[1:]).all()
+    assert r.length == pytest.approx(path_length(r.waypoints))
+    ref = astar_length(free, a, b)
+    assert ref is not None
+    assert r.length <= LENGTH_FACTOR * ref * res + 1e-9
+    # never shorter than the straight line
+    assert r.length >= np.hypot(*(g_xy - s_xy)) - 1e-9
+    return r.length / max(ref * res, 1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.integers(0, 2**31 - 1),
+    st.integers(8, 48),
+    st.integers(8, 48),
+    st.integers(0, 14),
+    st.integers(0, 40),
+    st.integers(0, 2**31 - 1),
+)
+def test_random_maps_paths_valid_and_within_factor_of_astar(seed, h, w, n_rect, n_dots, qseed):
+    free = random_map(seed, h, w, n_rect, n_dots)
+    tl = build_two_layer(free, 1, resolution=0.05)
+    planner = build_planner(tl)
+    cells = np.argwhere(free)
+    if cells.shape[0] < 2:
+        return
+    _, cc = cv2.connectedComponents(free.astype(np.uint8), connectivity=8)
+    rng = np.random.default_rng(qseed)
+    for _ in range(5):
+        a, b = (tuple(int(x) for x in cells[i]) for i in rng.integers(0, cells.shape[0], 2))
+        if cc[a] == cc[b]:
+            _check_route(tl, planner, free, a, b)
+        else:
+            with pytest.raises(PlanningError, match="cannot be reached"):
+                plan_path(
+                    planner,
+                    np.array([(a[1] + 0.5) * 0.05, (a[0] + 0.5) * 0.05]),
+                    np.array([(b[1] + 0.5) * 0.05, (b[0] + 0.5) * 0.05]),
+                )
+
+
+def test_household_queries_valid_and_shorter_than_factor():
+    free = apartment_free()
+    tl = build_two_layer(OccupancyGrid.from_free_mask(free, 0.05), 1)
+    planner = build_planner(tl)
+    cells = np.argwhere(free)
+    rng = np.random.default_rng(7)
+    ratios = [
+        _check_route(tl, planner, free, tuple(cells[i]), tuple(cells[j]))
+        for i, j in rng.integers(0, cells.shape[0], (40, 2))
+    ]
+    assert max(ratios) <= LENGTH_FACTOR
+
+
+def test_planning_errors_are_clear():
+    free = apartment_free()
+    free[:, 100:] = False  # cut the flat in two: the east part is now unreachable (and occupied)
+    free[5:20, 150:190] = True
+    tl = build_two_layer(OccupancyGrid.from_free_mask(free, 0.05), 1)
+    with pytest.raises(PlanningError, match="not in free space"):
+        plan_path(tl, np.array([6.5, 5.0]), np.array([1.0, 1.0]))  # start deep in the occupied half
+    with pytest.raises(PlanningError, match="cannot be reached"):
+        plan_path(tl, np.array([1.0, 1.0]), np.array([8.5, 0.5]))
+    with pytest.raises(PlanningError, match="finite"):
+        plan_path(tl, np.array([np.nan, 1.0]), np.array([1.0, 1.0]))
+    # a start just inside a wall snaps to the nearest free cell
+    r = plan_path(tl, np.array([0.06, 1.0]), np.array([1.0, 1.0]))
+    assert tl.region_at(r.waypoints[:1])[0] >= 0

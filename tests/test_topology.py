@@ -1,0 +1,191 @@
+"""Skeleton -> topology graph: invariants on random maps, geometry of edges, pruning, GraphML readiness."""
+
+import networkx as nx
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from holoslam.errors import MapError
+from holoslam.maps.grid import OccupancyGrid
+from holoslam.maps.thinning import count_removable, thin
+from holoslam.maps.topology import (
+    clearance_map,
+    cycle_rank,
+    path_from_string,
+    path_to_string,
+    prune_spurs,
+    skeleton_to_graph,
+    to_graphml_ready,
+    topology_from_grid,
+)
+from tests.test_thinning import topology
+
+# Random maps: free space with rectangular obstacles of at least 3 x 3 cells (the documented minimum hole
+# size: a smaller obstacle right at a crossing can sit inside one junction cluster, see topology.py).
+rect = st.tuples(st.integers(0, 40), st.integers(0, 40), st.integers(3, 9), st.integers(3, 9))
+
+
+def room_map(h, w, rects):
+    m = np.ones((h, w), bool)
+    for r, c, dh, dw in rects:
+        m[r : r + dh, c : c + dw] = False
+    return m
+
+
+@settings(max_examples=120, deadline=None)
+@given(st.integers(3, 45), st.integers(3, 45), st.lists(rect, max_size=10))
+def test_graph_has_the_topology_of_free_space(h, w, rects):
+    m = room_map(h, w, rects)
+    sk = thin(m)
+    assert count_removable(sk) == 0
+    G = skeleton_to_graph(sk, clearance=clearance_map(m))
+    comps, holes = topology(m)
+    assert nx.number_connected_components(G) == comps
+    assert cycle_rank(G) == holes
+    # every skeleton cell lies on an edge path or is a node cell
+    on = np.zeros_like(sk)
+    for _u, _v, d in G.edges(data=True):
+        p = d["path"]
+        assert (np.abs(np.diff(p, axis=0)).max(axis=1) == 1).all()  # 8-connected steps
+        assert sk[p[:, 0], p[:, 1]].all()
+        on[p[:, 0], p[:, 1]] = True
+    for _n, d in G.nodes(data=True):
+        on[d["row"], d["col"]] = True
+    junction_cells = sk & ~on
+    assert junction_cells.sum() <= 3 * sum(1 for _, k in G.nodes(data="kind") if k == "junction")
+    # pruning keeps components and cycles
+    prune_spurs(G, 5.0, 2.0)
+    assert nx.number_connected_components(G) == comps
+    assert cycle_rank(G) == holes
+
+
+def test_two_corridors_around_a_block_give_parallel_edges():
+    m = np.zeros((30, 60), bool)
+    m[5:25, 5:55] = True
+    m[12:18, 20:40] = False  # a block in the middle: a loop around it
+    G = skeleton_to_graph(thin(m), clearance=clearance_map(m), prune_spur_m=3.0, spur_clearance_factor=2.0)
+    assert cycle_rank(G) == 1  # the corner spurs are pruned, the two junctions merged away: one loop
+    assert [k for _, k in G.nodes(data="kind")] == ["loop"]
+    m = np.pad(m, ((0, 0), (30, 30)))
+    m[13:17, 0:36] = True  # long corridors to the west and east: the ring now has two junctions
+    m[13:17, 84:120] = True
+    G = skeleton_to_graph(thin(m), clearance=clearance_map(m), prune_spur_m=3.0, spur_clearance_factor=2.0)
+    assert cycle_rank(G) == 1
+    junctions = [n for n, k in G.nodes(data="kind") if k == "junction"]
+    assert len(junctions) == 2 and G.number_of_nodes() == 4
+    assert G.number_of_edges(*junctions) == 2  # two corridors around the block, kept as parallel edges
+
+
+def test_ring_without_junction_is_one_node_with_a_self_loop():
+    m = np.zeros((20, 20), bool)
+    m[3:17, 3:17] = True
+    m[6:14, 6:14] = False  # a 3-wide ring of free space
+    sk = thin(m)
+    G = skeleton_to_graph(sk, prune_spur_m=3.0)  # corner tips of the square ring are pruned
+    assert G.number_of_nodes() == 1 and G.number_of_edges() == 1
+    ((n, kind),) = G.nodes(data="kind")
+    assert kind == "loop" and G.has_edge(n, n)
+    ((_, _, d),) = G.edges(data=True)
+    assert 40 <= len(d["path"]) <= sk.sum() + 2
+    # a diamond ring (every cell has two non-touching neighbours) has no junction at all: a 'loop' node
+    ring = np.zeros((7, 7), bool)
+    ring[1, 3] = ring[2, 2] = ring[2, 4] = ring[3, 1] = ring[3, 5] = ring[4, 2] = ring[4, 4] = ring[5, 3] = (
+        True
+    )
+    G = skeleton_to_graph(ring)
+    ((n, kind),) = G.nodes(data="kind")
+    ((_, _, d),) = G.edges(data=True)
+    assert kind == "loop" and G.has_edge(n, n) and len(d["path"]) == 9
+    assert np.array_equal(d["path"][0], d["path"][-1]) and d["length"] == pytest.approx(8 * np.sqrt(2))
+
+
+def test_lengths_clearance_and_world_coordinates():
+    m = np.zeros((11, 41), bool)
+    m[3:8, 0:41] = True  # 5-wide corridor along x, open at both ends of the grid
+    m[3:8, 0] = m[3:8, 40] = False
+    res = 0.1
+    G = skeleton_to_graph(
+        thin(m),
+        resolution=res,
+        origin_x=2.0,
+        origin_y=-1.0,
+        clearance=clearance_map(m, res),
+        prune_spur_m=0.35,
+    )
+    assert G.number_of_edges() == 1  # the forks into the corridor's end corners are pruned
+    ((u, v, d),) = G.edges(data=True)
+    cols = d["path"][:, 1]
+    assert (d["path"][2:-2, 0] == 5).all()  # the middle row
+    steps = np.abs(np.diff(d["path"], axis=0)).sum(axis=1)
+    assert d["length"] == pytest.approx(((steps == 1).sum() + np.sqrt(2) * (steps == 2).sum()) * res)
+    assert d["length"] >= (cols.max() - cols.min()) * res
+    assert d["min_clearance"] <= 3 * res + 1e-9  # row 5's centre is 3 cells from the walls (rows 2 and 8)
+    assert d["min_clearance"] >= 1 * res - 1e-9
+    for n in (u, v):
+        nd = G.nodes[n]
+        assert nd["kind"] == "endpoint"
+        assert nd["x"] == pytest.approx(2.0 + (nd["col"] + 0.5) * res)
+        assert nd["y"] == pytest.approx(-1.0 + (nd["row"] + 0.5) * res)
+        assert nd["submap"] == -1
+    assert d["path_from"] in (u, v)
+
+
+def test_diagonal_length_and_isolated_cells():
+    sk = np.zeros((8, 8), bool)
+    for i in range(1, 6):
+        sk[i, i] = True
+    sk[7, 0] = True
+    G = skeleton_to_graph(sk, resolution=0.5)
+    kinds = sorted(k for _, k in G.nodes(data="kind"))
+    assert kinds == ["endpoint", "endpoint", "isolated"]
+    ((_, _, d),) = G.edges(data=True)
+    assert d["length"] == pytest.approx(4 * np.sqrt(2) * 0.5)
+
+
+def test_spur_pruning_removes_short_spur_and_merges_the_junction():
+    sk = np.zeros((20, 40), bool)
+    sk[10, 2:38] = True  # a long line
+    sk[7:10, 20] = True  # a 3-cell spur off its middle
+    G = skeleton_to_graph(sk)
+    assert G.number_of_nodes() == 4 and G.number_of_edges() == 3
+    removed = prune_spurs(G, 5.0)
+    assert removed == 1
+    assert G.number_of_nodes() == 2 and G.number_of_edges() == 1
+    ((_, _, d),) = G.edges(data=True)
+    assert len(d["path"]) == 36 and d["length"] == pytest.approx(35.0)
+    # the last edge of a component is never pruned
+    assert prune_spurs(G, 1000.0) == 0
+
+
+def test_submap_attribute_is_the_nearest_anchor_and_graphml_ready():
+    grid = OccupancyGrid.from_free_mask(room_map(30, 60, [(10, 25, 8, 8)]), 0.1)
+    anchors = np.array([[0.0, 0.0, 0.0], [6.0, 3.0, 1.0]])
+    G = topology_from_grid(grid, anchors_wTa=anchors)
+    for _n, d in G.nodes(data=True):
+        want = int(np.argmin(np.hypot(anchors[:, 0] - d["x"], anchors[:, 1] - d["y"])))
+        assert d["submap"] == want
+        assert d["clearance"] > 0
+    H = to_graphml_ready(G)
+    for _u, _v, d in H.edges(data=True):
+        assert all(isinstance(x, (int, float, str)) for x in d.values())
+    for (_u, _v, d), (_a, _b, e) in zip(G.edges(data=True), H.edges(data=True), strict=True):
+        assert np.array_equal(path_from_string(e["path"]), d["path"])
+    nx.generate_graphml(H)  # accepted by networkx's writer
+
+
+def test_path_string_round_trip_and_errors():
+    p = np.array([[0, 1], [2, 3], [10, 200]])
+    assert np.array_equal(path_from_string(path_to_string(p)), p)
+    assert path_from_string("").shape == (0, 2)
+    with pytest.raises(MapError):
+        path_from_string("1,2;x")
+    with pytest.raises(MapError):
+        skeleton_to_graph(np.zeros(4, bool))
+    with pytest.raises(MapError):
+        skeleton_to_graph(np.zeros((4, 4), bool), resolution=0.0)
+
+
+def test_empty_skeleton_gives_empty_graph():
+    G = skeleton_to_graph(np.zeros((5, 5), bool))
+    assert G.number_of_nodes() == 0 and G.number_of_edges() == 0

@@ -1,0 +1,154 @@
+"""QR detection on rendered label views: decode, corner order and accuracy, several codes, foreign and
+malformed payloads, corrupt files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from holoslam.errors import ImageDecodeError, VisionError
+from holoslam.vision.qr import (
+    Decoder,
+    Fallback,
+    decode_image_file,
+    decoder_status,
+    detect_qr,
+    detection_to_json,
+    orient_and_refine,
+)
+from holoslam.vision.synth import (
+    LabelInView,
+    RenderConditions,
+    look_at_label,
+    render_label_view,
+    render_labels_view,
+)
+
+K = np.array([[700.0, 0, 319.5], [0, 700.0, 239.5], [0, 0, 1]])
+PAYLOAD = "HL1;O07;cup;g=handle,s=60"
+
+
+@pytest.mark.parametrize(
+    "dist,yaw,pitch,roll",
+    [(0.35, 0, 0, 0), (0.5, 35, 0, 90), (0.6, -30, 20, 200), (0.45, 10, -35, 315), (0.55, 0, 0, 45)],
+)
+def test_decodes_rendered_label_with_subpixel_corners(dist, yaw, pitch, roll):
+    cond = RenderConditions(noise_sigma=2.0, blur_px=1.0, light_gradient=0.3)
+    img, truth = render_label_view(
+        PAYLOAD,
+        0.06,
+        look_at_label(dist, yaw, pitch, roll, (0.03, -0.02)),
+        K,
+        conditions=cond,
+        seed=int(dist * 100) + roll,
+    )
+    dets = detect_qr(img)
+    assert len(dets) == 1
+    d = dets[0]
+    assert d.payload == PAYLOAD and d.is_label and d.label.object_id == "O07" and d.error is None
+    assert d.refined and d.n_modules == 25
+    err = np.linalg.norm(d.corners - truth, axis=1)
+    assert err.max() < 1.0, err  # the code's own order TL, TR, BR, BL, whatever the in-plane rotation
+
+
+def test_refinement_beats_raw_decoder_corners():
+    errs_raw, errs_ref = [], []
+    for i, (yaw, roll) in enumerate([(0, 0), (30, 20), (-40, 120), (20, 250)]):
+        img, truth = render_label_view(PAYLOAD, 0.06, look_at_label(0.4, yaw, roll_deg=roll), K, seed=i)
+        raw = detect_qr(img, refine=False)[0]
+        ref = detect_qr(img)[0]
+        errs_raw.append(np.abs(raw.corners - truth).max())
+        errs_ref.append(np.abs(ref.corners - truth).max())
+    assert np.median(errs_ref) < 0.15 < np.median(errs_raw)
+
+
+def test_several_codes_per_image_and_foreign_code():
+    labs = [
+        LabelInView("HL1;O01;tv;s=120", 0.12, look_at_label(1.0, 20, offset_xy=(-0.25, -0.05))),
+        LabelInView("HL1;O02;cup;s=60", 0.06, look_at_label(0.5, -20, roll_deg=60, offset_xy=(0.1, 0.1))),
+        LabelInView(
+            "https://example.com/x", 0.08, look_at_label(0.7, 0, roll_deg=180, offset_xy=(0.2, -0.15))
+        ),
+    ]
+    img, truths = render_labels_view(labs, K, conditions=RenderConditions(noise_sigma=2), seed=5)
+    dets = {d.payload: d for d in detect_qr(img)}
+    assert set(dets) == {lab.payload for lab in labs}
+    for lab, t in zip(labs, truths):
+        assert np.linalg.norm(dets[lab.payload].corners - t, axis=1).max() < 1.0
+    f = dets["https://example.com/x"]
+    assert not f.is_label and f.foreign and f.label is None and "HL1" in f.error
+    assert dets["HL1;O01;tv;s=120"].label.size_m == pytest.approx(0.12)
+
+
+def test_malformed_label_payload_is_reported_not_guessed():
+    img, _ = render_label_view("HL1;o7;cup", 0.06, look_at_label(0.4), K)
+    (d,) = detect_qr(img)
+    assert d.payload == "HL1;o7;cup" and not d.is_label and "object id" in d.error
+
+
+def test_no_false_decodes_on_clutter_and_micro_qr():
+    import segno
+
+    rng = np.random.default_rng(0)
+    noise = (rng.random((480, 640)) * 255).astype(np.uint8)
+    blank, _ = render_labels_view([], K, conditions=RenderConditions(clutter=60, noise_sigma=5), seed=2)
+    # a Micro QR code drawn big and clean must not decode: only full-size QR codes are read
+    micro = np.asarray(segno.make_micro("HL1;O1;cup").matrix, np.uint8)
+    big = np.kron(1 - np.pad(micro, 2), np.ones((12, 12), np.uint8)) * 255
+    canvas = np.full((480, 640), 255, np.uint8)
+    canvas[50 : 50 + big.shape[0], 50 : 50 + big.shape[1]] = big
+    for img in (noise, blank, canvas):
+        assert detect_qr(img, (Decoder.ZXING, Decoder.ZBAR, Decoder.OPENCV), Fallback.ALWAYS) == []
+
+
+@pytest.mark.parametrize("decoder", [Decoder.ZXING, Decoder.ZBAR, Decoder.OPENCV, Decoder.OPENCV_ARUCO])
+def test_every_decoder_gives_code_order(decoder):
+    if decoder_status()[decoder.value] is not None:
+        pytest.skip(decoder_status()[decoder.value])
+    img, truth = render_label_view(PAYLOAD, 0.06, look_at_label(0.3, 20, roll_deg=150), K, seed=3)
+    (d,) = detect_qr(img, (decoder,))
+    assert d.decoder == decoder.value
+    assert np.linalg.norm(d.corners - truth, axis=1).max() < 1.0
+
+
+def test_orient_and_refine_recovers_order_from_any_start_and_winding():
+    img, truth = render_label_view(PAYLOAD, 0.06, look_at_label(0.35, 15, roll_deg=30), K, seed=4)
+    rough = truth + np.random.default_rng(1).normal(0, 0.7, (4, 2))
+    for k in range(4):
+        for order in ([0, 1, 2, 3], [0, 3, 2, 1]):
+            c, n, refined = orient_and_refine(img, np.roll(rough[order], k, axis=0))
+            assert n == 25 and refined
+            assert np.linalg.norm(c - truth, axis=1).max() < 0.5
+    # a quadrilateral on plain background is not a QR code
+    assert orient_and_refine(np.full((480, 640), 200, np.uint8), truth) is None
+
+
+def test_decode_image_file_and_json(tmp_path):
+    import cv2
+
+    img, truth = render_label_view(PAYLOAD, 0.06, look_at_label(0.4, 10), K)
+    p = tmp_path / "a.png"
+    cv2.imwrite(str(p), img)
+    (d,) = decode_image_file(p)
+    js = detection_to_json(d, str(p))
+    json.dumps(js)
+    assert js["image"] == str(p) and js["payload"] == PAYLOAD and not js["foreign"]
+    assert js["label"] == {"id": "O07", "type": "cup", "attributes": {"g": "handle", "s": "60"}}
+    assert np.allclose(js["corners"], truth, atol=1.0)
+
+
+def test_corrupt_and_missing_files_raise_clear_errors(tmp_path):
+    bad = tmp_path / "bad.jpg"
+    bad.write_bytes(b"\xff\xd8\xff\xe0 this is not really a jpeg")
+    empty = tmp_path / "empty.png"
+    empty.write_bytes(b"")
+    with pytest.raises(ImageDecodeError, match="bad.jpg.*not a decodable image"):
+        decode_image_file(bad)
+    with pytest.raises(ImageDecodeError, match="empty"):
+        decode_image_file(empty)
+    with pytest.raises(ImageDecodeError, match="cannot read"):
+        decode_image_file(tmp_path / "missing.png")
+    with pytest.raises(VisionError, match="uint8"):
+        detect_qr(np.zeros((10, 10), np.float32))
