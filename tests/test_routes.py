@@ -140,7 +140,7 @@ def test_household_queries_valid_and_shorter_than_factor():
         _check_route(tl, planner, free, tuple(cells[i]), tuple(cells[j]))
         for i, j in rng.integers(0, cells.shape[0], (40, 2))
     ]
-    assert max(ratios) <= LENGTH_FACTOR
+    assert max(ratios) <= 1.10  # the goal on household-like maps (tighter than LENGTH_FACTOR)
 
 
 def test_planning_errors_are_clear():

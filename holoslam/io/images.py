@@ -1,13 +1,16 @@
-"""Decode camera images kept encoded by ingestion (``holoslam.types.Image``) into numpy pixels."""
+"""Decode camera images kept encoded by ingestion (``holoslam.types.Image``), and image files, into numpy
+pixels."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
 from holoslam.errors import ImageDecodeError
 from holoslam.types import Image
 
-__all__ = ["decode_image", "COMPRESSED_FORMATS", "RAW_ENCODINGS"]
+__all__ = ["decode_image", "read_image_file", "COMPRESSED_FORMATS", "RAW_ENCODINGS"]
 
 COMPRESSED_FORMATS = ("jpeg", "jpg", "png", "bmp", "tiff", "webp")
 
@@ -94,3 +97,38 @@ def _decode_raw(image: Image, enc: str, where: str) -> np.ndarray:
     if enc in ("rgba8",):
         return px[:, :, 2::-1].copy()
     return px[:, :, :3].copy()
+
+
+def read_image_file(path: str | Path, grayscale: bool = False) -> np.ndarray:
+    """The pixels of one image file (PNG, JPEG, BMP, TIFF, WebP: anything OpenCV decodes): (H, W) uint8 when
+    ``grayscale`` or the file is single-channel, else (H, W, 3) uint8 BGR (alpha dropped); 16-bit files keep
+    their depth unless ``grayscale``.
+
+    Raises ImageDecodeError naming the file when it is missing, unreadable, empty or not a decodable image.
+    """
+    import cv2
+
+    p = Path(path)
+    if p.is_dir():
+        raise ImageDecodeError(f"{path}: is a directory, not an image file; pass the image files inside it")
+    try:
+        data = np.fromfile(p, dtype=np.uint8)
+    except FileNotFoundError:
+        raise ImageDecodeError(f"{path}: cannot read the file: no such file; check the path") from None
+    except OSError as e:
+        raise ImageDecodeError(
+            f"{path}: cannot read the file ({e.strerror or e}); check its permissions"
+        ) from None
+    if data.size == 0:
+        raise ImageDecodeError(f"{path}: the file is empty (0 bytes), not an image")
+    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE if grayscale else cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ImageDecodeError(
+            f"{path}: not a decodable image: its {data.size} bytes are corrupt, truncated or an unsupported "
+            f"format (first bytes {data[:8].tobytes().hex()}); save it as PNG or JPEG"
+        )
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    elif img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    return img

@@ -979,6 +979,31 @@ def _cov3(cov36: Any) -> np.ndarray | None:
     return np.array([[c[0], c[1], c[5]], [c[6], c[7], c[11]], [c[30], c[31], c[35]]], dtype=np.float64)
 
 
+def rotate_cov_xy(cov3: np.ndarray, phi: float) -> np.ndarray:
+    """``J cov3 J^T`` with J = blockdiag(R(phi), 1): the (x, y, yaw) covariance with its x/y axes rotated by
+    phi. The 2x2 block uses the double-angle form, so an isotropic block stays exactly isotropic."""
+    cov = np.asarray(cov3, dtype=np.float64)
+    a, b, d = cov[0, 0], 0.5 * (cov[0, 1] + cov[1, 0]), cov[1, 1]
+    m, h = 0.5 * (a + d), 0.5 * (a - d)
+    c2, s2 = math.cos(2.0 * phi), math.sin(2.0 * phi)
+    out = np.empty((3, 3))
+    out[0, 0] = m + h * c2 - b * s2
+    out[1, 1] = m - h * c2 + b * s2
+    out[0, 1] = out[1, 0] = h * s2 + b * c2
+    c, s = math.cos(phi), math.sin(phi)
+    xt = 0.5 * (cov[:2, 2] + cov[2, :2])
+    out[0, 2] = out[2, 0] = c * xt[0] - s * xt[1]
+    out[1, 2] = out[2, 1] = s * xt[0] + c * xt[1]
+    out[2, 2] = cov[2, 2]
+    return out
+
+
+def _cov_odom_to_body(cov_odom: np.ndarray, theta: float) -> np.ndarray:
+    """nav_msgs/Odometry's pose covariance is in the parent (odom) frame; ``Odometry.cov_odomTb`` is in the
+    body frame (GTSAM's right perturbation): rotate the x/y block by R(theta)^T."""
+    return rotate_cov_xy(cov_odom, -theta)
+
+
 class _Conv:
     """Per-topic conversion state and counters (shared by the report)."""
 
@@ -1069,6 +1094,8 @@ def _convert(c: _Conv, kind: str, msg: Any) -> tuple[int, list[Record]]:
         cov3 = _cov3(cov) if cov is not None else None
         if cov3 is None and cov is not None:
             c.zero_cov += 1
+        if cov3 is not None:
+            cov3 = _cov_odom_to_body(cov3, th)
         return stamp, [Odometry(stamp, Pose2(x, y, th), cov3, speed, frame or "odom", child or "base_link")]
     if role is Role.SCAN:
         if custom:

@@ -156,11 +156,14 @@ def _yaw_quat(yaw: float) -> dict[str, float]:
     return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
 
 
-def _cov6(cov3: np.ndarray | None) -> list[float]:
+def _cov6(cov3: np.ndarray | None, theta: float = 0.0) -> list[float]:
+    """The ROS 6x6 pose covariance (parent frame) of a body-frame (x, y, yaw) covariance at heading theta."""
     c = np.zeros((6, 6))
     if cov3 is not None:
+        from holoslam.io.mcap import rotate_cov_xy
+
         idx = [0, 1, 5]
-        c[np.ix_(idx, idx)] = cov3
+        c[np.ix_(idx, idx)] = rotate_cov_xy(cov3, theta)
     return c.ravel().tolist()
 
 
@@ -177,7 +180,7 @@ def ros2_message(rec: Record) -> dict[str, Any]:
             "child_frame_id": rec.child_frame_id,
             "pose": {
                 "pose": {"position": {"x": p.x, "y": p.y, "z": 0.0}, "orientation": _yaw_quat(p.theta)},
-                "covariance": _cov6(rec.cov_odomTb),
+                "covariance": _cov6(rec.cov_odomTb, p.theta),
             },
             "twist": {
                 "twist": {

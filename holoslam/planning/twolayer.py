@@ -80,7 +80,10 @@ def integral_image(free: np.ndarray) -> np.ndarray:
 def rect_free(S: np.ndarray, rects: np.ndarray) -> np.ndarray:
     """Number of free cells in each half-open rectangle (N, 4) (row0, col0, row1, col1), vectorised."""
     r0, c0, r1, c1 = (rects[:, i] for i in range(4))
-    return S[r1, c1].astype(np.int64) - S[r0, c1].astype(np.int64) - S[r1, c0].astype(np.int64) + S[r0, c0]
+    # in the table's own integer type: every partial sum is a cell count of the grid, so nothing overflows
+    W1 = S.shape[1]
+    Sf = S.ravel()
+    return (Sf[r1 * W1 + c1] - Sf[r0 * W1 + c1]) - (Sf[r1 * W1 + c0] - Sf[r0 * W1 + c0])
 
 
 def decompose(free: np.ndarray, min_block_cells: int = 1, S: np.ndarray | None = None) -> np.ndarray:

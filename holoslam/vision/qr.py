@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from holoslam.errors import ImageDecodeError, PayloadError, VisionError
+from holoslam.errors import PayloadError, VisionError
 from holoslam.vision.label import ObjectLabel, parse_label
 
 __all__ = [
@@ -485,24 +485,13 @@ def detect_qr(
 def decode_image_file(
     path: str | Path, decoders: tuple[Decoder, ...] | None = None, fallback: Fallback | None = None
 ) -> list[QrDetection]:
-    """Decode the QR codes of one image file (PNG, JPEG, ... anything OpenCV reads).
+    """Decode the QR codes of one image file (PNG, JPEG, ... anything OpenCV reads); the one call the CLI's
+    ``holoslam tags`` makes per file. The file is read by ``holoslam.io.images.read_image_file``.
 
     Raises ``ImageDecodeError`` naming the file when it cannot be read or is not a decodable image."""
-    import cv2
+    from holoslam.io.images import read_image_file
 
-    p = Path(path)
-    try:
-        data = np.fromfile(p, dtype=np.uint8)
-    except OSError as e:
-        raise ImageDecodeError(f"{path}: cannot read the file ({e.strerror or e})") from None
-    if data.size == 0:
-        raise ImageDecodeError(f"{path}: the file is empty, not an image")
-    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
-    if img is None:
-        raise ImageDecodeError(
-            f"{path}: not a decodable image (corrupt or unsupported format); use PNG or JPEG"
-        )
-    return detect_qr(img, decoders, fallback)
+    return detect_qr(read_image_file(path, grayscale=True), decoders, fallback)
 
 
 def detection_to_json(det: QrDetection, image: str | None = None) -> dict:

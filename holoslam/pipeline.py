@@ -1,0 +1,803 @@
+"""One function per user job. Each returns results and writes nothing itself except where the job *is* to
+write files (``run_log_to_folder``, ``simulate``, ``solve_graph_file``, ...), and then only through ``holoslam.io``
+and only under the folder the caller named.
+
+The main job, ``run``::
+
+    log --ingest--> records --vision--> object observations
+        --front end--> submaps + SLAM problem (Eq. 12, 14-16) --solve--> anchors, objects, covariances
+        --> trajectory --> occupancy grid --> thinning topology --> holographic graph --> two-layer planning graph
+
+Every stage is timed; the result carries what a report needs (``RunResult.report``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from holoslam import geometry as g
+from holoslam.errors import ConfigError, HoloslamError, IngestError
+from holoslam.submaps.frontend import FrontEndConfig
+
+__all__ = [
+    "RunConfig",
+    "SolverConfig",
+    "GridConfig",
+    "TopologyConfig",
+    "HolographicConfig",
+    "PlanningConfig",
+    "VisionConfig",
+    "RunResult",
+    "run",
+    "run_log_to_folder",
+    "run_logs",
+    "load_run_config",
+    "optimised_trajectory",
+    "simulate",
+    "inspect",
+    "solve_graph_file",
+    "plan_to_object",
+    "export_run",
+    "list_datasets",
+    "decode_tags",
+    "topology_from_map_file",
+]
+
+Progress = Callable[..., None]
+
+
+def _noop(*_a: Any, **_k: Any) -> None:
+    return None
+
+
+# ------------------------------------------------------------------------------------------------- config
+
+
+class SolverMethod(str, Enum):
+    LM = "lm"
+    ISAM2 = "isam2"
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """How the graph is optimised: batch Levenberg-Marquardt or incremental iSAM2 (anchor by anchor),
+    outlier rejection (robust kernels + chi2 consistency rounds), marginal covariances of anchors/objects."""
+
+    method: SolverMethod = SolverMethod.LM
+    reject_outliers: bool = True
+    chi2_probability: float = 0.9999
+    covariances: bool = True
+    max_iterations: int = 100
+
+
+@dataclass(frozen=True)
+class VisionConfig:
+    """Where object sightings come from: decoded images and/or the robot's own tag detections."""
+
+    use_images: bool = True
+    use_tags: bool = True
+    sigma_px: float = 0.5
+    base_frame: str = "base_link"
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """The global occupancy grid: resolution (m/cell) and how far a no-return beam clears free space."""
+
+    resolution: float = 0.05
+    no_return_clear_m: float = 3.0
+    margin_m: float = 0.5
+
+
+@dataclass(frozen=True)
+class TopologyConfig:
+    """Thinning topology: spurs shorter than ``prune_spur_m`` (or ``spur_clearance_factor`` x the clearance at
+    their junction) are pruned; ``close_cells`` closes gaps in obstacles (scan holes) before thinning."""
+
+    prune_spur_m: float = 0.3
+    spur_clearance_factor: float = 1.5
+    erode_cells: int = 0
+    close_cells: int = 1
+
+
+@dataclass(frozen=True)
+class HolographicConfig:
+    """Reach model of the robot (who can handle which object from where) and place detection thresholds."""
+
+    robot_radius_m: float = 0.25
+    arm_reach_m: float = 0.9
+    doorway_width_m: float = 1.3
+    min_room_area_m2: float = 1.0
+
+
+@dataclass(frozen=True)
+class PlanningConfig:
+    """Two-layer planning graph: built on the free space eroded by the robot radius (its configuration space),
+    with the nine-square split stopping at ``min_block_cells`` (mixed blocks smaller count as occupied)."""
+
+    robot_radius_m: float = 0.2
+    min_block_cells: int = 1
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """The whole run's configuration; every section has defaults, so an empty YAML file is valid."""
+
+    mapping: Path | None = None  # YAML topic-role mapping for custom topics (see holoslam.io.mcap)
+    vision: VisionConfig = field(default_factory=VisionConfig)
+    frontend: FrontEndConfig = field(default_factory=FrontEndConfig)
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    grid: GridConfig = field(default_factory=GridConfig)
+    topology: TopologyConfig = field(default_factory=TopologyConfig)
+    holographic: HolographicConfig = field(default_factory=HolographicConfig)
+    planning: PlanningConfig = field(default_factory=PlanningConfig)
+    pictures: bool = True
+    results_mcap: bool = True
+
+
+def load_run_config(path: str | Path | None) -> RunConfig:
+    """The run configuration from a YAML file (safe loader), or the defaults when ``path`` is None."""
+    if path is None:
+        return RunConfig()
+    from holoslam.config import load_yaml_config
+
+    cfg = load_yaml_config(RunConfig, path)
+    if cfg.mapping is not None and not cfg.mapping.is_absolute():
+        cfg = dataclasses.replace(cfg, mapping=Path(path).parent / cfg.mapping)
+    return cfg
+
+
+# ------------------------------------------------------------------------------------------------- result
+
+
+@dataclass(frozen=True, eq=False)
+class RunResult:
+    """Everything a run produced, as numpy arrays, records and networkx graphs (nothing written yet)."""
+
+    source: str
+    config: RunConfig
+    stamps_ns: np.ndarray  # (N,) odometry stamps
+    wTb: np.ndarray  # (N, 3) optimised base trajectory
+    dead_reckoning_wTb: np.ndarray  # (N, 3)
+    anchor_stamps_ns: np.ndarray  # (K,)
+    wTa: np.ndarray  # (K, 3)
+    cov_wTa: np.ndarray | None  # (K, 3, 3) body frame
+    objects: tuple  # holoslam.maps.holographic.ObjectInfo
+    moved_objects: tuple
+    problem: Any  # holoslam.graph.problem.SlamProblem
+    solution: Any  # holoslam.solve.Solution
+    frontend: Any  # holoslam.submaps.frontend.FrontEnd
+    grid: Any  # OccupancyGrid
+    topology: Any  # nx.MultiGraph
+    holographic: Any  # nx.Graph
+    planning: Any  # TwoLayerGraph
+    report: dict[str, Any]
+
+
+def optimised_trajectory(
+    stamps_ns: np.ndarray, dr_stamps_ns: np.ndarray, dr_wTb: np.ndarray, anchor_stamps_ns: np.ndarray, wTa: np.ndarray
+) -> np.ndarray:
+    """The base pose at every stamp from the optimised anchors: within submap k (from its anchor's stamp to the
+    next one's) the pose is wTa_k composed with the dead-reckoned motion since the anchor,
+    wTb(t) = wTa_k ∘ (drTa_k^-1 ∘ drTb(t)). Before the first anchor, anchor 0 is used backwards."""
+    from holoslam.submaps.deadreckon import interpolate_poses
+
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    dr_t = interpolate_poses(dr_stamps_ns, dr_wTb, stamps)
+    dr_a = interpolate_poses(dr_stamps_ns, dr_wTb, np.asarray(anchor_stamps_ns, dtype=np.int64))
+    k = np.clip(np.searchsorted(anchor_stamps_ns, stamps, side="right") - 1, 0, len(anchor_stamps_ns) - 1)
+    return g.compose(np.asarray(wTa)[k], g.between(dr_a[k], dr_t))
+
+
+def _objects(problem: Any, solution: Any, observations: Sequence[Any]) -> tuple:
+    from holoslam.maps.holographic import ObjectInfo
+    from holoslam.vision.label import parse_label
+
+    payload = {o.object_id: o.payload for o in observations}
+    lm = problem.landmarks
+    objs = []
+    for k, oid in enumerate(solution.landmark_ids):
+        base = oid.split("@")[0]
+        z = np.nan
+        if lm is not None and len(lm.landmark):
+            sel = np.array([name == oid or name.split("@")[0] == base for name in lm.landmark])
+            zs = lm.z[sel]
+            zs = zs[np.isfinite(zs)]
+            z = float(np.median(zs)) if zs.size else np.nan
+        cov = np.full((3, 3), np.nan)
+        if solution.cov_w_landmarks is not None:
+            cov = np.zeros((3, 3))
+            cov[:2, :2] = solution.cov_w_landmarks[k]
+            cov[2, 2] = 0.02**2
+        try:
+            label = parse_label(payload.get(base, ""))
+            kind, attrs, text = label.kind, label.attributes, payload[base]
+        except HoloslamError:
+            kind, attrs, text = "unknown", (), payload.get(base, "")
+        if "@" in oid:  # a moved object's earlier place: kept in the result, not as a separate graph object
+            continue
+        xy = solution.w_landmarks[k]
+        objs.append(
+            ObjectInfo(oid, kind, np.array([xy[0], xy[1], 0.0 if not np.isfinite(z) else z]), cov, attrs, text)
+        )
+    return tuple(objs)
+
+
+def _stage(progress: Progress, timings: dict[str, float], name: str):
+    class _Timer:
+        def __enter__(self):
+            progress(name)
+            self.t0 = time.perf_counter()
+            return self
+
+        def __exit__(self, *exc):
+            timings[name] = round(time.perf_counter() - self.t0, 4)
+            return False
+
+    return _Timer()
+
+
+def run(log_path: str | Path, config: RunConfig | None = None, progress: Progress | None = None) -> RunResult:
+    """The main job on one log: ingest, locate objects, build and optimise the graph, build the maps and
+    graphs. Raises ``IngestError`` when the log lacks what a run needs (odometry and laser scans)."""
+    from holoslam.io.mcap import read_log, report_to_dict
+    from holoslam.maps.holographic import PlaceParams, ReachModel, build_holographic
+    from holoslam.maps.occupancy import build_grid
+    from holoslam.maps.topology import topology_from_grid
+    from holoslam.planning.twolayer import build_two_layer
+    from holoslam.solve import CovarianceScope, Method, SolveOptions, solve
+    from holoslam.submaps.frontend import build_problem
+    from holoslam.vision.observe import observations_from_log
+
+    cfg = config or RunConfig()
+    progress = progress or _noop
+    timings: dict[str, float] = {}
+    t_start = time.perf_counter()
+
+    with _stage(progress, timings, "ingest"):
+        log, ingest_report = read_log(log_path, mapping=cfg.mapping, require=["odometry", "scan"])
+    absent = [
+        name
+        for name, present in (
+            ("compass", bool(log.headings)),
+            ("camera images", bool(log.images)),
+            ("tag sightings", bool(log.tags)),
+            ("ground truth", bool(log.ground_truth)),
+        )
+        if not present
+    ]
+
+    observations: tuple = ()
+    vision_report: dict[str, Any] = {"skipped": "the log has no images and no tag sightings"}
+    if log.images or log.tags:
+        with _stage(progress, timings, "vision"):
+            observations, vrep = observations_from_log(
+                log,
+                base_frame=cfg.vision.base_frame,
+                sigma_px=cfg.vision.sigma_px,
+                use_images=cfg.vision.use_images,
+                use_tags=cfg.vision.use_tags,
+            )
+            vision_report = dataclasses.asdict(vrep)
+            vision_report["problems"] = list(vision_report.get("problems", ()))[:50]
+
+    with _stage(progress, timings, "front end (submaps, Eq. 12/14/15/16)"):
+        fe = build_problem(log, observations, cfg.frontend)
+
+    with _stage(progress, timings, "optimise"):
+        options = SolveOptions(
+            method=Method.ISAM2 if cfg.solver.method is SolverMethod.ISAM2 else Method.BATCH,
+            reject_outliers=cfg.solver.reject_outliers,
+            chi2_probability=cfg.solver.chi2_probability,
+            covariances=CovarianceScope.ALL if cfg.solver.covariances else CovarianceScope.NONE,
+            max_iterations=cfg.solver.max_iterations,
+        )
+        sol = solve(fe.problem, options)
+
+    with _stage(progress, timings, "trajectory"):
+        stamps, _ = log.odometry_arrays()
+        dr = _interp(fe.dr_stamps_ns, fe.dr_wTb, stamps)
+        wTb = optimised_trajectory(stamps, fe.dr_stamps_ns, fe.dr_wTb, fe.anchor_stamps_ns, sol.wTa)
+        objects = _objects(fe.problem, sol, observations)
+
+    with _stage(progress, timings, "occupancy grid"):
+        scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
+        wTb_scan = optimised_trajectory(scan_stamps, fe.dr_stamps_ns, fe.dr_wTb, fe.anchor_stamps_ns, sol.wTa)
+        wTs = g.compose(wTb_scan, np.broadcast_to(fe.bTs, wTb_scan.shape))
+        grid = build_grid(
+            wTs,
+            log.scans,
+            cfg.grid.resolution,
+            margin_m=cfg.grid.margin_m,
+            no_return_clear_m=cfg.grid.no_return_clear_m,
+        )
+
+    with _stage(progress, timings, "topology (thinning)"):
+        topology = topology_from_grid(
+            grid,
+            anchors_wTa=sol.wTa,
+            prune_spur_m=cfg.topology.prune_spur_m,
+            spur_clearance_factor=cfg.topology.spur_clearance_factor,
+            erode_cells=cfg.topology.erode_cells,
+            close_cells=cfg.topology.close_cells,
+        )
+
+    with _stage(progress, timings, "holographic graph"):
+        submap_features = {
+            sm.index: {
+                "n_scans": int(len(sm.scan_stamps_ns)),
+                "n_points": int(len(sm.points)),
+                "n_lines": int(len(sm.features.lines)),
+                "n_corners": int(len(sm.features.corners)),
+                "n_crossings": int(len(sm.features.crossings)),
+            }
+            for sm in fe.submaps
+        }
+        holo = build_holographic(
+            grid,
+            topology,
+            anchors_wTa=sol.wTa,
+            submap_ids=[sm.index for sm in fe.submaps],
+            objects=objects,
+            reach_model=ReachModel(robot_radius_m=cfg.holographic.robot_radius_m, arm_reach_m=cfg.holographic.arm_reach_m),
+            params=PlaceParams(
+                doorway_width_m=cfg.holographic.doorway_width_m, min_room_area_m2=cfg.holographic.min_room_area_m2
+            ),
+            submap_features=submap_features,
+        )
+
+    with _stage(progress, timings, "planning graph"):
+        planning = build_two_layer(_configuration_space(grid, cfg.planning.robot_radius_m), cfg.planning.min_block_cells)
+
+    timings["total"] = round(time.perf_counter() - t_start, 4)
+    report = _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects, grid, topology, holo,
+                     planning, timings, absent, stamps, wTb, dr)
+    return RunResult(
+        source=str(log_path),
+        config=cfg,
+        stamps_ns=stamps,
+        wTb=wTb,
+        dead_reckoning_wTb=dr,
+        anchor_stamps_ns=np.asarray(fe.anchor_stamps_ns, dtype=np.int64),
+        wTa=sol.wTa,
+        cov_wTa=sol.cov_wTa,
+        objects=objects,
+        moved_objects=tuple(sol.moved_objects),
+        problem=fe.problem,
+        solution=sol,
+        frontend=fe,
+        grid=grid,
+        topology=topology,
+        holographic=holo,
+        planning=planning,
+        report=report,
+    )
+
+
+def _interp(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) -> np.ndarray:
+    from holoslam.submaps.deadreckon import interpolate_poses
+
+    return interpolate_poses(stamps, poses, query)
+
+
+def _configuration_space(grid: Any, robot_radius_m: float) -> Any:
+    """The grid with free space eroded by the robot radius: a free cell of the result is a place the robot's
+    centre can be. Unknown and occupied cells both block."""
+    import cv2
+
+    from holoslam.maps.grid import OccupancyGrid
+
+    r = int(np.ceil(robot_radius_m / grid.resolution))
+    free = grid.free.astype(np.uint8)
+    if r > 0:
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+        free = cv2.erode(free, k, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    return OccupancyGrid.from_free_mask(free.astype(bool), grid.resolution, grid.origin_x, grid.origin_y)
+
+
+def _accuracy(log: Any, fe: Any, sol: Any, objects: Sequence[Any], stamps: np.ndarray, wTb: np.ndarray,
+              dr: np.ndarray) -> dict[str, Any] | None:
+    """Errors against the log's ground truth after the best SE(2) alignment (the run's world frame is its own)."""
+    if not log.ground_truth:
+        return None
+    from holoslam.evaluate import align_se2, object_errors, trajectory_errors, truth_at
+
+    gs, gp = log.ground_truth_arrays()
+    true_a = truth_at(fe.anchor_stamps_ns, gs, gp)
+    anchors = trajectory_errors(sol.wTa, true_a, sol.cov_wTa)
+    dr_a = _interp(fe.dr_stamps_ns, fe.dr_wTb, fe.anchor_stamps_ns)
+    anchors_dr = trajectory_errors(dr_a, true_a, None)
+    true_b = truth_at(stamps, gs, gp)
+    traj = trajectory_errors(wTb, true_b, None)
+    traj_dr = trajectory_errors(dr, true_b, None)
+    out: dict[str, Any] = {
+        "anchors": _errors_dict(anchors),
+        "anchors_dead_reckoning": _errors_dict(anchors_dr),
+        "trajectory": _errors_dict(traj),
+        "trajectory_dead_reckoning": _errors_dict(traj_dr),
+    }
+    if anchors.rmse_m > 0:
+        out["anchor_improvement_over_dead_reckoning"] = round(anchors_dr.rmse_m / anchors.rmse_m, 2)
+    if log.world_json:
+        world = json.loads(log.world_json)
+        truth = {o["id"]: np.asarray(o["position"], dtype=np.float64) for o in world.get("objects", [])}
+        T = align_se2(sol.wTa[:, :2], true_a[:, :2])
+        ids = [o.object_id for o in objects]
+        est = np.array([o.w_position for o in objects]).reshape(-1, 3)
+        covs = np.array([o.cov_w_position[:2, :2] for o in objects]).reshape(-1, 2, 2)
+        oe = object_errors(ids, est[:, :2], truth, T, covs if np.all(np.isfinite(covs)) else None)
+        out["objects"] = {
+            "rmse_m": round(oe.rmse_m, 4),
+            "max_m": round(oe.max_m, 4),
+            "matched": oe.n_matched,
+            "missing": list(oe.missing),
+            "unexpected": list(oe.unexpected),
+            "coverage95": None if oe.coverage95 is None else round(oe.coverage95, 3),
+            "per_object_m": {k: round(float(v), 4) for k, v in sorted(oe.per_object.items())},
+        }
+    return out
+
+
+def _errors_dict(e: Any) -> dict[str, Any]:
+    return {
+        "rmse_m": round(float(e.rmse_m), 4),
+        "max_m": round(float(e.max_m), 4),
+        "heading_rmse_deg": round(float(e.heading_rmse_deg), 3),
+        "n": int(e.n),
+        "coverage95": None if e.coverage95 is None else round(float(e.coverage95), 3),
+    }
+
+
+def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects, grid, topology, holo, planning,
+            timings, absent, stamps, wTb, dr) -> dict[str, Any]:
+    p = fe.problem
+    kinds: dict[str, int] = {}
+    for k in p.relative.kind:
+        kinds[str(k)] = kinds.get(str(k), 0) + 1
+    factors = {f"relative_pose/{k}": v for k, v in sorted(kinds.items())}
+    factors["compass_heading"] = 0 if p.headings is None else int(len(p.headings.i))
+    factors["object_landmark"] = 0 if p.landmarks is None else int(len(p.landmarks.i))
+    env = [n for n, d in holo.nodes(data=True) if d.get("kind") == "environment"]
+    places: dict[str, int] = {}
+    for n in env:
+        pl = str(holo.nodes[n].get("place", "?"))
+        places[pl] = places.get(pl, 0) + 1
+    obj_nodes = [n for n, d in holo.nodes(data=True) if d.get("kind") == "object"]
+    obj_edges = sum(1 for u, v in holo.edges() if (u in obj_nodes) != (v in obj_nodes))
+    reachable = {n for u, v in holo.edges() for n in (u, v) if n in obj_nodes and ((u in obj_nodes) != (v in obj_nodes))}
+    return {
+        "source": log.source,
+        "inputs_absent": absent,
+        "ingest": report_to_dict(ingest_report),
+        "vision": vision_report,
+        "submaps": {
+            "count": len(fe.submaps),
+            "split_reasons": _count(str(sm.reason) for sm in fe.submaps),
+            "loops_tried": int(fe.loops_tried),
+            "observations_before_first_anchor": int(fe.skipped_observations),
+        },
+        "factors": factors,
+        "solver": {
+            "method": str(getattr(sol.method, "value", sol.method)),
+            "iterations": int(sol.iterations),
+            "rounds": int(sol.rounds),
+            "initial_error": float(sol.initial_error),
+            "final_error": float(sol.final_error),
+            "rejected_measurements": len(sol.rejected),
+            "compass_bias_deg": None if sol.compass_bias is None else round(float(np.degrees(sol.compass_bias)), 3),
+            "seconds": round(float(sol.seconds), 4),
+        },
+        "objects": {
+            "count": len(objects),
+            "ids": [o.object_id for o in objects],
+            "moved": [
+                {
+                    "id": m.object_id,
+                    "before": [round(float(v), 4) for v in m.w_position_before],
+                    "after": [round(float(v), 4) for v in m.w_position_after],
+                    "distance_m": round(m.distance, 3),
+                }
+                for m in sol.moved_objects
+            ],
+            "without_reach_edge": sorted(set(obj_nodes) - reachable),
+        },
+        "map": {
+            "shape": list(grid.shape),
+            "resolution_m": grid.resolution,
+            "origin": [grid.origin_x, grid.origin_y],
+            "free_cells": int(grid.free.sum()),
+            "occupied_cells": int(grid.occupied.sum()),
+        },
+        "topology": {"nodes": topology.number_of_nodes(), "edges": topology.number_of_edges()},
+        "holographic": {
+            "environment_nodes": len(env),
+            "places": places,
+            "object_nodes": len(obj_nodes),
+            "object_edges": obj_edges,
+            "edges": holo.number_of_edges(),
+            "connected": bool(_connected(holo)),
+        },
+        "planning": {"layer1_blocks": int(planning.n_blocks), "layer2_regions": int(planning.n_regions)},
+        "timings_s": timings,
+        "accuracy": _accuracy(log, fe, sol, objects, stamps, wTb, dr),
+    }
+
+
+def _count(items) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for i in items:
+        out[i] = out.get(i, 0) + 1
+    return out
+
+
+def _connected(G: Any) -> bool:
+    import networkx as nx
+
+    return G.number_of_nodes() > 0 and nx.is_connected(nx.Graph(G))
+
+
+def format_run_report(report: dict[str, Any]) -> str:
+    """The readable summary of a run's report."""
+    lines = [f"holoslam run of {report['source']}"]
+    if report.get("inputs_absent"):
+        lines.append(f"  inputs absent: {', '.join(report['inputs_absent'])}")
+    ing = report["ingest"]
+    lines.append(f"  ingest: {ing.get('messages_decoded', '?')} messages decoded, "
+                 f"{ing.get('messages_failed', 0)} failed, {len(ing.get('warnings', []))} warnings")
+    v = report["vision"]
+    if "skipped" in v:
+        lines.append(f"  vision: skipped ({v['skipped']})")
+    else:
+        lines.append(f"  vision: {v['images']} images, {v['decodes']} codes decoded, {v['tag_sightings']} robot "
+                     f"sightings, {v['observations']} object observations, {v['foreign']} foreign codes")
+    sm = report["submaps"]
+    lines.append(f"  submaps: {sm['count']} ({', '.join(f'{k} {n}' for k, n in sm['split_reasons'].items())}); "
+                 f"{sm['loops_tried']} revisit registrations tried")
+    lines.append("  factors: " + ", ".join(f"{k} {n}" for k, n in report["factors"].items()))
+    s = report["solver"]
+    lines.append(f"  solver: {s['method']}, {s['iterations']} iterations in {s['rounds']} rounds, error "
+                 f"{s['initial_error']:.4g} -> {s['final_error']:.4g}, {s['rejected_measurements']} measurements "
+                 f"rejected, compass bias {s['compass_bias_deg']} deg")
+    o = report["objects"]
+    lines.append(f"  objects: {o['count']}; moved: {[m['id'] for m in o['moved']] or 'none'}; "
+                 f"without a reach edge: {o['without_reach_edge'] or 'none'}")
+    h = report["holographic"]
+    lines.append(f"  holographic graph: {h['environment_nodes']} environment nodes "
+                 f"({', '.join(f'{k} {n}' for k, n in h['places'].items())}), {h['object_nodes']} object nodes, "
+                 f"{h['object_edges']} object edges, connected: {h['connected']}")
+    m = report["map"]
+    lines.append(f"  map: {m['shape'][1]} x {m['shape'][0]} cells at {m['resolution_m']} m; topology "
+                 f"{report['topology']['nodes']} nodes / {report['topology']['edges']} edges; planning "
+                 f"{report['planning']['layer1_blocks']} blocks / {report['planning']['layer2_regions']} regions")
+    acc = report.get("accuracy")
+    if acc:
+        a, d = acc["anchors"], acc["anchors_dead_reckoning"]
+        lines.append(f"  accuracy vs ground truth: anchors {a['rmse_m']:.3f} m RMSE (dead reckoning {d['rmse_m']:.3f} m),"
+                     f" heading {a['heading_rmse_deg']:.2f} deg, 95% ellipse coverage {a['coverage95']}")
+        if "objects" in acc:
+            ob = acc["objects"]
+            lines.append(f"                            objects {ob['rmse_m']:.3f} m RMSE (max {ob['max_m']:.3f} m), "
+                         f"{ob['matched']} matched, missing {ob['missing'] or 'none'}")
+    lines.append("  timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items()))
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------- jobs with outputs
+
+
+def run_log_to_folder(log: str, out_dir: str, config: RunConfig | None = None, progress: Progress | None = None
+                      ) -> dict[str, Any]:
+    """Run one log and write its output folder; returns a short summary (for the batch runner)."""
+    from holoslam.io.run_folder import write_run
+
+    result = run(log, config, progress)
+    written = write_run(result, out_dir, pictures=result.config.pictures, results_mcap=result.config.results_mcap,
+                        progress=progress)
+    acc = result.report.get("accuracy") or {}
+    return {
+        "log": log,
+        "out_dir": out_dir,
+        "files": len(written),
+        "anchors": int(len(result.wTa)),
+        "objects": len(result.objects),
+        "anchor_rmse_m": acc.get("anchors", {}).get("rmse_m"),
+        "object_rmse_m": acc.get("objects", {}).get("rmse_m"),
+        "seconds": result.report["timings_s"]["total"],
+        "text": format_run_report(result.report),
+    }
+
+
+def run_logs(logs: Sequence[Path], out_root: str | Path, config: RunConfig, *, workers: int | None = None,
+             scheduler: str | None = None, progress: Progress | None = None) -> dict[str, Any]:
+    """Run one or many logs. One log writes straight into ``out_root``; many logs get one sub-folder each,
+    processed in parallel (local processes, or a Dask cluster given its scheduler address)."""
+    from holoslam.batch import run_many
+
+    progress = progress or _noop
+    if len(logs) == 1 and scheduler is None:
+        try:
+            summary = run_log_to_folder(str(logs[0]), str(out_root), config, progress)
+        except IngestError as e:
+            raise IngestError(f"{logs[0]}: {e}") from None
+        return {"ok": True, "logs": [summary], "text": summary["text"] + f"\n  output: {out_root}"}
+
+    def on_done(item, done, total):
+        progress(f"{done}/{total} {'ok' if item.ok else 'FAILED'} {item.log} ({item.seconds:.1f} s)")
+
+    items = run_many(run_log_to_folder, logs, out_root, workers=workers, scheduler=scheduler, on_done=on_done,
+                     config=config)
+    lines = [f"{sum(i.ok for i in items)} of {len(items)} logs processed into {out_root}"]
+    for i in items:
+        lines.append(f"  {'ok    ' if i.ok else 'FAILED'} {i.log} -> {i.out_dir} ({i.seconds:.1f} s)"
+                     + ("" if i.ok else f": {i.error}"))
+    return {
+        "ok": all(i.ok for i in items),
+        "logs": [dataclasses.asdict(i) for i in items],
+        "text": "\n".join(lines),
+    }
+
+
+def simulate(output: str | Path, seed: int = 0, duration_s: float | None = None, image_rate_hz: float | None = None,
+             noise_scale: float = 1.0) -> dict[str, Any]:
+    """Write a simulated reference-household log (``holoslam.sim``) to ``output``."""
+    from holoslam.sim import SimConfig, simulate_to_file
+
+    if noise_scale < 0 or not np.isfinite(noise_scale):
+        raise ConfigError(f"--noise-scale must be a non-negative number, got {noise_scale}")
+    if duration_s is not None and not duration_s > 0:
+        raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
+    if image_rate_hz is not None and not image_rate_hz >= 0:
+        raise ConfigError(f"--image-rate must be >= 0 snapshots per second, got {image_rate_hz}")
+    kw: dict[str, Any] = {"seed": seed}
+    if duration_s is not None:
+        kw["duration_s"] = duration_s
+    if image_rate_hz is not None:
+        kw["image_rate_hz"] = image_rate_hz
+    cfg = SimConfig(**kw)
+    if noise_scale != 1.0:
+        cfg = cfg.with_noise_scale(noise_scale)
+    out = Path(output)
+    if out.parent and not out.parent.exists():
+        raise ConfigError(f"folder {out.parent} does not exist; create it first")
+    return simulate_to_file(out, cfg)
+
+
+def inspect(log: str | Path, mapping: str | Path | None = None) -> tuple[str, dict[str, Any]]:
+    """The channel table of a log (summary section only) as text and as JSON-able data."""
+    from holoslam.io.mcap import format_summary, inspect_log, summary_to_dict
+
+    s = inspect_log(log, mapping=mapping)
+    return format_summary(s), summary_to_dict(s)
+
+
+def solve_graph_file(input_path: str | Path, output: str | Path, tum: str | Path | None = None,
+                     method: str = "lm", init: str = "file", kernel: str = "none") -> dict[str, Any]:
+    """Optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result (g2o, and TUM)."""
+    from holoslam.solve import solve_g2o_file
+
+    summary, solution = solve_g2o_file(input_path, output, method=method, initialisation=init, kernel=kernel)
+    out = dataclasses.asdict(summary) if dataclasses.is_dataclass(summary) else dict(summary)
+    if tum is not None:
+        from holoslam.io.trajectory import write_tum
+
+        ids = solution.pose_ids if solution.pose_ids is not None else np.arange(len(solution.wTa))
+        # g2o carries no time: the pose index (or vertex id) stands for seconds
+        write_tum(tum, np.asarray(ids, dtype=np.int64) * 1_000_000_000, solution.wTa)
+        out["tum"] = str(tum)
+    return {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v)) for k, v in out.items()}
+
+
+def plan_to_object(run_dir: str | Path, object_id: str, from_xy: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Route from a pose (default: the run's last pose) to an object in a saved run."""
+    from holoslam.io.run_folder import load_run
+    from holoslam.planning.routes import plan_to_object as _plan
+
+    saved = load_run(run_dir, parts=("trajectory", "holographic", "planning", "grid"))
+    oid = _resolve_object(saved.holographic, object_id)
+    start = np.asarray(from_xy if from_xy is not None else saved.wTb[-1, :2], dtype=np.float64)
+    route = _plan(saved.planning, saved.holographic, saved.grid, oid, start)
+    obj = saved.holographic.nodes[oid]
+    wp = np.asarray(route.waypoints)
+    text = [
+        f"route to {oid} ({obj.get('object_type', obj.get('type', '?'))}) at "
+        f"({obj.get('x', float('nan')):.2f}, {obj.get('y', float('nan')):.2f}) from ({start[0]:.2f}, {start[1]:.2f})",
+        "  places: " + " -> ".join(str(p) for p in route.places),
+        f"  handled from: {route.goal_place}",
+        "  waypoints: " + " ".join(f"({x:.2f},{y:.2f})" for x, y in wp),
+        f"  length: {route.length:.2f} m",
+    ]
+    return {
+        "object": oid,
+        "from": [float(start[0]), float(start[1])],
+        "places": [str(p) for p in route.places],
+        "goal_place": route.goal_place,
+        "waypoints": wp.round(4).tolist(),
+        "length_m": round(float(route.length), 4),
+        "text": "\n".join(text),
+    }
+
+
+def _resolve_object(holo: Any, id_or_type: str) -> str:
+    from holoslam.errors import PlanningError
+    from holoslam.maps.holographic import where_is
+
+    if id_or_type in holo and holo.nodes[id_or_type].get("kind") == "object":
+        return id_or_type
+    found = where_is(holo, id_or_type) if id_or_type else []
+    if not found:
+        ids = sorted(n for n, d in holo.nodes(data=True) if d.get("kind") == "object")
+        raise PlanningError(f"no object {id_or_type!r} in this run; known objects: {', '.join(ids)}")
+    return str(found[0].get("id", found[0].get("object_id")))
+
+
+def export_run(run_dir: str | Path, to: str | Path | None = None, formats: Sequence[str] = ("all",)) -> list[Path]:
+    """Re-export a saved run (pictures, results MCAP, graphs, TUM) into ``to`` (default: the run folder)."""
+    from holoslam.io.run_folder import export_saved, load_run
+
+    saved = load_run(run_dir)
+    return export_saved(saved, Path(to) if to is not None else Path(run_dir), set(formats))
+
+
+def list_datasets() -> list[dict[str, Any]]:
+    """The bundled and known datasets with where they are on this machine."""
+    from holoslam.io.datasets import find_dataset, load_manifest
+
+    rows = []
+    for name, entry in load_manifest().items():
+        path = find_dataset(name)
+        rows.append({
+            "name": name,
+            "kind": getattr(entry, "kind", ""),
+            "path": None if path is None else str(path),
+            "source": getattr(entry, "source", "") or getattr(entry, "url", ""),
+        })
+    return rows
+
+
+def decode_tags(images: Sequence[str]) -> list[dict[str, Any]]:
+    """Decode the QR codes of image files; an unreadable file yields an ``error`` item and the others go on."""
+    from holoslam.vision.qr import decode_image_file, detection_to_json
+
+    out: list[dict[str, Any]] = []
+    for path in images:
+        try:
+            dets = decode_image_file(path)
+        except HoloslamError as e:
+            out.append({"image": path, "error": str(e)})
+            continue
+        out.extend(detection_to_json(d, path) for d in dets)
+    return out
+
+
+def topology_from_map_file(map_yaml: str | Path, output: str | Path) -> dict[str, Any]:
+    """Topology graph of a ROS map_server map written as GraphML (and JSON node-link beside it)."""
+    from holoslam.io.graphs import write_graphml, write_node_link_json
+    from holoslam.io.grid import read_grid
+    from holoslam.maps.topology import cycle_rank, to_graphml_ready, topology_from_grid
+
+    grid = read_grid(map_yaml)
+    G = topology_from_grid(grid)
+    out = Path(output)
+    if not out.parent.exists():
+        raise ConfigError(f"folder {out.parent} does not exist; create it first")
+    ready = to_graphml_ready(G)
+    write_graphml(ready, out)
+    js = write_node_link_json(ready, out.with_suffix(".json"))
+    return {
+        "map": str(map_yaml),
+        "cells": f"{grid.shape[1]} x {grid.shape[0]} at {grid.resolution} m",
+        "nodes": G.number_of_nodes(),
+        "edges": G.number_of_edges(),
+        "independent_cycles": cycle_rank(G),
+        "graphml": str(out),
+        "json": str(js),
+    }
