@@ -441,8 +441,8 @@ def _accuracy(log: Any, fe: Any, sol: Any, objects: Sequence[Any], stamps: np.nd
             "matched": oe.n_matched,
             "missing": list(oe.missing),
             "unexpected": list(oe.unexpected),
-            "coverage95": None if oe.coverage95 is None else round(oe.coverage95, 3),
-            "per_object_m": {k: round(float(v), 4) for k, v in sorted(oe.per_object.items())},
+            "coverage95": _num_or_none(oe.coverage95),
+            "per_object_m": {k: round(float(v), 4) for k, v in sorted(oe.errors_m.items())},
         }
     return out
 
@@ -453,8 +453,12 @@ def _errors_dict(e: Any) -> dict[str, Any]:
         "max_m": round(float(e.max_m), 4),
         "heading_rmse_deg": round(float(e.heading_rmse_deg), 3),
         "n": int(e.n),
-        "coverage95": None if e.coverage95 is None else round(float(e.coverage95), 3),
+        "coverage95": _num_or_none(e.coverage95),
     }
+
+
+def _num_or_none(v: float | None, digits: int = 3) -> float | None:
+    return None if v is None or not np.isfinite(v) else round(float(v), digits)
 
 
 def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects, grid, topology, holo, planning,
@@ -472,7 +476,6 @@ def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects,
         pl = str(holo.nodes[n].get("place", "?"))
         places[pl] = places.get(pl, 0) + 1
     obj_nodes = [n for n, d in holo.nodes(data=True) if d.get("kind") == "object"]
-    obj_edges = sum(1 for u, v in holo.edges() if (u in obj_nodes) != (v in obj_nodes))
     reachable = {n for u, v in holo.edges() for n in (u, v) if n in obj_nodes and ((u in obj_nodes) != (v in obj_nodes))}
     return {
         "source": log.source,
@@ -522,7 +525,8 @@ def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects,
             "environment_nodes": len(env),
             "places": places,
             "object_nodes": len(obj_nodes),
-            "object_edges": obj_edges,
+            "object_edges": sum(1 for u, v in holo.edges() if (u in obj_nodes) != (v in obj_nodes)),
+            "objects_with_edge": len(reachable),
             "edges": holo.number_of_edges(),
             "connected": bool(_connected(holo)),
         },
@@ -551,8 +555,10 @@ def format_run_report(report: dict[str, Any]) -> str:
     if report.get("inputs_absent"):
         lines.append(f"  inputs absent: {', '.join(report['inputs_absent'])}")
     ing = report["ingest"]
-    lines.append(f"  ingest: {ing.get('messages_decoded', '?')} messages decoded, "
-                 f"{ing.get('messages_failed', 0)} failed, {len(ing.get('warnings', []))} warnings")
+    chans = ing.get("channels", [])
+    lines.append(f"  ingest: {len(chans)} channels, {sum(c.get('decoded', 0) for c in chans)} messages decoded, "
+                 f"{sum(c.get('failed', 0) for c in chans)} failed, {sum(c.get('skipped', 0) for c in chans)} "
+                 f"skipped, {len(ing.get('warnings', []))} warnings")
     v = report["vision"]
     if "skipped" in v:
         lines.append(f"  vision: skipped ({v['skipped']})")
@@ -573,7 +579,7 @@ def format_run_report(report: dict[str, Any]) -> str:
     h = report["holographic"]
     lines.append(f"  holographic graph: {h['environment_nodes']} environment nodes "
                  f"({', '.join(f'{k} {n}' for k, n in h['places'].items())}), {h['object_nodes']} object nodes, "
-                 f"{h['object_edges']} object edges, connected: {h['connected']}")
+                 f"{h['object_edges']} object edges ({h['objects_with_edge']} objects reachable), connected: {h['connected']}")
     m = report["map"]
     lines.append(f"  map: {m['shape'][1]} x {m['shape'][0]} cells at {m['resolution_m']} m; topology "
                  f"{report['topology']['nodes']} nodes / {report['topology']['edges']} edges; planning "

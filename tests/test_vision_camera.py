@@ -52,7 +52,7 @@ def test_ptz_chain_eq8_9_hand_computed():
     T = ptz_chain(bTm, 0.0, math.radians(30))
     assert np.allclose(T[:3, 2], (math.cos(math.radians(30)), 0, -0.5))
     assert np.allclose(T[:3, 0], (0, -1, 0))  # tilting keeps image-right horizontal
-    # pan then tilt: the tilt axis is the *rotated* horizontal axis, so the optical axis stays in the pan plane
+    # pan then tilt: the tilt axis is the *rotated* horizontal axis: the optical axis stays in the pan plane
     p, t = math.radians(40), math.radians(25)
     T = ptz_chain(bTm, p, t)
     assert np.allclose(T[:3, 2], (math.cos(t) * math.cos(p), math.cos(t) * math.sin(p), -math.sin(t)))

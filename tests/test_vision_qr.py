@@ -75,7 +75,7 @@ def test_several_codes_per_image_and_foreign_code():
     img, truths = render_labels_view(labs, K, conditions=RenderConditions(noise_sigma=2), seed=5)
     dets = {d.payload: d for d in detect_qr(img)}
     assert set(dets) == {lab.payload for lab in labs}
-    for lab, t in zip(labs, truths):
+    for lab, t in zip(labs, truths, strict=True):
         assert np.linalg.norm(dets[lab.payload].corners - t, axis=1).max() < 1.0
     f = dets["https://example.com/x"]
     assert not f.is_label and f.foreign and f.label is None and "HL1" in f.error

@@ -11,14 +11,14 @@ Eq. 7 (hand-eye camera): ``bTc = bTe @ eTc`` with ``bTe`` the arm base -> end-ef
 arm controller and ``eTc`` the hand-eye calibration (``hand_eye_chain``).
 
 Eq. 8-9 (PTZ camera): ``bTc = bTm @ mTh(pan, tilt) @ hTc`` with ``bTm`` the fixed base -> pan-tilt mount
-transform (calibrated), ``mTh`` a rotation by pan about the mount's vertical axis (z) followed by tilt about the
-rotated horizontal axis (y), both through the optical centre (t_b = 0), and ``hTc`` the fixed body -> optical
-rotation (``ptz_chain``). Positive pan turns left, positive tilt looks down.
+transform (calibrated), ``mTh`` a rotation by pan about the mount's vertical axis (z) followed by tilt about
+the rotated horizontal axis (y), both through the optical centre (t_b = 0), and ``hTc`` the fixed body ->
+optical rotation (``ptz_chain``). Positive pan turns left, positive tilt looks down.
 
 The printed Eq. 8a is garbled by the scan (its (3, 1) entry reads ``-sin p cos p``; that matrix is not
-orthonormal). Written for a mount frame with a vertical y axis, as the paper does, the matrix is the product of
-the two axis rotations ``Rx(-tilt) @ Ry(pan)``, whose (3, 1) entry is ``-sin p cos T``: ``eq8_rotation`` builds
-it that way and ``check_rotation`` rejects the printed one.
+orthonormal). Written for a mount frame with a vertical y axis, as the paper does, the matrix is the product
+of the two axis rotations ``Rx(-tilt) @ Ry(pan)``, whose (3, 1) entry is ``-sin p cos T``: ``eq8_rotation``
+builds it that way and ``check_rotation`` rejects the printed one.
 """
 
 from __future__ import annotations

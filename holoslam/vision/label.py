@@ -71,7 +71,9 @@ def encode_label(label: ObjectLabel) -> str:
         parts.append(",".join(f"{k}={v}" for k, v in sorted(label.attributes)))
     text = ";".join(parts)
     if len(text) > MAX_PAYLOAD_CHARS:
-        raise PayloadError(f"label payload is {len(text)} characters; at most {MAX_PAYLOAD_CHARS} fit a small code")
+        raise PayloadError(
+            f"label payload is {len(text)} characters; at most {MAX_PAYLOAD_CHARS} fit a small code"
+        )
     return text
 
 

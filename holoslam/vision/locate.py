@@ -54,7 +54,8 @@ class LabelPose:
 @dataclass(frozen=True, slots=True)
 class Triangulation:
     """A point triangulated in a reference frame x: ``x_position`` (3,), ``cov_x_position`` (3x3), the
-    reprojection RMS (px) and the largest angle (rad) between the viewing rays (small = poorly conditioned)."""
+    reprojection RMS (px) and the largest angle (rad) between the viewing rays (small = poorly
+    conditioned)."""
 
     x_position: np.ndarray
     cov_x_position: np.ndarray
@@ -129,9 +130,9 @@ def triangulate(
             f"{len(cameras)} cameras, {len(xTcs)} poses)"
         )
     cTx = [invert_transform(T) for T in xTcs]
-    xn = np.vstack([cam.normalized(p[None, :]) for cam, p in zip(cameras, px)])
+    xn = np.vstack([cam.normalized(p[None, :]) for cam, p in zip(cameras, px, strict=True)])
     A = []
-    for (u, v), T in zip(xn, cTx):
+    for (u, v), T in zip(xn, cTx, strict=True):
         P = T[:3, :]
         A.append(u * P[2] - P[0])
         A.append(v * P[2] - P[1])
@@ -143,11 +144,11 @@ def triangulate(
             "use a second camera with a baseline"
         )
     X = Xh[:3] / Xh[3]
-    ideal = np.vstack([cam.K @ np.array([u, v, 1.0]) for cam, (u, v) in zip(cameras, xn)])[:, :2]
+    ideal = np.vstack([cam.K @ np.array([u, v, 1.0]) for cam, (u, v) in zip(cameras, xn, strict=True)])[:, :2]
 
     def predict(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r, J = np.zeros(2 * V), np.zeros((2 * V, 3))
-        for i, (cam, T) in enumerate(zip(cameras, cTx)):
+        for i, (cam, T) in enumerate(zip(cameras, cTx, strict=True)):
             pc = T[:3, :3] @ X + T[:3, 3]
             if pc[2] <= 0:
                 raise VisionError(

@@ -1,15 +1,15 @@
 """Wiring: a log's images (and the tag sightings the robot decoded itself) become object observations.
 
 ``observations_from_log(log)`` decodes every image of the log (``holoslam.vision.qr.detect_qr``), takes the
-``CameraInfo`` with the image's stamp (nearest within a tolerance) and the base -> camera transform at that stamp
-from the log's TF records (``holoslam.frames.TransformTree``), and locates each holoslam label by PnP with its
-printed size (label attribute ``s``). Sightings already decoded on the robot (``log.tags``) are used as they
-are (PnP from their corners); an image decode of the same label at the same stamp is then skipped as a
+``CameraInfo`` with the image's stamp (nearest within a tolerance) and the base -> camera transform at that
+stamp from the log's TF records (``holoslam.frames.TransformTree``), and locates each holoslam label by PnP
+with its printed size (label attribute ``s``). Sightings already decoded on the robot (``log.tags``) are used
+as they are (PnP from their corners); an image decode of the same label at the same stamp is then skipped as a
 duplicate. Nothing is silently lost: a ``VisionReport`` counts images, decodes, foreign codes, rejected
 payloads, corrupt images (with their messages) and every reason a sighting gave no observation.
 
-``accept_landmarks`` is the acceptance rule "a landmark only after consistent decodes": an object id is accepted
-once at least ``min_decodes`` (default 3) of its sightings, expressed in one common frame, lie within
+``accept_landmarks`` is the acceptance rule "a landmark only after consistent decodes": an object id is
+accepted once at least ``min_decodes`` (default 3) of its sightings, expressed in one common frame, lie within
 ``radius_m`` (default 0.3 m) of their component-wise median.
 """
 
@@ -258,7 +258,8 @@ def observations_from_log(
 
 @dataclass(frozen=True, slots=True)
 class AcceptedLandmark:
-    """An object accepted as a landmark: mean of its consistent sightings, how many agreed, how many in all."""
+    """An object accepted as a landmark: mean of its consistent sightings, how many agreed, how many in
+    all."""
 
     object_id: str
     position: np.ndarray

@@ -7,9 +7,9 @@ other symbologies are disabled, so clutter cannot decode as a tiny code). The de
 (``benchmarks/bench_vision.py``): zxing-cpp first (on rendered VGA views every label with modules >= 2.5 px
 decoded under blur, noise, dim light, gradients, JPEG and three codes per image, no false decode, corner error
 0.04 px median after refinement, ~2.3 ms per image), then zbar only where zxing-cpp found nothing
-(``Fallback.IF_EMPTY``): on the simulator's household log zbar recovered 3 of 30 strongly sheared views zxing-cpp
-missed, and it costs ~2 ms only on images without a zxing decode. OpenCV's detectors decoded fewer labels and
-were slower. Pass ``decoders=`` / ``fallback=`` to change it.
+(``Fallback.IF_EMPTY``): on the simulator's household log zbar recovered 3 of 30 strongly sheared views
+zxing-cpp missed, and it costs ~2 ms only on images without a zxing decode. OpenCV's detectors decoded fewer
+labels and were slower. Pass ``decoders=`` / ``fallback=`` to change it.
 
 Whatever decoder found a code, its corners are put in the code's order and refined the same way
 (``orient_and_refine``):
@@ -22,8 +22,8 @@ Whatever decoder found a code, its corners are put in the code's order and refin
    is fitted per border and the corners are the line intersections (exact under perspective, unbiased under
    symmetric blur). Two passes; if refinement fails or runs away the decoder's oriented corners are kept.
 
-Payloads are untrusted text. A payload that is not UTF-8 or not a holoslam label (``holoslam.vision.label``) is
-returned with ``is_label=False`` and the reason in ``error``, never guessed at.
+Payloads are untrusted text. A payload that is not UTF-8 or not a holoslam label (``holoslam.vision.label``)
+is returned with ``is_label=False`` and the reason in ``error``, never guessed at.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -54,14 +54,14 @@ __all__ = [
 ]
 
 
-class Decoder(str, Enum):
+class Decoder(StrEnum):
     ZXING = "zxing"
     ZBAR = "zbar"
     OPENCV = "opencv"
     OPENCV_ARUCO = "opencv_aruco"
 
 
-class Fallback(str, Enum):
+class Fallback(StrEnum):
     """When the decoders after the first run: never, only when the first found nothing, or always (merged)."""
 
     NEVER = "never"
@@ -495,7 +495,8 @@ def decode_image_file(
 
 
 def detection_to_json(det: QrDetection, image: str | None = None) -> dict:
-    """The JSON form the CLI prints: ``{"image", "payload", "corners", "decoder", "label", "foreign", "error"}``."""
+    """The JSON form the CLI prints: ``{"image", "payload", "corners", "decoder", "label", "foreign",
+    "error"}``."""
     label = None
     if det.label is not None:
         label = {"id": det.label.object_id, "type": det.label.kind, "attributes": dict(det.label.attributes)}
