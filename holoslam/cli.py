@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -99,7 +100,7 @@ def cmd_run(a: argparse.Namespace) -> int:
 def cmd_solve(a: argparse.Namespace) -> int:
     from holoslam.pipeline import solve_graph_file
 
-    summary = solve_graph_file(a.input, a.output, tum=a.tum, method=a.method, init=a.init, kernel=a.kernel)
+    summary = solve_graph_file(a.input, a.output, tum=a.tum, method=a.method, init=a.init)
     print(json.dumps(summary, indent=2) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
     return EXIT_OK
 
@@ -131,8 +132,9 @@ def cmd_datasets(a: argparse.Namespace) -> int:
         print(json.dumps(rows, indent=2))
         return EXIT_OK
     for r in rows:
-        where = r.get("path") or f"not here ({r.get('source', 'see manifest')})"
-        print(f"{r['name']:<24} {r.get('kind', ''):<12} {where}")
+        where = r.get("path") or f"not found here; {r.get('source') or 'see datasets/manifest.yaml'}"
+        print(f"{r['name']:<20} {r.get('kind', ''):<9} {where}")
+    print("(external datasets are looked up in the folders of $HOLOSLAM_DATA)")
     return EXIT_OK
 
 
@@ -141,14 +143,14 @@ def cmd_tags(a: argparse.Namespace) -> int:
 
     failed = 0
     for item in decode_tags(a.images):
-        if "error" in item:
+        if "payload" not in item:
             failed += 1
             _err(item["error"])
             continue
         if a.json:
             print(json.dumps(item))
         else:
-            what = f"label {item['label']['object_id']} ({item['label']['kind']})" if item.get("label") else "foreign"
+            what = f"label {item['label']['id']} ({item['label']['type']})" if item.get("label") else "foreign"
             print(f"{item['image']}: {what}: {item['payload']!r}")
     return EXIT_FAILED if failed and failed == len(a.images) else EXIT_OK
 
@@ -203,7 +205,6 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--tum", type=Path, help="also write the optimised poses as TUM text")
     s.add_argument("--method", choices=["lm", "isam2"], default="lm")
     s.add_argument("--init", choices=["file", "odometry", "lago", "incremental"], default="file")
-    s.add_argument("--kernel", choices=["none", "huber", "cauchy", "dcs", "gm"], default="none")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_solve)
 
@@ -237,6 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    # holoslam reports bad images itself; OpenCV's own log lines would only repeat it
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "OFF")
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

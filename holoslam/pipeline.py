@@ -686,11 +686,20 @@ def inspect(log: str | Path, mapping: str | Path | None = None) -> tuple[str, di
 
 
 def solve_graph_file(input_path: str | Path, output: str | Path, tum: str | Path | None = None,
-                     method: str = "lm", init: str = "file", kernel: str = "none") -> dict[str, Any]:
-    """Optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result (g2o, and TUM)."""
-    from holoslam.solve import solve_g2o_file
+                     method: str = "lm", init: str = "file") -> dict[str, Any]:
+    """Optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result (g2o, and TUM).
+    ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices), odometry, lago
+    or incremental."""
+    from holoslam.solve import Initialisation, Method, solve_g2o_file
 
-    summary, solution = solve_g2o_file(input_path, output, method=method, initialisation=init, kernel=kernel)
+    methods = {"lm": Method.BATCH, "isam2": Method.ISAM2}
+    inits = {"file": Initialisation.PROBLEM, "odometry": Initialisation.ODOMETRY, "lago": Initialisation.LAGO,
+             "incremental": Initialisation.INCREMENTAL}
+    if method not in methods or init not in inits:
+        raise ConfigError(f"method must be one of {sorted(methods)} and init one of {sorted(inits)}")
+    if not Path(input_path).is_file():
+        raise IngestError(f"graph file {input_path} does not exist")
+    summary, solution = solve_g2o_file(input_path, output, method=methods[method], initialisation=inits[init])
     out = dataclasses.asdict(summary) if dataclasses.is_dataclass(summary) else dict(summary)
     if tum is not None:
         from holoslam.io.trajectory import write_tum
@@ -760,11 +769,14 @@ def list_datasets() -> list[dict[str, Any]]:
     rows = []
     for name, entry in load_manifest().items():
         path = find_dataset(name)
+        extra = entry.extra or {}
         rows.append({
             "name": name,
-            "kind": getattr(entry, "kind", ""),
+            "kind": entry.where,
+            "file": entry.file,
             "path": None if path is None else str(path),
-            "source": getattr(entry, "source", "") or getattr(entry, "url", ""),
+            "source": str(extra.get("how_to_get") or extra.get("source") or extra.get("url") or ""),
+            "licence": entry.licence,
         })
     return rows
 

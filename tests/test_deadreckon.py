@@ -129,11 +129,16 @@ def _mc(cfg, use_compass, runs=1500, seed=1):
     an = None
     for k in range(runs + 1):
         noisy = k > 0
-        sig_s = cfg.sigma_s_per_m * np.abs(s_true) + cfg.sigma_s_floor
-        s = s_true + (rng.normal(0, 1, s_true.size) * sig_s if noisy else 0)
+        sig_s = np.sqrt((cfg.sigma_s_per_m * np.abs(s_true) + cfg.sigma_s_floor) ** 2
+                        + cfg.sigma_s_per_sqrt_m**2 * np.abs(s_true))
+        scale = rng.normal(0, cfg.sigma_scale) if noisy else 0.0  # one systematic error per run
+        s = s_true * (1 + scale) + (rng.normal(0, 1, s_true.size) * sig_s if noisy else 0)
         var_o = (cfg.odo_sigma_dtheta_per_rad * np.abs(d_true) + cfg.odo_sigma_dtheta_per_m * np.abs(s_true)
                  + cfg.odo_sigma_dtheta_floor) ** 2
-        d = d_true + (rng.normal(0, 1, d_true.size) * np.sqrt(var_o) if noisy and not use_compass else 0)
+        turn = rng.normal(0, cfg.odo_sigma_turn_scale) if noisy else 0.0
+        drift = rng.normal(0, cfg.odo_sigma_drift_per_m) if noisy else 0.0
+        d = d_true + (rng.normal(0, 1, d_true.size) * np.sqrt(var_o) + turn * d_true + drift * np.abs(s_true)
+                      if noisy and not use_compass else 0)
         odo = integrate(P[0], s, d)
         yaw = g.wrap(yaw_true + 0.4 + (rng.normal(0, cfg.compass_sigma, hs.size) if noisy else 0))
         xi0 = rng.multivariate_normal(np.zeros(3), cov0) if noisy else np.zeros(3)
@@ -149,11 +154,13 @@ def _mc(cfg, use_compass, runs=1500, seed=1):
     return an, np.cov(E.T)
 
 
-@pytest.mark.parametrize("use_compass", [True, False])
-def test_covariance_matches_monte_carlo(use_compass):
+@pytest.mark.parametrize("use_compass,systematic", [(True, False), (False, False), (True, True), (False, True)])
+def test_covariance_matches_monte_carlo(use_compass, systematic):
+    k = 1.0 if systematic else 0.0  # with the correlated scale / slip / turn-scale / drift terms or without
     cfg = DeadReckoningConfig(sigma_s_per_m=0.05, sigma_s_floor=0.002, compass_sigma=0.02,
                               odo_sigma_dtheta_per_rad=0.1, odo_sigma_dtheta_per_m=0.05,
-                              odo_sigma_dtheta_floor=0.002, gate=1e9)
+                              odo_sigma_dtheta_floor=0.002, gate=1e9, sigma_s_per_sqrt_m=0.02 * k,
+                              sigma_scale=0.05 * k, odo_sigma_turn_scale=0.05 * k, odo_sigma_drift_per_m=0.05 * k)
     an, mc = _mc(cfg, use_compass)
     sd_an, sd_mc = np.sqrt(np.diag(an)), np.sqrt(np.diag(mc))
     np.testing.assert_allclose(sd_an, sd_mc, rtol=0.08)
@@ -181,3 +188,15 @@ def test_eq15_invariant(a, b):
     assert abs(g.wrap(back[2] - mTr[2])) < 1e-9
     assert abs(g.wrap(mTn[2] - (mTr[2] - nTr[2]))) < 1e-9  # theta_mn = theta_rm - theta_rn
     assert np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+def test_systematic_scale_error_grows_linearly_with_distance():
+    # a straight 1 m and 4 m drive: with only the correlated scale error the along-track sigma is
+    # sigma_scale * distance (independent per-step noise would grow like sqrt(distance / step))
+    cfg = DeadReckoningConfig(sigma_s_per_m=0.0, sigma_s_floor=0.0, sigma_s_per_sqrt_m=0.0, sigma_scale=0.015,
+                              use_compass=False)
+    for L in (1.0, 4.0):
+        t = np.arange(0, 201, dtype=np.int64) * 50_000_000
+        P = np.column_stack([np.linspace(0, L, t.size), np.zeros(t.size), np.zeros(t.size)])
+        r = dead_reckon(t, P, int(t[0]), int(t[-1]), config=cfg)
+        assert np.sqrt(r.cov_aTb_end[0, 0]) == pytest.approx(0.015 * L, rel=1e-9)

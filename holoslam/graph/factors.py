@@ -23,6 +23,7 @@ __all__ = [
     "RobustKernel",
     "Kernel",
     "NoiseCache",
+    "noise_models",
     "between_factors",
     "prior_factors",
     "heading_factors",
@@ -92,17 +93,76 @@ class NoiseCache:
         return model
 
 
+def noise_models(cov: np.ndarray, kernel: Kernel = NO_KERNEL) -> tuple[list[Any], np.ndarray]:
+    """Gaussian noise models for a batch of covariances (M, d, d), one per distinct covariance, and each row's
+    model index. Vectorised: distinct matrices found with one ``np.unique``, diagonal ones become
+    ``noiseModel.Diagonal.Sigmas`` (what gtsam's "smart" constructors pick), the others
+    ``noiseModel.Gaussian.SqrtInformation`` with the upper Cholesky factor R of the information (R^T R = cov^-1)
+    computed in one batched numpy call. A robust kernel, when given, wraps every model."""
+    import gtsam
+
+    cov = np.ascontiguousarray(cov, dtype=np.float64)
+    m, d = cov.shape[0], cov.shape[1]
+    if m == 0:
+        return [], np.zeros(0, np.int64)
+    flat = cov.reshape(m, d * d)
+    if m > 1 and np.array_equal(flat.min(axis=0), flat.max(axis=0)):
+        uniq, inverse = flat[:1], np.zeros(m, np.int64)
+    else:
+        void = flat.view(np.dtype((np.void, flat.dtype.itemsize * d * d))).ravel()
+        _, first, inverse = np.unique(void, return_index=True, return_inverse=True)
+        uniq = flat[first]
+    uc = uniq.reshape(-1, d, d)
+    diag = np.einsum("kii->ki", uc)
+    is_diag = np.all((uc == 0) | np.eye(d, dtype=bool), axis=(1, 2))
+    ok = np.all(np.isfinite(uc), axis=(1, 2)) & np.all(diag > 0, axis=1)
+    R = np.zeros_like(uc)
+    full = np.flatnonzero(~is_diag & ok)
+    if full.size:
+        from holoslam.graph.linalg import chol_upper, inv_sym
+
+        sub = uc[full]
+        R[full] = chol_upper(inv_sym(sub))
+    sigmas = np.sqrt(np.where(diag > 0, diag, 1.0))
+    est = kernel.make()
+    models: list[Any] = []
+    ok &= is_diag | np.all(np.isfinite(R), axis=(1, 2))
+    if not ok.all():
+        k = int(np.argmin(ok))
+        raise GraphError(
+            f"covariance {uc[k].tolist()} is not usable as noise (not positive definite); "
+            "give every measurement a finite, non-zero uncertainty"
+        )
+    diag_model, full_model = gtsam.noiseModel.Diagonal.Sigmas, gtsam.noiseModel.Gaussian.SqrtInformation
+    for d_k, s_k, r_k in zip(is_diag.tolist(), sigmas, R, strict=True):
+        model = diag_model(s_k) if d_k else full_model(r_k, False)
+        if est is not None:
+            model = gtsam.noiseModel.Robust.Create(est, model)
+        models.append(model)
+    return models, inverse.reshape(-1).astype(np.int64)
+
+
 def between_factors(
     keys_i: np.ndarray, keys_j: np.ndarray, iTj: np.ndarray, cov_iTj: np.ndarray, kernel: Kernel = NO_KERNEL
 ) -> Any:
-    """BetweenFactorPose2(key_i, key_j, iTj) for each row, noise from ``cov_iTj``."""
+    """BetweenFactorPose2(key_i, key_j, iTj) for each row, noise from ``cov_iTj`` (see :func:`noise_models`);
+    the Python loop does only the unavoidable per-factor constructor calls."""
     import gtsam
 
     graph = gtsam.NonlinearFactorGraph()
-    noise = NoiseCache(kernel)
-    Pose2, Between = gtsam.Pose2, gtsam.BetweenFactorPose2
-    for ki, kj, m, c in zip(keys_i.tolist(), keys_j.tolist(), iTj.tolist(), cov_iTj, strict=True):
-        graph.add(Between(ki, kj, Pose2(m[0], m[1], m[2]), noise.covariance(c)))
+    models, which = noise_models(np.reshape(cov_iTj, (-1, 3, 3)), kernel)
+    Pose2, Between, add = gtsam.Pose2, gtsam.BetweenFactorPose2, graph.add
+    m = np.reshape(iTj, (-1, 3))
+    for ki, kj, x, y, t, w in zip(
+        np.asarray(keys_i).tolist(),
+        np.asarray(keys_j).tolist(),
+        m[:, 0].tolist(),
+        m[:, 1].tolist(),
+        m[:, 2].tolist(),
+        which.tolist(),
+        strict=True,
+    ):
+        add(Between(ki, kj, Pose2(x, y, t), models[w]))
     return graph
 
 
@@ -194,14 +254,15 @@ def landmark_factors(
     bearing, rng, cov = bearing_range_from_xy(
         np.asarray(a_position, float), np.asarray(cov_a_position, float)
     )
-    noise = NoiseCache(kernel)
-    for ka, kl, b, r, c in zip(
+    models, which = noise_models(cov, kernel)
+    Factor, Rot2, add = gtsam.BearingRangeFactor2D, gtsam.Rot2, graph.add
+    for ka, kl, b, r, w in zip(
         np.asarray(anchor_keys).tolist(),
         np.asarray(landmark_keys).tolist(),
         bearing.tolist(),
         rng.tolist(),
-        cov,
+        which.tolist(),
         strict=True,
     ):
-        graph.add(gtsam.BearingRangeFactor2D(ka, kl, gtsam.Rot2(b), r, noise.covariance(c)))
+        add(Factor(ka, kl, Rot2(b), r, models[w]))
     return graph

@@ -216,7 +216,9 @@ def _inv_checked(
             text[rows.lines[r] - 1],
             f"the {what} matrix is not positive definite (eigenvalues {eig.tolist()})",
         )
-    return np.linalg.inv(M)
+    from holoslam.graph.linalg import inv_sym
+
+    return inv_sym(M)
 
 
 def positive_definite(M: np.ndarray) -> np.ndarray:
@@ -281,7 +283,10 @@ def xy_cov_from_bearing_range(
     xy: np.ndarray, sigma_bearing: np.ndarray, sigma_range: np.ndarray
 ) -> np.ndarray:
     """The x/y covariance (L, 2, 2) whose first-order bearing/range covariance is diag(sb^2, sr^2)."""
-    Jinv = np.linalg.inv(_br_jacobian(xy))
+    J = _br_jacobian(xy)
+    det = J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0]
+    Jinv = np.stack([np.stack([J[:, 1, 1], -J[:, 0, 1]], -1), np.stack([-J[:, 1, 0], J[:, 0, 0]], -1)], -2)
+    Jinv /= det[:, None, None]
     D = np.zeros((xy.shape[0], 2, 2))
     D[:, 0, 0] = np.square(sigma_bearing)
     D[:, 1, 1] = np.square(sigma_range)

@@ -58,9 +58,6 @@ __all__ = [
     "cycle_rank",
 ]
 
-_OFFS = np.array([(-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1)], dtype=np.int64)
-
-
 def clearance_map(free: np.ndarray, resolution: float = 1.0) -> np.ndarray:
     """(H, W) float64: Euclidean distance (metres) from each free cell's centre to the nearest non-free cell
     (cells outside the grid count as non-free); 0 on non-free cells."""
@@ -97,22 +94,72 @@ def _pointer_jump(
     return rank, (root if mn is None else np.where(done, root, mn)), done
 
 
+_OFFS = np.array([(-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1)], dtype=np.int64)
+
+
+def _code_tables() -> tuple[np.ndarray, np.ndarray]:
+    """Per 8-neighbour code (bit k = neighbour _OFFS[k]): number of neighbours, and whether the code has
+    exactly two neighbours that touch each other (8-adjacent: a line tip)."""
+    bits = (np.arange(256)[:, None] >> np.arange(8)[None, :]) & 1
+    deg = bits.sum(axis=1).astype(np.int64)
+    tip2 = np.zeros(256, dtype=bool)
+    for code in np.flatnonzero(deg == 2):
+        a, b = np.flatnonzero(bits[code])
+        tip2[code] = np.abs(_OFFS[a] - _OFFS[b]).max() == 1
+    return deg, tip2
+
+
+_DEG, _TIP2 = _code_tables()
+# lowest and second-lowest set bit of each code (0 where there are fewer)
+_BIT0 = np.array([([k for k in range(8) if c >> k & 1] + [0, 0])[0] for c in range(256)], dtype=np.int64)
+_BIT1 = np.array([([k for k in range(8) if c >> k & 1] + [0, 0])[1] for c in range(256)], dtype=np.int64)
+
+
 class _Skeleton:
-    """Skeleton cells as sorted flat indices of the padded grid, with their neighbour table."""
+    """Skeleton cells as sorted flat indices of the zero-padded grid: their (row, col), neighbour codes,
+    neighbour table (index of the neighbour cell or -1) and degrees, all from whole-array gathers."""
 
     def __init__(self, skel: np.ndarray) -> None:
+        import cv2
+
         h, w = skel.shape
         self.h, self.w, self.w2 = h, w, w + 2
-        rr, cc = np.nonzero(skel)
-        self.rc = np.column_stack([rr, cc]).astype(np.int64)
-        self.flat = (rr.astype(np.int64) + 1) * self.w2 + (cc + 1)  # sorted (nonzero is row-major)
+        pad = cv2.copyMakeBorder(
+            np.ascontiguousarray(skel).view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0
+        )
+        self.pad = pad.ravel()
+        itype = np.int32 if self.pad.shape[0] < 2**31 - 16 else np.int64
+        self.flat = np.flatnonzero(self.pad.view(bool)).astype(itype)  # sorted (row-major)
         n = self.flat.shape[0]
-        q = self.flat[:, None] + (_OFFS[:, 0] * self.w2 + _OFFS[:, 1])[None, :]
-        pos = np.searchsorted(self.flat, q)
-        pos = np.minimum(pos, max(n - 1, 0))
-        found = self.flat[pos] == q if n else np.zeros((0, 8), dtype=bool)
-        self.nbr = np.where(found, pos, -1)  # (n, 8) index of the neighbour cell or -1
-        self.deg = found.sum(axis=1)
+        r = self.flat // self.w2
+        self.rc = np.column_stack([r - 1, self.flat - r * self.w2 - 1]).astype(np.int64)
+        self.offs = (_OFFS[:, 0] * self.w2 + _OFFS[:, 1]).astype(itype)
+        code = np.zeros(n, dtype=np.uint8)
+        for k in range(8):
+            code |= np.take(self.pad, self.flat + self.offs[k]) << np.uint8(k)
+        self.code = code
+        self.deg = _DEG[code]
+        # dense index map: only read at set cells, so it needs no initialisation
+        self.index = np.empty(self.pad.shape[0], dtype=itype)
+        self.index[self.flat] = np.arange(n, dtype=itype)
+
+    def neighbours(self, cells: np.ndarray) -> np.ndarray:
+        """(len(cells), 8) int64: index of each neighbour cell (order of _OFFS) or -1."""
+        code = self.code[cells]
+        fl = self.flat[cells]
+        nbr = np.full((cells.shape[0], 8), -1, dtype=np.int64)
+        for k in range(8):
+            has = (code >> np.uint8(k)) & np.uint8(1) != 0
+            nbr[has, k] = np.take(self.index, fl[has] + self.offs[k])
+        return nbr
+
+    def two_neighbours(self, cells: np.ndarray) -> np.ndarray:
+        """(len(cells), 2) int64: the two neighbour cells of cells with exactly two, in increasing order."""
+        code = self.code[cells]
+        fl = self.flat[cells]
+        a = np.take(self.index, fl + self.offs[_BIT0[code]]).astype(np.int64)
+        b = np.take(self.index, fl + self.offs[_BIT1[code]]).astype(np.int64)
+        return np.column_stack([np.minimum(a, b), np.maximum(a, b)])
 
 
 def skeleton_to_graph(
@@ -140,22 +187,15 @@ def skeleton_to_graph(
         raise MapError(f"clearance map shape {np.shape(clearance)} differs from the skeleton's {skel.shape}")
     sk = _Skeleton(skel)
     n = sk.flat.shape[0]
-    clr = (
-        np.asarray(clearance, dtype=np.float64)[sk.rc[:, 0], sk.rc[:, 1]]
-        if clearance is not None
-        else np.full(n, np.nan)
-    )
+    if clearance is not None:
+        clr_flat = np.asarray(clearance).reshape(-1)
+        clr = clr_flat[sk.rc[:, 0] * sk.w + sk.rc[:, 1]].astype(np.float64)
+    else:
+        clr = np.full(n, np.nan)
 
     # tips: one neighbour, or two neighbours touching each other (the end of a diagonal line; thin() keeps
     # such cells as line ends) are endpoints; junctions have >= 3 neighbours; the rest are chain cells
-    two_nb = sk.deg == 2
-    if two_nb.any():
-        pair = np.sort(sk.nbr[two_nb], axis=1)[:, -2:]
-        dr = np.abs(sk.rc[pair[:, 0]] - sk.rc[pair[:, 1]]).max(axis=1)
-        tip2 = np.zeros(n, dtype=bool)
-        tip2[np.flatnonzero(two_nb)[dr == 1]] = True
-    else:
-        tip2 = np.zeros(n, dtype=bool)
+    tip2 = _TIP2[sk.code]
     is_node = (sk.deg != 2) | tip2
     node_of, kinds, rep = _nodes(sk, is_node, clr, tip2)
     # loops without any node cell: promote the smallest cell of each to a 'loop' node
@@ -171,21 +211,28 @@ def skeleton_to_graph(
     eu, ev, cells, starts = chains
 
     # edges between adjacent node cells of different nodes (e.g. a one-cell spur off a junction)
-    i_idx, k_idx = np.nonzero((sk.nbr >= 0) & is_node[:, None])
-    j_idx = sk.nbr[i_idx, k_idx]
+    node_cells = np.flatnonzero(is_node)
+    nb = sk.neighbours(node_cells)
+    i_pos, k_idx = np.nonzero(nb >= 0)
+    i_idx = node_cells[i_pos]
+    j_idx = nb[i_pos, k_idx].astype(np.int64)
     keep = is_node[j_idx] & (i_idx < j_idx) & (node_of[i_idx] != node_of[j_idx])
     di, dj = _spanning_pairs(i_idx[keep], j_idx[keep], node_of)
+    # holes enclosed by the cells of one junction cluster: one self-loop each, around the hole
+    hu, hcells = _cluster_holes(sk, node_of, kinds)
 
-    all_u = np.concatenate([eu, node_of[di]])
-    all_v = np.concatenate([ev, node_of[dj]])
-    lengths_cells = np.concatenate([np.diff(starts), np.full(di.shape[0], 2)])
-    cells = np.concatenate([cells, np.column_stack([di, dj]).ravel()])
+    all_u = np.concatenate([eu, node_of[di], hu]).astype(np.int64)
+    all_v = np.concatenate([ev, node_of[dj], hu]).astype(np.int64)
+    lengths_cells = np.concatenate(
+        [np.diff(starts), np.full(di.shape[0], 2), [len(c) for c in hcells]]
+    ).astype(np.int64)
+    cells = np.concatenate([cells, np.column_stack([di, dj]).ravel(), *hcells]).astype(np.int64)
     starts = np.concatenate([[0], np.cumsum(lengths_cells)])
 
     # per-edge length and clearance with reduceat over the concatenated cell sequences
     rc = sk.rc[cells]
-    step = np.abs(np.diff(rc, axis=0))
-    steplen = np.where(step.sum(axis=1) == 2, np.sqrt(2.0), 1.0)
+    step = np.abs(np.diff(rc, axis=0)).sum(axis=1)
+    steplen = np.where(step == 2, np.sqrt(2.0), 1.0)
     steplen[starts[1:-1] - 1] = 0.0  # no step between two edges' sequences
     m = all_u.shape[0]
     if m:
@@ -195,44 +242,117 @@ def skeleton_to_graph(
     else:
         length = min_clr = np.zeros(0)
 
-    G = nx.MultiGraph()
     node_rc = sk.rc[rep]
     xs = origin_x + (node_rc[:, 1] + 0.5) * resolution
     ys = origin_y + (node_rc[:, 0] + 0.5) * resolution
     submap = _nearest_anchor(np.column_stack([xs, ys]), anchors_wTa)
-    G.add_nodes_from(
-        (
-            i,
-            {
-                "x": float(xs[i]),
-                "y": float(ys[i]),
-                "row": int(node_rc[i, 0]),
-                "col": int(node_rc[i, 1]),
-                "kind": str(kinds[i]),
-                "clearance": float(clr[rep[i]]),
-                "submap": int(submap[i]),
-            },
+    node_attrs = [
+        {"x": x, "y": y, "row": r, "col": c, "kind": k, "clearance": cl, "submap": s}
+        for x, y, r, c, k, cl, s in zip(
+            xs.tolist(),
+            ys.tolist(),
+            node_rc[:, 0].tolist(),
+            node_rc[:, 1].tolist(),
+            kinds.tolist(),
+            clr[rep].tolist(),
+            submap.tolist(),
+            strict=True,
         )
-        for i in range(rep.shape[0])
-    )
-    paths = np.split(rc, starts[1:-1])
-    G.add_edges_from(
-        (
-            int(all_u[e]),
-            int(all_v[e]),
-            {
-                "path": paths[e],
-                "path_from": int(all_u[e]),
-                "length": float(length[e]),
-                "min_clearance": float(min_clr[e]),
-            },
-        )
-        for e in range(m)
-    )
+    ]
+    # paths: views into one (sum K, 2) array, one per edge
+    st = starts.tolist()
+    ul = all_u.tolist()
+    edge_attrs = [
+        {"path": rc[a:b], "path_from": u, "length": ln, "min_clearance": mc}
+        for a, b, u, ln, mc in zip(st[:-1], st[1:], ul, length.tolist(), min_clr.tolist(), strict=True)
+    ]
+    G = _bulk_multigraph(node_attrs, ul, all_v.tolist(), edge_attrs)
     G.graph.update(resolution=float(resolution), origin_x=float(origin_x), origin_y=float(origin_y))
     if prune_spur_m > 0 or spur_clearance_factor > 0:
         prune_spurs(G, prune_spur_m, spur_clearance_factor)
     return G
+
+
+def _bulk_multigraph(node_attrs: list[dict], u: list[int], v: list[int], edge_attrs: list[dict]):
+    """The MultiGraph that ``add_nodes_from(enumerate(node_attrs))`` then ``add_edges_from(zip(u, v,
+    edge_attrs))`` builds (same nodes, edge keys 0, 1, ... per node pair in order, shared key dicts), written
+    straight into networkx's documented dict-of-dict-of-dict adjacency (``G._node``, ``G._adj``): the public
+    calls cost ~10 us per edge, which is most of the time at 50k+ edges."""
+    import networkx as nx
+
+    G = nx.MultiGraph()
+    G._node.update(enumerate(node_attrs))
+    adj = G._adj
+    adj.update((i, {}) for i in range(len(node_attrs)))
+    for a, b, d in zip(u, v, edge_attrs, strict=True):
+        kd = adj[a].get(b)
+        if kd is None:
+            kd = {0: d}
+            adj[a][b] = kd
+            adj[b][a] = kd
+        else:
+            kd[len(kd)] = d  # keys are 0 .. len - 1, so len is the next free key
+    nx._clear_cache(G)
+    return G
+
+
+def _cluster_holes(sk: _Skeleton, node_of: np.ndarray, kinds: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Holes enclosed by the cells of a single junction cluster (an obstacle of a cell or two at a crossing):
+    the cluster collapses to one node, so each such hole becomes a self-loop of that node whose path runs
+    around the hole. Clusters with holes are found with the Euler number (8-connected cells, 4-connected
+    background) from 2 x 2 bit quads, E = (Q1 - Q3 - 2 QD) / 4; holes = 1 - E per cluster (every 2 x 2 quad
+    holds cells of at most one cluster, since cells of two clusters are never 8-adjacent). The paths are the
+    inner contours of those few clusters (cv2.findContours). Returns (node per hole, cell-index sequences)."""
+    import cv2
+
+    junction = sk.deg >= 3
+    jcells = np.flatnonzero(junction)
+    empty = (np.zeros(0, dtype=np.int64), [])
+    if jcells.shape[0] < 4:  # a hole needs at least four enclosing cells
+        return empty
+    w2 = sk.w2
+    jpad = np.zeros(sk.pad.shape[0], dtype=np.uint8)
+    jpad[sk.flat[jcells]] = 1
+    fj = sk.flat[jcells]
+    nj = node_of[jcells]
+    e4 = np.zeros(jcells.shape[0], dtype=np.int64)
+    for pos, (dr0, dc0) in enumerate(((-1, -1), (-1, 0), (0, -1), (0, 0))[::-1]):
+        # quad with top-left corner at cell + (dr0, dc0); the cell is corner `pos` (00, 01, 10, 11 order)
+        t = fj + (dr0 * w2 + dc0)
+        v = [np.take(jpad, t + o) for o in (0, 1, w2, w2 + 1)]
+        first = np.ones(t.shape[0], dtype=bool)
+        for q in range(pos):
+            first &= v[q] == 0  # count each quad once, at its first junction cell
+        s = v[0].astype(np.int64) + v[1] + v[2] + v[3]
+        diag = (s == 2) & (v[0] == v[3])
+        e4 += first * ((s == 1).astype(np.int64) - (s == 3) - 2 * diag)
+    n_nodes = kinds.shape[0]
+    holes = 1 - np.bincount(nj, weights=e4, minlength=n_nodes) / 4.0
+    with_holes = np.flatnonzero((np.rint(holes) > 0) & (np.bincount(nj, minlength=n_nodes) > 0))
+    if with_holes.size == 0:
+        return empty
+    sel = np.isin(nj, with_holes)
+    cl_cells, cl_nodes = jcells[sel], nj[sel]
+    order = np.argsort(cl_nodes, kind="stable")
+    cl_cells, cl_nodes = cl_cells[order], cl_nodes[order]
+    bounds = np.flatnonzero(np.diff(cl_nodes)) + 1
+    hu, hcells = [], []
+    heads = cl_nodes[np.concatenate([[0], bounds])].tolist()
+    for cells, node in zip(np.split(cl_cells, bounds), heads, strict=True):
+        rc = sk.rc[cells]
+        r0, c0 = rc.min(axis=0) - 1
+        box = np.zeros(tuple(rc.max(axis=0) - (r0, c0) + 2), dtype=np.uint8)
+        box[rc[:, 0] - r0, rc[:, 1] - c0] = 1
+        contours, hierarchy = cv2.findContours(box, cv2.RETR_CCOMP, cv2.CHAIN_APPROX_NONE)
+        for contour, hier in zip(contours, hierarchy[0], strict=True):
+            if hier[3] < 0:
+                continue  # an outer boundary
+            xy = contour[:, 0, :]
+            ring = np.concatenate([xy, xy[:1]])
+            flat = (ring[:, 1] + r0 + 1) * w2 + (ring[:, 0] + c0 + 1)
+            hu.append(node)
+            hcells.append(sk.index[flat].astype(np.int64))
+    return np.asarray(hu, dtype=np.int64), hcells
 
 
 def _spanning_pairs(di: np.ndarray, dj: np.ndarray, node_of: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -261,7 +381,7 @@ def _nodes(sk: _Skeleton, is_node: np.ndarray, clr: np.ndarray, tip2: np.ndarray
     junction = sk.deg >= 3
     lab = np.arange(n)
     jidx = np.flatnonzero(junction)
-    jn = sk.nbr[jidx]
+    jn = sk.neighbours(jidx)
     jn_ok = jn >= 0
     jn_ok[jn_ok] = junction[jn[jn_ok]]
     jn = np.where(jn_ok, jn, jidx[:, None])
@@ -291,7 +411,7 @@ def _nodes(sk: _Skeleton, is_node: np.ndarray, clr: np.ndarray, tip2: np.ndarray
 def _states(sk: _Skeleton, is_node: np.ndarray):
     """Chain cells and their (cell, direction) successor function."""
     chain = np.flatnonzero(~is_node)
-    two = np.sort(sk.nbr[chain], axis=1)[:, -2:]  # the two neighbours (deg == 2)
+    two = sk.two_neighbours(chain)  # chain cells have exactly two neighbours
     cpos = np.full(sk.flat.shape[0], -1, dtype=np.int64)
     cpos[chain] = np.arange(chain.shape[0])
     # state 2*i + d: at chain cell i, arrived from two[i, d], leaving towards two[i, 1 - d]

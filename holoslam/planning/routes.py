@@ -72,9 +72,11 @@ class RoutePlanner:
 
     Points are in cell-boundary coordinates (u = column axis, v = row axis). Node k at ``node_uv[k]`` is a
     corner or the centre of one or more portals (coincident points are one node) and lies on the regions
-    ``node_region_ids[node_region_ptr[k]:node_region_ptr[k+1]]``; ``region_node_ptr`` / ``region_node_ids``
-    list each region's nodes and ``adjacency[k]`` the (node, distance) pairs of the nodes sharing a region
-    with k (straight segments inside one convex region, so collision-free).
+    ``node_region_ids[node_region_ptr[k]:node_region_ptr[k+1]]`` (ascending); ``region_node_ptr`` /
+    ``region_node_ids`` list each region's nodes. The edges (CSR ``adj_ptr``, ``adj_dst``, ``adj_w``) join
+    the nodes sharing a region, weighted by their distance in cells (straight segments inside one convex
+    region, so collision-free). ``kernels`` is the compiled kernel module (``holoslam.planning._fast``) or
+    None when numba is not installed (pure-Python search, same answers, much slower).
     """
 
     graph: TwoLayerGraph
@@ -84,10 +86,23 @@ class RoutePlanner:
     region_node_ptr: np.ndarray  # (R+1,)
     region_node_ids: np.ndarray
     region_component: np.ndarray  # (R,) connected component of the region graph
-    adjacency: tuple = field(repr=False)
+    adj_ptr: np.ndarray = field(repr=False)  # (P+1,)
+    adj_dst: np.ndarray = field(repr=False)  # (A,)
+    adj_w: np.ndarray = field(repr=False)  # (A,) cells
     free: np.ndarray = field(repr=False)  # (H, W) bool planner free mask
-    node_u: tuple = field(repr=False, default=())  # node_uv as Python floats for the search loop
-    node_v: tuple = field(repr=False, default=())
+    kernels: object = field(repr=False, default=None)
+    _cache: dict = field(repr=False, default_factory=dict, compare=False)
+
+
+def _kernels(use_compiled: bool = True):
+    """The numba kernel module, or None when numba is missing or ``use_compiled`` is False."""
+    if not use_compiled:
+        return None
+    try:
+        from holoslam.planning import _fast
+    except ImportError:  # pragma: no cover - numba is a declared dependency
+        return None
+    return _fast
 
 
 def _components(n: int, edges: np.ndarray) -> np.ndarray:
@@ -110,7 +125,7 @@ def _components(n: int, edges: np.ndarray) -> np.ndarray:
         np.minimum.at(parent, hi, lo)
 
 
-def build_planner(graph: TwoLayerGraph) -> RoutePlanner:
+def build_planner(graph: TwoLayerGraph, use_compiled: bool = True) -> RoutePlanner:
     """Precompute the portal-point graph of a two-layer graph (vectorised; its size is the sum over regions of
     the square of the region's number of portal points)."""
     P = graph.portals.astype(np.float64)
@@ -147,32 +162,21 @@ def build_planner(graph: TwoLayerGraph) -> RoutePlanner:
     m = src != dst
     src, dst = src[m], dst[m]
     d = np.hypot(*(node_uv[src] - node_uv[dst]).T) if src.shape[0] else np.zeros(0)
-    o2 = np.argsort(src, kind="stable")
+    o2 = np.argsort(src * max(n_nodes, 1) + dst)  # by source, then destination (deterministic)
     src, dst, d = src[o2], dst[o2], d[o2]
-    aptr = np.searchsorted(src, np.arange(n_nodes + 1)).tolist()
-    dl, wl = dst.tolist(), d.tolist()
-    adjacency = tuple(
-        list(zip(dl[aptr[k] : aptr[k + 1]], wl[aptr[k] : aptr[k + 1]], strict=False)) for k in range(n_nodes)
-    )
+    aptr = np.searchsorted(src, np.arange(n_nodes + 1))
     comp = _components(R, graph.region_edges)
-    ro = []
-    for a in (node_uv, node_region_ptr, node_region_ids, ptr, nid, comp):
-        a = np.ascontiguousarray(a)
-        a.setflags(write=False)
-        ro.append(a)
-    return RoutePlanner(
-        graph,
-        ro[0],
-        ro[1],
-        ro[2],
-        ro[3],
-        ro[4],
-        ro[5],
-        adjacency,
-        graph.free_mask(),
-        tuple(node_uv[:, 0].tolist()),
-        tuple(node_uv[:, 1].tolist()),
-    )
+    ro = [
+        _ro(a)
+        for a in (node_uv, node_region_ptr, node_region_ids, ptr, nid, comp, aptr, dst, d.astype(np.float64))
+    ]
+    return RoutePlanner(*ro, free=_ro(graph.free_mask()), kernels=_kernels(use_compiled))
+
+
+def _ro(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
 
 
 def segments_free(free: np.ndarray, a_uv: np.ndarray, b_uv: np.ndarray, eps: float = EPS_CELLS) -> np.ndarray:
@@ -281,64 +285,87 @@ def _locate(planner: RoutePlanner, xy: np.ndarray, snap_radius_m: float, what: s
     )
 
 
-def _search(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray, rg: int) -> list[int]:
-    """A* over portal points (Euclidean heuristic, admissible and consistent); returns the node sequence."""
+def _search(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray, rg: int) -> np.ndarray:
+    """A* over portal points (Euclidean heuristic, admissible and consistent); returns the node sequence
+    (int64, empty when the goal is unreachable). Compiled when numba is available."""
     uv = planner.node_uv
     ptr, nid = planner.region_node_ptr, planner.region_node_ids
-    gx, gy = float(g_uv[0]), float(g_uv[1])
-    goal_nodes = nid[ptr[rg] : ptr[rg + 1]]
-    hgoal = dict(
-        zip(
-            goal_nodes.tolist(),
-            np.hypot(uv[goal_nodes, 0] - gx, uv[goal_nodes, 1] - gy).tolist(),
-            strict=False,
-        )
-    )
-    gcost: dict[int, float] = {}
-    parent: dict[int, int] = {}
     first = nid[ptr[rs] : ptr[rs + 1]]
     q = uv[first]
     d0 = np.hypot(q[:, 0] - s_uv[0], q[:, 1] - s_uv[1])
-    hh = np.hypot(q[:, 0] - gx, q[:, 1] - gy)
+    gx, gy = float(g_uv[0]), float(g_uv[1])
+    K = planner.kernels
+    if K is not None:
+        return K.astar(
+            planner.adj_ptr,
+            planner.adj_dst,
+            planner.adj_w,
+            uv[:, 0] if "U" not in planner._cache else planner._cache["U"],
+            planner._cache.setdefault("V", np.ascontiguousarray(uv[:, 1])),
+            planner.node_region_ptr,
+            planner.node_region_ids,
+            first,
+            d0,
+            rg,
+            gx,
+            gy,
+        )
+    return _search_py(planner, first, d0, rg, gx, gy)
+
+
+def _search_py(planner: RoutePlanner, first: np.ndarray, d0: np.ndarray, rg: int, gx: float, gy: float):
+    """The pure-Python A* (same algorithm as ``_fast.astar``), used when numba is not installed."""
+    c = planner._cache
+    if "adj" not in c:
+        ap, ad, aw = planner.adj_ptr.tolist(), planner.adj_dst.tolist(), planner.adj_w.tolist()
+        c["adj"] = [list(zip(ad[ap[k] : ap[k + 1]], aw[ap[k] : ap[k + 1]], strict=True)) for k in range(len(ap) - 1)]
+        c["u"], c["v"] = planner.node_uv[:, 0].tolist(), planner.node_uv[:, 1].tolist()
+    adj, U, V = c["adj"], c["u"], c["v"]
+    nrp, nri = planner.node_region_ptr, planner.node_region_ids
+    goal_nodes = planner.region_node_ids[planner.region_node_ptr[rg] : planner.region_node_ptr[rg + 1]]
+    on_goal = set(goal_nodes.tolist())
+    del nrp, nri
+    gcost: dict[int, float] = {}
+    parent: dict[int, int] = {}
     heap: list[tuple[float, float, int]] = []
-    for j, d, hv in zip(first.tolist(), d0.tolist(), hh.tolist(), strict=False):
-        gcost[j] = d
-        parent[j] = -1
-        heap.append((d + hv, d, j))
+    sqrt = math.sqrt
+    for j, d in zip(first.tolist(), d0.tolist(), strict=True):
+        if d < gcost.get(j, math.inf):
+            gcost[j] = d
+            parent[j] = -1
+            heap.append((d + sqrt((U[j] - gx) ** 2 + (V[j] - gy) ** 2), d, j))
     heapq.heapify(heap)
     GOAL = -2
-    best_goal = np.inf
+    best_goal = math.inf
     closed: set[int] = set()
-    adj = planner.adjacency
-    U, V = planner.node_u, planner.node_v
-    sqrt = math.sqrt
     while heap:
         f, gc, n = heapq.heappop(heap)
         if n == GOAL:
             break
-        if n in closed:
+        if n in closed or gc > gcost[n]:
             continue
         closed.add(n)
-        hg = hgoal.get(n)
-        if hg is not None and gc + hg < best_goal:
-            best_goal = gc + hg
-            parent[GOAL] = n
-            heapq.heappush(heap, (best_goal, best_goal, GOAL))
+        if n in on_goal:
+            cg = gc + sqrt((U[n] - gx) ** 2 + (V[n] - gy) ** 2)
+            if cg < best_goal:
+                best_goal = cg
+                parent[GOAL] = n
+                heapq.heappush(heap, (cg, cg, GOAL))
         for j, w in adj[n]:
             d = gc + w
-            if d < gcost.get(j, np.inf):
+            if d < gcost.get(j, math.inf):
                 gcost[j] = d
                 parent[j] = n
                 du, dv = U[j] - gx, V[j] - gy
                 heapq.heappush(heap, (d + sqrt(du * du + dv * dv), d, j))
     if GOAL not in parent:
-        return []
+        return np.zeros(0, dtype=np.int64)
     path = []
     n = parent[GOAL]
     while n != -1:
         path.append(n)
         n = parent[n]
-    return path[::-1]
+    return np.array(path[::-1], dtype=np.int64)
 
 
 def _string_pull(free: np.ndarray, pts: np.ndarray, window: int = 12, passes: int = 3) -> np.ndarray:

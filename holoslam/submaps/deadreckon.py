@@ -37,11 +37,16 @@ its step and the adjoint of the remaining motion, ``Ad(between(P_j, P_{k+1}))``:
   interpolation weights;
 * for odometry steps, an independent heading-change noise sigma_o = ``odo_sigma_dtheta_per_rad`` |dtheta| +
   ``odo_sigma_dtheta_per_m`` |s| + ``odo_sigma_dtheta_floor``;
-* the start pose's covariance.
+* the start pose's covariance;
+* systematic errors, each one unknown per integrated segment (so fully correlated over its steps): the odometer
+  scale (``sigma_scale``: s_k -> (1 + e) s_k, sensitivity sum_k F_k s_k), random slip growing with the square
+  root of the distance (``sigma_s_per_sqrt_m``, per step sigma^2 |s_k|), and for odometry-heading steps the turn
+  scale (``odo_sigma_turn_scale``) and a heading drift per metre (``odo_sigma_drift_per_m``, unequal wheels).
+  Without them the per-step independent distance noise averages out and a 3 m segment with a 1.5 % scale error
+  is reported about ten times too confident.
 
-Not modelled: a systematic odometer scale error (it acts like a distance-proportional random error here) and
-the correlation between two consecutive dead-reckoning segments that share the compass reading at their common
-anchor.
+Not modelled: the correlation between consecutive dead-reckoning segments (the same scale error, the compass
+reading shared at their common anchor).
 """
 
 from __future__ import annotations
@@ -76,6 +81,10 @@ class DeadReckoningConfig:
     odo_sigma_dtheta_per_rad: float = 0.02
     odo_sigma_dtheta_per_m: float = 0.01
     odo_sigma_dtheta_floor: float = 0.0005  # rad per step
+    sigma_s_per_sqrt_m: float = 0.01  # random slip: distance sigma grows with sqrt(metres travelled)
+    sigma_scale: float = 0.02  # odometer scale error, one unknown per segment (fully correlated over its steps)
+    odo_sigma_turn_scale: float = 0.02  # odometry turn scale error, correlated over a segment's odometry steps
+    odo_sigma_drift_per_m: float = 0.01  # rad per metre: heading drift (unequal wheels), correlated likewise
     use_compass: bool = True
     gate: float = 4.0  # compass/odometry consistency gate in sigmas
     window_ns: int = 1_000_000_000
@@ -260,8 +269,17 @@ def dead_reckon(
     M = Ad @ J  # (N, 3, 2): end-pose sensitivity to (s_k, dtheta_k)
     F, G = M[:, :, 0], M[:, :, 1]
     sig_s = cfg.sigma_s_per_m * np.abs(s) + cfg.sigma_s_floor
-    cov = np.einsum("k,ki,kj->ij", sig_s**2, F, F)
+    cov = np.einsum("k,ki,kj->ij", sig_s**2 + cfg.sigma_s_per_sqrt_m**2 * np.abs(s), F, F)
     cov += np.einsum("k,ki,kj->ij", np.where(use_c, 0.0, var_o), G, G)
+    # systematic errors: one scale factor for all steps of the segment (s_k -> (1 + e) s_k), one turn scale
+    # and one drift rate for its odometry-heading steps; each maps through the summed sensitivities
+    v_scale = F.T @ s
+    cov += cfg.sigma_scale**2 * np.outer(v_scale, v_scale)
+    odo_steps = ~use_c
+    v_turn = G[odo_steps].T @ dth_o[odo_steps]
+    v_drift = G[odo_steps].T @ np.abs(s[odo_steps])
+    cov += cfg.odo_sigma_turn_scale**2 * np.outer(v_turn, v_turn)
+    cov += cfg.odo_sigma_drift_per_m**2 * np.outer(v_drift, v_drift)
     if have_compass and use_c.any():
         kk = np.nonzero(use_c)[0]
         S = np.zeros((hst.size, 3))  # sensitivity of the end pose to each compass reading

@@ -204,6 +204,7 @@ def build_problem(
     last_kf_t, last_kf_pose, last_kf_cov = None, None, None
     kf_count = 0
     loops_tried = 0
+    linked: set[tuple[int, int]] = set()  # (old, current) submap pairs that already have a loop
     for scan in scans:
         t = int(scan.stamp_ns)
         spts_all = np.column_stack([scan.ranges * np.cos(scan.angles), scan.ranges * np.sin(scan.angles)])
@@ -244,7 +245,9 @@ def build_problem(
             dr = dead_reckon(ost, opose, cur.stamp, t, **hargs)
             add_rel(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
             if reg.ok:
-                mTn, cov_mTn = _eq15(reg.aTb, reg.cov_aTb, np.zeros(3), np.zeros((3, 3)))
+                # the map the arrival scan registered into was placed by the earlier keyframes: their pose
+                # error in the anchor frame (that of the last one) adds to the registration's own
+                mTn, cov_mTn = _eq15(reg.aTb, reg.cov_aTb + cur.covs[-1], np.zeros(3), np.zeros((3, 3)))
                 add_rel(m, n, mTn, cov_mTn, "scan_match")
                 best = mTn
             else:
@@ -259,7 +262,7 @@ def build_problem(
         if kf_count % cfg.revisit_every == 0 and len(closed) >= 2:
             wTr = g.compose(est_wTa[cur.index], aTb)
             for old in closed:
-                if old.index >= cur.index - 1:
+                if old.index >= cur.index - 1 or (old.index, cur.index) in linked:
                     continue
                 if np.hypot(*(est_wTa[old.index][:2] - wTr[:2])) > cfg.revisit_radius:
                     continue
@@ -270,6 +273,7 @@ def build_problem(
                     continue
                 mTn, cov_mTn = _eq15(lr.aTb, lr.cov_aTb, aTb, cov)
                 add_rel(old.index, cur.index, mTn, cov_mTn, "loop")
+                linked.add((old.index, cur.index))
     closed.append(cur.close(bTs, cfg.build_grids))
     anchors = np.array([s.anchor_stamp_ns for s in closed], dtype=np.int64)
     N = len(closed)

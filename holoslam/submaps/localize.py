@@ -10,8 +10,8 @@ matched pairs (p_R, p_L):
   (vectorised), the largest consensus set is refined by :func:`align_pairs`.
 
 Scan registration (:func:`register_points`) is point-to-line ICP of the scan's points (robot frame) against a
-local map's points and normals (anchor frame), seeded by dead reckoning. Nearest neighbours are brute force on
-numpy blocks (the maps are small: a submap holds a few thousand decimated points). Each iteration solves the
+local map's points and normals (anchor frame), seeded by dead reckoning. Nearest neighbours come from a k-d tree
+(scipy's cKDTree) built once per registration, brute force on numpy blocks without scipy. Each iteration solves the
 linearised 3x3 normal equations with Huber weights; correspondences farther than a distance that shrinks over
 the iterations are dropped. The covariance is sigma^2 (J^T W J)^-1 at convergence (sigma^2 from the residuals,
 never below ``sigma_floor``^2), multiplied by ``cov_inflation`` because ICP's residuals are correlated
@@ -209,6 +209,28 @@ def _nearest(src: np.ndarray, dst: np.ndarray, block: int) -> tuple[np.ndarray, 
     return idx, d2
 
 
+class _NearestIndex:
+    """Nearest neighbours in a fixed point set: a scipy cKDTree built once per registration (O(log M) per
+    query), or brute force on numpy blocks when scipy is unavailable."""
+
+    def __init__(self, dst: np.ndarray, block: int) -> None:
+        self.dst, self.block = dst, block
+        try:
+            from scipy.spatial import cKDTree
+
+            self.tree = cKDTree(dst)
+        except ImportError:  # pragma: no cover - scipy ships with the environment
+            self.tree = None
+
+    def query(self, src: np.ndarray, max_distance: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """(index, squared distance) of the nearest point; beyond ``max_distance`` the distance is inf."""
+        if self.tree is None:
+            return _nearest(src, self.dst, self.block)
+        d, j = self.tree.query(src, k=1, distance_upper_bound=max_distance)
+        j = np.minimum(j, self.dst.shape[0] - 1)
+        return j.astype(np.int64), d * d
+
+
 def register_points(
     b_points: np.ndarray, a_points: np.ndarray, a_normals: np.ndarray, aTb_init: np.ndarray,
     config: IcpConfig | None = None,
@@ -225,9 +247,10 @@ def register_points(
         return bad
     it = 0
     gate = cfg.max_distance
+    index = _NearestIndex(q, cfg.block)
     for it in range(1, cfg.max_iterations + 1):
         pa = g.transform_points(T, p)
-        j, d2 = _nearest(pa, q, cfg.block)
+        j, d2 = index.query(pa, gate)
         sel = d2 < gate * gate
         if sel.sum() < cfg.min_points:
             return bad
@@ -250,7 +273,7 @@ def register_points(
             break
     # final statistics at the converged pose with the tight gate
     pa = g.transform_points(T, p)
-    j, d2 = _nearest(pa, q, cfg.block)
+    j, d2 = index.query(pa, cfg.min_distance)
     sel = d2 < cfg.min_distance**2
     m = int(sel.sum())
     if m < cfg.min_points:

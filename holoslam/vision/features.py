@@ -8,18 +8,41 @@ computed from the image crops that show an object.
 - SIFT: ``cv2.SIFT_create`` keypoints (x, y, size, angle, crop index) and 128-d descriptors of every crop.
 
 ``crop_around_label`` cuts the region around a label (the object it is stuck on) from an image.
+
+Wiring: ``object_features_from_log(log, items)`` takes the label sightings of a log (``Sighting`` records from
+``holoslam.vision.observe``, robot ``TagSighting`` records, or ``ObjectObservation`` records, whose corners
+are found again from the log's tags or by decoding the image), cuts a colour crop around the label in every
+image that shows it, and computes each object's feature set; ``accepted=`` restricts it to the landmarks
+accepted after consistent decodes (``accept_landmarks``). ``object_crops_from_log`` is the step before,
+returning the crops and one line per item that gave no crop (no image at its stamp, label outside the image,
+...).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from holoslam.errors import VisionError
+from holoslam.errors import HoloslamError, ImageDecodeError, PayloadError, VisionError
+from holoslam.types import LogData, ObjectObservation, TagSighting
 
-__all__ = ["ObjectFeatures", "lbp_histogram", "dominant_colours", "crop_around_label", "object_features"]
+if TYPE_CHECKING:
+    from holoslam.vision.observe import Sighting
+
+__all__ = [
+    "ObjectFeatures",
+    "ObjectCrop",
+    "lbp_histogram",
+    "dominant_colours",
+    "crop_around_label",
+    "label_mask",
+    "object_features",
+    "object_crops_from_log",
+    "object_features_from_log",
+]
 
 _LBP_BINS = 10
 
@@ -45,6 +68,7 @@ class ObjectFeatures:
     colour_weights: np.ndarray
     keypoints: np.ndarray
     descriptors: np.ndarray
+    crop_stamps_ns: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("texture", "colours_lab", "colour_weights", "keypoints", "descriptors"):
@@ -61,6 +85,7 @@ class ObjectFeatures:
             "colours_lab": [[round(float(v), 1) for v in c] for c in self.colours_lab],
             "colour_weights": [round(float(w), 3) for w in self.colour_weights],
             "n_sift": int(self.keypoints.shape[0]),
+            "crop_stamps_ns": [int(t) for t in self.crop_stamps_ns],
         }
 
 
@@ -89,8 +114,9 @@ def _riu2_table() -> np.ndarray:
 _RIU2 = _riu2_table()
 
 
-def lbp_histogram(img: np.ndarray) -> np.ndarray:
-    """The normalised rotation-invariant uniform LBP(8, 1) histogram (10,) of an image (vectorised)."""
+def lbp_histogram(img: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """The normalised rotation-invariant uniform LBP(8, 1) histogram (10,) of an image (vectorised), over the
+    pixels where ``mask`` (same shape, non-zero = use) is set, or all of them."""
     g = _gray(img).astype(np.int16)
     if g.shape[0] < 3 or g.shape[1] < 3:
         raise VisionError(f"crop of shape {g.shape} is too small for a texture descriptor (>= 3x3)")
@@ -100,28 +126,46 @@ def lbp_histogram(img: np.ndarray) -> np.ndarray:
     H, W = g.shape
     for k, (dy, dx) in enumerate(offs):  # 8 whole-array comparisons, no per-pixel loop
         code |= (g[1 + dy : H - 1 + dy, 1 + dx : W - 1 + dx] >= c).astype(np.int64) << k
-    hist = np.bincount(_RIU2[code].ravel(), minlength=_LBP_BINS).astype(np.float64)
+    codes = _RIU2[code]
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != (H, W):
+            raise VisionError(f"mask of shape {m.shape} does not match the crop's {(H, W)}")
+        codes = codes[m[1:-1, 1:-1] != 0]
+        if codes.size == 0:
+            raise VisionError("the mask leaves no pixel for the texture descriptor")
+    hist = np.bincount(codes.ravel(), minlength=_LBP_BINS).astype(np.float64)
     return hist / hist.sum()
 
 
 def dominant_colours(
-    crops: Sequence[np.ndarray], k: int = 3, max_pixels: int = 20000, seed: int = 0
+    crops: Sequence[np.ndarray],
+    k: int = 3,
+    max_pixels: int = 20000,
+    seed: int = 0,
+    masks: Sequence[np.ndarray | None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` dominant colours (k, 3) in Lab (L 0-100, a, b) of the crops' pixels and their weights (k,),
     heaviest first (``cv2.kmeans``; grey crops give a = b = 0)."""
     import cv2
 
     pix = []
-    for im in crops:
+    for i, im in enumerate(crops):
         a = np.asarray(im)
         bgr = cv2.cvtColor(a, cv2.COLOR_GRAY2BGR) if a.ndim == 2 else a
         if bgr.dtype != np.uint8 or bgr.ndim != 3 or bgr.shape[2] != 3:
             raise VisionError(f"crop of shape {a.shape} / {a.dtype} is not a uint8 grey or BGR image")
-        pix.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2Lab).reshape(-1, 3))
+        lab_px = cv2.cvtColor(bgr, cv2.COLOR_BGR2Lab).reshape(-1, 3)
+        if masks is not None and masks[i] is not None:
+            lab_px = lab_px[np.asarray(masks[i]).reshape(-1) != 0]
+        pix.append(lab_px)
     P = np.concatenate(pix).astype(np.float32)
+    if len(P) == 0:
+        raise VisionError("no pixels left for the dominant colours (empty crops or masks)")
     if len(P) > max_pixels:
         P = P[np.random.default_rng(seed).choice(len(P), max_pixels, replace=False)]
-    k = int(min(k, len(np.unique(P, axis=0))))
+    Pi = P.astype(np.int64)
+    k = int(min(k, len(np.unique((Pi[:, 0] << 16) | (Pi[:, 1] << 8) | Pi[:, 2]))))
     cv2.setRNGSeed(seed)
     _, lab, centres = cv2.kmeans(
         P, k, None, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.5), 3, cv2.KMEANS_PP_CENTERS
@@ -136,15 +180,42 @@ def dominant_colours(
 
 def crop_around_label(image: np.ndarray, corners: np.ndarray, scale: float = 3.0) -> np.ndarray:
     """The axis-aligned region ``scale`` times the label's size around its centre (clipped to the image)."""
+    x0, y0, x1, y1 = _crop_box(image.shape[:2], corners, scale)
+    return image[y0:y1, x0:x1]
+
+
+def _crop_box(shape_hw: tuple[int, ...], corners: np.ndarray, scale: float) -> tuple[int, int, int, int]:
     c = np.asarray(corners, np.float64).reshape(4, 2)
     centre = c.mean(axis=0)
     half = 0.5 * scale * float(np.max(c.max(axis=0) - c.min(axis=0)))
-    h, w = image.shape[:2]
+    h, w = shape_hw
     x0, y0 = int(max(0, np.floor(centre[0] - half))), int(max(0, np.floor(centre[1] - half)))
     x1, y1 = int(min(w, np.ceil(centre[0] + half) + 1)), int(min(h, np.ceil(centre[1] + half) + 1))
     if x1 - x0 < 3 or y1 - y0 < 3:
         raise VisionError(f"the label at {np.round(centre, 1)} lies outside the {w}x{h} image")
-    return image[y0:y1, x0:x1]
+    return x0, y0, x1, y1
+
+
+def label_mask(shape_hw: tuple[int, int], corners: np.ndarray, margin: float = 1.4) -> np.ndarray:
+    """A (H, W) uint8 mask, 255 on the object and 0 on the label: the code's quadrilateral ``corners`` (4, 2)
+    grown by ``margin`` about its centre (1.4 covers a 4-module quiet zone of codes up to version 4 and the
+    sticker edge), so the object's texture and colours are not the code's black and white."""
+    import cv2
+
+    c = np.asarray(corners, np.float64).reshape(4, 2)
+    centre = _diagonal_centre(c)
+    grown = centre + margin * (c - centre)
+    m = np.full(shape_hw, 255, np.uint8)
+    cv2.fillConvexPoly(m, np.round(grown * 16).astype(np.int32), 0, cv2.LINE_8, 4)
+    return m
+
+
+def _diagonal_centre(c: np.ndarray) -> np.ndarray:
+    d1, d2 = c[2] - c[0], c[3] - c[1]
+    A = np.column_stack([d1, -d2])
+    if abs(np.linalg.det(A)) < 1e-12:
+        return c.mean(axis=0)
+    return c[0] + np.linalg.solve(A, c[1] - c[0])[0] * d1
 
 
 def object_features(
@@ -154,18 +225,26 @@ def object_features(
     ranges_m: Sequence[float] = (),
     n_colours: int = 3,
     max_sift: int = 200,
+    crop_stamps_ns: Sequence[int] = (),
+    masks: Sequence[np.ndarray | None] | None = None,
 ) -> ObjectFeatures:
-    """Eq. 13's feature set of one object from its crops (grey or BGR uint8)."""
+    """Eq. 13's feature set of one object from its crops (grey or BGR uint8); ``crop_stamps_ns`` records
+    which images the crops came from; ``masks`` (one per crop, or None) restrict texture, colours and SIFT to
+    the object's pixels."""
     import cv2
 
     if not crops:
         raise VisionError(f"object {object_id}: no image crops to compute features from")
-    texture = np.mean([lbp_histogram(c) for c in crops], axis=0)
-    colours, weights = dominant_colours(crops, n_colours)
+    if masks is not None and len(masks) != len(crops):
+        raise VisionError(f"object {object_id}: {len(masks)} masks for {len(crops)} crops")
+    ms = list(masks) if masks is not None else [None] * len(crops)
+    texture = np.mean([lbp_histogram(c, m) for c, m in zip(crops, ms, strict=True)], axis=0)
+    colours, weights = dominant_colours(crops, n_colours, masks=ms)
     sift = cv2.SIFT_create(nfeatures=max_sift)
     kps, descs = [], []
     for i, c in enumerate(crops):
-        k, d = sift.detectAndCompute(_gray(c), None)
+        m = None if ms[i] is None else (np.asarray(ms[i]) != 0).astype(np.uint8) * 255
+        k, d = sift.detectAndCompute(_gray(c), m)
         if d is None or not k:
             continue
         kps.append(np.array([(p.pt[0], p.pt[1], p.size, p.angle, i) for p in k], np.float64))
@@ -174,5 +253,228 @@ def object_features(
     descriptors = np.concatenate(descs) if descs else np.zeros((0, 128), np.float32)
     rng = float(np.median(ranges_m)) if len(ranges_m) else float("nan")
     return ObjectFeatures(
-        object_id, float(size_m), rng, len(crops), texture, colours, weights, keypoints, descriptors
+        object_id,
+        float(size_m),
+        rng,
+        len(crops),
+        texture,
+        colours,
+        weights,
+        keypoints,
+        descriptors,
+        tuple(int(t) for t in crop_stamps_ns),
     )
+
+
+# ------------------------------------------------------------------------------------------------ wiring
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectCrop:
+    """A colour crop (H, W, 3) uint8 BGR around one label in one image, the label's corners (4, 2) in the
+    full image, its printed side (m, NaN if the label has no ``s``) and the camera -> label-centre range by
+    PnP (m, NaN when unknown)."""
+
+    object_id: str
+    stamp_ns: int
+    image_index: int
+    crop: np.ndarray
+    corners: np.ndarray
+    side_m: float
+    range_m: float
+    mask: np.ndarray | None = None
+
+    @property
+    def label_px(self) -> float:
+        """Mean side of the label in the image (pixels)."""
+        c = self.corners
+        return float(np.mean(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1)))
+
+
+def _nearest_index(stamps: np.ndarray, stamp_ns: int, tol_ns: int) -> int:
+    if not len(stamps):
+        return -1
+    i = int(np.searchsorted(stamps, stamp_ns))
+    cand = [j for j in (i - 1, i) if 0 <= j < len(stamps)]
+    j = min(cand, key=lambda k: abs(int(stamps[k]) - stamp_ns))
+    return j if abs(int(stamps[j]) - stamp_ns) <= tol_ns else -1
+
+
+def object_crops_from_log(
+    log: LogData,
+    items: Sequence[Sighting | TagSighting | ObjectObservation],
+    accepted: Collection[str] | None = None,
+    crop_scale: float = 3.0,
+    stamp_tolerance_ns: int = 1_000_000,
+    mask_label: bool = True,
+    max_side_px: int = 256,
+) -> tuple[dict[str, list[ObjectCrop]], list[str]]:
+    """Colour crops around each label sighting in ``items`` (``Sighting``, ``TagSighting`` or
+    ``ObjectObservation`` records of ``log``), grouped by object id and in stamp order, plus one problem line
+    per item that gave no crop. ``accepted`` (ids, or the dict ``accept_landmarks`` returns) keeps only those
+    objects; the same object in the same image is cropped once.
+
+    Corners come from the item (sightings), else from the log's robot tag sightings at the image stamp, else
+    from decoding the image (``detect_qr``). The range is PnP's when the label carries its size ``s`` and a
+    ``CameraInfo`` is within ``stamp_tolerance_ns`` of the image. With ``mask_label`` each crop carries a
+    mask (``label_mask``) that leaves the label and its quiet zone out of the object's features. Crops larger
+    than ``max_side_px`` are shrunk to it (``INTER_AREA``; bounds SIFT's cost and evens out the scale);
+    ``ObjectCrop.corners`` stay in full-image pixels."""
+    import cv2
+
+    from holoslam.vision.camera import PinholeCamera
+    from holoslam.vision.label import parse_label
+    from holoslam.vision.locate import pnp_label
+    from holoslam.vision.qr import detect_qr
+
+    if crop_scale <= 1.0:
+        raise VisionError(f"crop_scale must be > 1 (crop larger than the label), got {crop_scale}")
+    keep = None if accepted is None else set(accepted)
+    img_stamps = np.array([im.stamp_ns for im in log.images], dtype=np.int64)
+    info_stamps = np.array([ci.stamp_ns for ci in log.camera_infos], dtype=np.int64)
+    tags_at: dict[int, list[TagSighting]] = {}
+    for t in log.tags:
+        tags_at.setdefault(t.stamp_ns, []).append(t)
+    pixels: dict[int, np.ndarray | None] = {}
+    decoded: dict[int, list] = {}
+    problems: list[str] = []
+    out: dict[str, list[ObjectCrop]] = {}
+    done: set[tuple[str, int]] = set()
+
+    def image_pixels(k: int, where: str) -> np.ndarray | None:
+        if k not in pixels:
+            try:
+                px = log.images[k].decode()
+            except ImageDecodeError as e:
+                problems.append(f"{where}: {e}")
+                px = None
+            if px is not None and (px.dtype != np.uint8 or px.ndim not in (2, 3)):
+                problems.append(
+                    f"{where}: image {k} is {px.dtype} {px.shape}, not an 8-bit grey/colour image"
+                )
+                px = None
+            if px is not None and px.ndim == 2:
+                import cv2
+
+                px = cv2.cvtColor(px, cv2.COLOR_GRAY2BGR)
+            pixels[k] = px
+        return pixels[k]
+
+    for item in items:
+        oid = getattr(item, "object_id", None)
+        label = getattr(item, "label", None)
+        payload = getattr(item, "payload", "")
+        if oid is None:  # a TagSighting: the id is in the payload
+            if label is None:
+                try:
+                    label = parse_label(payload)
+                except PayloadError as e:
+                    problems.append(f"tag sighting at {item.stamp_ns} ns: not a holoslam label: {e}")
+                    continue
+            oid = label.object_id
+        if label is None:
+            try:
+                label = parse_label(payload)
+            except PayloadError as e:
+                problems.append(f"{oid} at {item.stamp_ns} ns: payload is not a holoslam label: {e}")
+                continue
+        if keep is not None and oid not in keep:
+            continue
+        stamp = int(item.stamp_ns)
+        where = f"{oid} at {stamp} ns"
+        k = int(getattr(item, "image_index", -1))
+        if k < 0 or k >= len(log.images):
+            k = _nearest_index(img_stamps, stamp, stamp_tolerance_ns)
+        if k < 0:
+            problems.append(f"{where}: no image within {stamp_tolerance_ns / 1e6:g} ms of the sighting")
+            continue
+        if (oid, k) in done:
+            continue
+        corners = getattr(item, "corners", None)
+        if corners is None:
+            for t in tags_at.get(log.images[k].stamp_ns, []):
+                try:
+                    if parse_label(t.payload).object_id == oid:
+                        corners = t.corners
+                        break
+                except PayloadError:
+                    continue
+        px = image_pixels(k, where)
+        if px is None:
+            continue
+        if corners is None:
+            if k not in decoded:
+                decoded[k] = detect_qr(px)
+            hits = [d for d in decoded[k] if d.label is not None and d.label.object_id == oid]
+            if not hits:
+                problems.append(f"{where}: the label is not among the codes decoded in image {k}")
+                continue
+            corners = hits[0].corners
+        corners = np.asarray(corners, np.float64).reshape(4, 2)
+        try:
+            x0, y0, x1, y1 = _crop_box(px.shape[:2], corners, crop_scale)
+        except VisionError as e:
+            problems.append(f"{where}: {e}")
+            continue
+        crop = px[y0:y1, x0:x1]
+        mask = label_mask(crop.shape[:2], corners - np.array([x0, y0], np.float64)) if mask_label else None
+        f = max_side_px / max(crop.shape[:2])
+        if f < 1.0:
+            size = (max(3, round(crop.shape[1] * f)), max(3, round(crop.shape[0] * f)))
+            crop = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
+            if mask is not None:
+                mask = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST)
+        side = label.size_m if label.size_m is not None else float("nan")
+        rng = float("nan")
+        j = _nearest_index(info_stamps, log.images[k].stamp_ns, stamp_tolerance_ns)
+        if np.isfinite(side) and j >= 0:
+            try:
+                est = pnp_label(corners, side, PinholeCamera.from_camera_info(log.camera_infos[j]))
+                rng = float(np.linalg.norm(est.c_position))
+            except HoloslamError as e:
+                problems.append(f"{where}: no range ({e})")
+        done.add((oid, k))
+        out.setdefault(oid, []).append(
+            ObjectCrop(
+                oid, int(log.images[k].stamp_ns), k, np.ascontiguousarray(crop), corners, side, rng, mask
+            )
+        )
+    for crops in out.values():
+        crops.sort(key=lambda c: c.stamp_ns)
+    return out, problems
+
+
+def object_features_from_log(
+    log: LogData,
+    items: Sequence[Sighting | TagSighting | ObjectObservation],
+    accepted: Collection[str] | None = None,
+    crop_scale: float = 3.0,
+    max_crops: int = 8,
+    n_colours: int = 3,
+    max_sift: int = 200,
+) -> dict[str, ObjectFeatures]:
+    """Eq. 13's feature set of every object sighted in ``items`` (see ``object_crops_from_log``; ``accepted``
+    restricts it to accepted landmarks), keyed by object id: size = the printed label side (``s``), range =
+    median PnP range, texture / colours / SIFT over at most ``max_crops`` crops per object (the ones showing
+    the label largest, i.e. the most detail). ``ObjectFeatures.to_summary()`` is its JSON-able form."""
+    if max_crops < 1:
+        raise VisionError(f"max_crops must be >= 1, got {max_crops}")
+    crops_by_id, _problems = object_crops_from_log(log, items, accepted, crop_scale)
+    out: dict[str, ObjectFeatures] = {}
+    for oid in sorted(crops_by_id):
+        crops = crops_by_id[oid]
+        best = sorted(crops, key=lambda c: -c.label_px)[:max_crops]
+        best.sort(key=lambda c: c.stamp_ns)
+        sides = [c.side_m for c in crops if np.isfinite(c.side_m)]
+        ranges = [c.range_m for c in crops if np.isfinite(c.range_m)]
+        out[oid] = object_features(
+            oid,
+            [c.crop for c in best],
+            size_m=float(np.median(sides)) if sides else float("nan"),
+            ranges_m=ranges,
+            n_colours=n_colours,
+            max_sift=max_sift,
+            crop_stamps_ns=[c.stamp_ns for c in best],
+            masks=[c.mask for c in best],
+        )
+    return out

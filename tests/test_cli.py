@@ -1,0 +1,150 @@
+"""The command line on real files: every command, its outputs, its exit codes and its messages."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from holoslam.cli import main
+from holoslam.io.datasets import bundled_household_log
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def household_run(tmp_path_factory) -> Path:
+    """One full run of the bundled household log through the CLI (the README's main job)."""
+    out = tmp_path_factory.mktemp("run") / "household"
+    assert main(["run", str(bundled_household_log()), "-o", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_run_writes_every_file_of_the_output_folder(household_run):
+    from holoslam.io.run_folder import RUN_FILES
+
+    for name in RUN_FILES + ("results.mcap", "anchors.csv", "objects.csv", "trajectory.png", "holographic.png"):
+        assert (household_run / name).is_file(), name
+    report = json.loads((household_run / "report.json").read_text())
+    assert report["objects"]["count"] == 35
+    acc = report["accuracy"]
+    assert acc["anchors"]["rmse_m"] < 0.05
+    assert acc["anchors"]["rmse_m"] < acc["anchors_dead_reckoning"]["rmse_m"]
+    assert acc["objects"]["matched"] == 35 and acc["objects"]["rmse_m"] < 0.1
+    assert "solver" in (household_run / "report.txt").read_text()
+
+
+def test_saved_run_loads_back(household_run):
+    from holoslam.io.run_folder import load_run
+
+    saved = load_run(household_run)
+    assert saved.wTb.shape[1] == 3 and len(saved.stamps_ns) == len(saved.wTb)
+    assert np.all(np.diff(saved.stamps_ns) > 0)
+    assert saved.cov_wTa.shape == (len(saved.wTa), 3, 3)
+    assert len(saved.objects) == 35
+    kinds = {d["kind"] for _, d in saved.holographic.nodes(data=True)}
+    assert kinds == {"environment", "object"}
+    assert all(saved.holographic.nodes[o.object_id]["kind"] == "object" for o in saved.objects)
+    assert saved.planning.n_regions > 0 and saved.grid.shape[0] > 100
+
+
+def test_plan_to_object_and_errors(household_run, capsys):
+    assert main(["plan", str(household_run), "--to", "O05", "--json"]) == 0
+    route = json.loads(capsys.readouterr().out)
+    wp = np.array(route["waypoints"])
+    assert route["object"] == "O05" and wp.shape[1] == 2 and route["length_m"] > 0
+    assert np.isclose(route["length_m"], np.sum(np.hypot(*np.diff(wp, axis=0).T)), rtol=1e-3)
+    assert main(["plan", str(household_run), "--to", "NOPE"]) == 1
+    assert "no object 'NOPE'" in capsys.readouterr().err
+    assert main(["plan", str(household_run), "--to", "O22"]) == 1  # the chair out of the arm's reach
+    assert "reach" in capsys.readouterr().err
+    assert main(["plan", str(household_run.parent / "missing"), "--to", "O05"]) == 2
+
+
+def test_export_rewrites_pictures_and_results(household_run, tmp_path, capsys):
+    assert main(["export", str(household_run), "--to", str(tmp_path / "again")]) == 0
+    for name in ("results.mcap", "holographic.graphml", "trajectory.png", "planning.png"):
+        assert (tmp_path / "again" / name).stat().st_size > 0
+
+
+def test_inspect_prints_every_topic(capsys):
+    assert main(["inspect", str(bundled_household_log())]) == 0
+    out = capsys.readouterr().out
+    for topic in ("/odom", "/scan", "/compass", "/camera/image/compressed", "/tags", "/tf_static",
+                  "/ground_truth/pose"):
+        assert topic in out
+
+
+def test_inspect_of_a_foreign_file_is_a_message_not_a_traceback(tmp_path, capsys):
+    p = tmp_path / "notes.mcap"
+    p.write_text("just some text\n")
+    assert main(["inspect", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("holoslam: ") and "Traceback" not in err
+
+
+def test_solve_g2o_from_the_gtsam_wheel(tmp_path, capsys):
+    import gtsam
+
+    src = gtsam.findExampleDataFile("w100.graph")
+    assert main(["solve", src, "-o", str(tmp_path / "out.g2o"), "--tum", str(tmp_path / "out.tum"), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["final_error"] < summary["initial_error"]
+    graph, _ = gtsam.load2D(src)
+    assert len((tmp_path / "out.tum").read_text().splitlines()) == 1 + summary["num_poses"]
+    # the optimised file reads back with gtsam itself
+    g2, v2 = gtsam.readG2o(str(tmp_path / "out.g2o"))
+    assert v2.size() == summary["num_poses"] + summary["num_landmarks"]
+
+
+def test_datasets_lists_bundled_and_wheel_data(capsys):
+    assert main(["datasets", "--json"]) == 0
+    rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)}
+    assert Path(rows["household_small"]["path"]).is_file()
+    assert Path(rows["victoria_park"]["path"]).is_file()
+
+
+def test_tags_decodes_real_pixels_and_reports_bad_files(tmp_path, capsys):
+    import cv2
+
+    from holoslam.io.mcap import read_log
+
+    log, _ = read_log(bundled_household_log())
+    img = log.images[0]
+    path = tmp_path / "snap.jpg"
+    path.write_bytes(img.data)
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(b"\x89PNG\r\n\x1a\n broken")
+    assert main(["tags", str(path), str(bad), "--json"]) == 0
+    captured = capsys.readouterr()
+    items = [json.loads(line) for line in captured.out.splitlines()]
+    assert items and all(i["image"] == str(path) for i in items)
+    assert {i["label"]["id"] for i in items if i["label"]} <= {t.payload.split(";")[1] for t in log.tags}
+    assert len(items[0]["corners"]) == 4
+    assert str(bad) in captured.err
+    assert cv2.imread(str(path)) is not None
+
+
+def test_topology_of_a_map_file(household_run, tmp_path, capsys):
+    assert main(["topology", str(household_run / "map.yaml"), "-o", str(tmp_path / "topo.graphml")]) == 0
+    from holoslam.io.graphs import read_graphml
+
+    G = read_graphml(tmp_path / "topo.graphml")
+    assert G.number_of_nodes() > 10 and (tmp_path / "topo.json").is_file()
+
+
+def test_bad_config_is_exit_2_with_the_key(tmp_path, capsys):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("grid:\n  resolutoin: 0.1\n")
+    assert main(["run", str(bundled_household_log()), "-o", str(tmp_path / "o"), "--config", str(cfg)]) == 2
+    assert "did you mean 'resolution'" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_console_script_entry_point():
+    r = subprocess.run([sys.executable, "-m", "holoslam.cli", "--version"], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.startswith("holoslam ")
