@@ -123,6 +123,8 @@ class PlaceParams:
     dead_end_min_length_m: float = 1.0
     corridor_width_m: float = 1.4
     min_room_area_m2: float = 1.0
+    min_room_clearance_m: float = 0.45
+    doorway_window_m: float = 1.0
 
 
 def _nearest_anchor(xy: np.ndarray, anchors: np.ndarray | None) -> np.ndarray:
@@ -147,9 +149,13 @@ def _cut_line(mask: np.ndarray, rc: np.ndarray, direction: np.ndarray, half_len_
 def _doorway_candidates(
     topology, clr: np.ndarray, res: float, p: PlaceParams
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(cell (row, col), skeleton direction) of the narrowest cell of each short narrow run along the
-    edges."""
+    """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges: in every run
+    of narrow skeleton cells (free width 2 x clearance <= ``doorway_width_m``) the narrowest cell of a run no
+    longer than ``doorway_depth_m``, and in a longer run (a door opening into a cluttered room continues as a
+    narrow passage) every cell that is the narrowest within ``doorway_window_m`` along the skeleton (one per
+    plateau). Whether a candidate separates anything is decided later by the regions it cuts."""
     out = []
+    half = max(int(round(0.5 * p.doorway_window_m / res)), 1)
     for _u, _v, data in topology.edges(data=True):
         path = np.asarray(data.get("path", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
         if path.shape[0] < 3:
@@ -158,20 +164,30 @@ def _doorway_candidates(
         narrow = 2.0 * c <= p.doorway_width_m
         if not narrow.any():
             continue
-        # runs of narrow cells
         d = np.diff(np.concatenate([[0], narrow.astype(np.int8), [0]]))
         starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
         step = np.hypot(*np.diff(path, axis=0).T) * res
         cum = np.concatenate([[0.0], np.cumsum(step)])
-        for s, e in zip(starts.tolist(), ends.tolist(), strict=False):
-            if cum[e - 1] - cum[s] > p.doorway_depth_m:
-                continue
-            i = s + int(np.argmin(c[s:e]))
-            lo, hi = max(i - 3, 0), min(i + 3, path.shape[0] - 1)
-            direction = (path[hi] - path[lo]).astype(np.float64)
-            if not direction.any():
-                continue
-            out.append((path[i], direction))
+        # running minimum over +-half cells (edges padded with +inf: a run end is not a minimum by itself)
+        pad = np.concatenate([np.full(half, np.inf), c, np.full(half, np.inf)])
+        win_min = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1).min(axis=1)
+        for s_, e in zip(starts.tolist(), ends.tolist(), strict=False):
+            if cum[e - 1] - cum[s_] <= p.doorway_depth_m:
+                picks = [s_ + int(np.argmin(c[s_:e]))]
+            else:
+                is_min = c[s_:e] <= win_min[s_:e]
+                idx = np.nonzero(is_min)[0] + s_
+                # one per plateau of equal minima: its middle cell
+                if idx.shape[0] == 0:
+                    continue
+                groups = np.split(idx, np.nonzero(np.diff(idx) > 1)[0] + 1)
+                picks = [int(g[g.shape[0] // 2]) for g in groups]
+            for i in picks:
+                lo, hi = max(i - 3, 0), min(i + 3, path.shape[0] - 1)
+                direction = (path[hi] - path[lo]).astype(np.float64)
+                if not direction.any():
+                    continue
+                out.append((path[i], direction))
     return out
 
 
@@ -240,7 +256,12 @@ def build_holographic(
         for rc, d in cs:
             _cut_line(m, rc.astype(np.float64), d, clr[rc[0], rc[1]] / res + 2.0)
         n_l, lb = cv2.connectedComponents(m, connectivity=4)
-        ar = np.bincount(lb.ravel(), minlength=n_l)
+        ar = np.bincount(lb.ravel(), minlength=n_l).astype(np.float64)
+        # a region without room for a standing robot (a strip between furniture and a wall) is no room:
+        # count it as small whatever its area
+        mx = np.zeros(n_l)
+        np.maximum.at(mx, lb.ravel(), clr.ravel())
+        ar[mx < p.min_room_clearance_m] = np.minimum(ar[mx < p.min_room_clearance_m], min_room_cells - 0.5)
         sd = [
             _side_labels(lb, free, rc.astype(np.float64), d, int(clr[rc[0], rc[1]] / res) + 8) for rc, d in cs
         ]

@@ -170,7 +170,7 @@ def build_planner(graph: TwoLayerGraph, use_compiled: bool = True) -> RoutePlann
         _ro(a)
         for a in (node_uv, node_region_ptr, node_region_ids, ptr, nid, comp, aptr, dst, d.astype(np.float64))
     ]
-    return RoutePlanner(*ro, free=_ro(graph.free_mask()), kernels=_kernels(use_compiled))
+    return RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels(use_compiled))
 
 
 def _ro(a: np.ndarray) -> np.ndarray:
@@ -300,8 +300,7 @@ def _search(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray, 
             planner.adj_ptr,
             planner.adj_dst,
             planner.adj_w,
-            uv[:, 0] if "U" not in planner._cache else planner._cache["U"],
-            planner._cache.setdefault("V", np.ascontiguousarray(uv[:, 1])),
+            *_uv_columns(planner),
             planner.node_region_ptr,
             planner.node_region_ids,
             first,
@@ -311,6 +310,14 @@ def _search(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray, 
             gy,
         )
     return _search_py(planner, first, d0, rg, gx, gy)
+
+
+def _uv_columns(planner: RoutePlanner) -> tuple[np.ndarray, np.ndarray]:
+    c = planner._cache
+    if "U" not in c:
+        c["U"] = np.ascontiguousarray(planner.node_uv[:, 0])
+        c["V"] = np.ascontiguousarray(planner.node_uv[:, 1])
+    return c["U"], c["V"]
 
 
 def _search_py(planner: RoutePlanner, first: np.ndarray, d0: np.ndarray, rg: int, gx: float, gy: float):
@@ -432,15 +439,25 @@ def plan_path(
         regions: tuple[int, ...] = (rs,)
     else:
         nodes = _search(planner, s_uv, rs, g_uv, rg)
-        if not nodes:  # pragma: no cover - the component check above makes this unreachable
+        if not nodes.shape[0]:  # pragma: no cover - the component check above makes this unreachable
             raise PlanningError("no route found between connected regions; rebuild the planning graph")
         nrp, nri = planner.node_region_ptr, planner.node_region_ids
-        pairs = [set(nri[nrp[k] : nrp[k + 1]].tolist()) for k in nodes]
-        regs = [rs] + [min(p & q) for p, q in zip(pairs[:-1], pairs[1:], strict=False)] + [rg]
+        K = planner.kernels
+        if K is not None:
+            shared = K.path_regions(nodes, nrp, nri).tolist()
+        else:
+            sets = [set(nri[nrp[k] : nrp[k + 1]].tolist()) for k in nodes.tolist()]
+            shared = [min(p & q) for p, q in zip(sets[:-1], sets[1:], strict=False)]
+        regs = [rs, *shared, rg]
         regions = tuple(r for i, r in enumerate(regs) if i == 0 or r != regs[i - 1])
         mid = planner.node_uv[nodes]
     raw = np.vstack([s_uv[None], mid, g_uv[None]])
-    pts = _string_pull(planner.free, raw)  # every kept segment is checked on the grid
+    if planner.kernels is not None:
+        pts, ok = planner.kernels.string_pull(planner.free, raw, 12, 3, EPS_CELLS)
+        if not ok:
+            raise PlanningError("internal planning error: a path segment crosses an obstacle; rebuild the graph")
+    else:
+        pts = _string_pull(planner.free, raw)  # every kept segment is checked on the grid
     wp = np.column_stack([g.origin_x + pts[:, 0] * g.resolution, g.origin_y + pts[:, 1] * g.resolution])
     wp.setflags(write=False)
     return Route(places=tuple(places), waypoints=wp, length=path_length(wp), regions=regions)

@@ -261,6 +261,7 @@ def build_problem(
         # 5. revisits
         if kf_count % cfg.revisit_every == 0 and len(closed) >= 2:
             wTr = g.compose(est_wTa[cur.index], aTb)
+            found: list[tuple[int, np.ndarray, np.ndarray]] = []
             for old in closed:
                 if old.index >= cur.index - 1 or (old.index, cur.index) in linked:
                     continue
@@ -271,9 +272,16 @@ def build_problem(
                 lr = register_points(bpts[nok], old.points, old.normals, seed_m, scfg.icp)
                 if not lr.ok or np.hypot(*(lr.aTb[:2] - seed_m[:2])) > cfg.max_loop_correction:
                     continue
-                mTn, cov_mTn = _eq15(lr.aTb, lr.cov_aTb, aTb, cov)
-                add_rel(old.index, cur.index, mTn, cov_mTn, "loop")
+                # plus the old map's own error where the scan matched: its nearest keyframe's pose covariance
+                near = int(np.argmin(np.hypot(*(old.aTb[:, :2] - lr.aTb[:2]).T)))
+                mTn, cov_mTn = _eq15(lr.aTb, lr.cov_aTb + old.cov_aTb[near], aTb, cov)
+                found.append((old.index, mTn, cov_mTn))
                 linked.add((old.index, cur.index))
+            # the loops of one keyframe share its pose error in the current submap (and overlapping old maps
+            # share points): k of them are not k independent measurements; inflating each by k keeps their
+            # combined information at that of one (covariance intersection's conservative bound)
+            for m_old, mTn, cov_mTn in found:
+                add_rel(m_old, cur.index, mTn, cov_mTn * len(found), "loop")
     closed.append(cur.close(bTs, cfg.build_grids))
     anchors = np.array([s.anchor_stamp_ns for s in closed], dtype=np.int64)
     N = len(closed)

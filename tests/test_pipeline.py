@@ -1,0 +1,97 @@
+"""The whole pipeline on logs other robots write: odometry + laser + tf only, and many logs at once."""
+
+from __future__ import annotations
+
+import heapq
+import json
+
+import numpy as np
+import pytest
+
+from holoslam.cli import main
+from holoslam.config import from_mapping
+from holoslam.errors import ConfigError, IngestError
+from holoslam.pipeline import RunConfig, load_run_config, run
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def short_run():
+    from holoslam.sim import SimConfig, simulate_household
+
+    return simulate_household(SimConfig(seed=7, duration_s=150.0, image_rate_hz=0.0))
+
+
+def _write(run_, path, keep):
+    """Write the simulated run as a ROS 2 MCAP holding only the record kinds in ``keep``."""
+    from holoslam.io.mcap_write import write_ros2_log
+    from holoslam.sim.records import to_log_data
+
+    log = to_log_data(run_)
+    streams = [getattr(log, k) for k in keep]
+    merged = heapq.merge(*streams, key=lambda r: r.stamp_ns)
+    return write_ros2_log(path, merged)
+
+
+def test_odometry_and_laser_only_log_runs_end_to_end(short_run, tmp_path):
+    log = _write(short_run, tmp_path / "plain_robot.mcap", ["odometry", "scans", "transforms", "ground_truth"])
+    result = run(log)
+    assert set(result.report["inputs_absent"]) == {"compass", "camera images", "tag sightings"}
+    assert result.report["vision"]["skipped"]
+    assert result.report["factors"]["compass_heading"] == 0
+    assert result.report["factors"]["object_landmark"] == 0
+    assert len(result.objects) == 0
+    acc = result.report["accuracy"]
+    # scan matching alone still beats dead reckoning
+    assert acc["anchors"]["rmse_m"] < acc["anchors_dead_reckoning"]["rmse_m"]
+    assert result.grid.free.sum() > 1000
+    assert result.holographic.number_of_nodes() > 0
+
+
+def test_log_without_laser_is_a_clear_error(short_run, tmp_path):
+    log = _write(short_run, tmp_path / "no_laser.mcap", ["odometry", "transforms"])
+    with pytest.raises(IngestError, match="scan"):
+        run(log)
+
+
+def test_many_logs_in_parallel_one_failing(short_run, tmp_path, capsys):
+    fleet = tmp_path / "fleet"
+    fleet.mkdir()
+    _write(short_run, fleet / "a.mcap", ["odometry", "scans", "transforms"])
+    _write(short_run, fleet / "b.mcap", ["odometry", "scans", "transforms", "headings"])
+    (fleet / "broken.mcap").write_bytes(b"\x89MCAP0\r\n" + b"\x00" * 20)
+    out = tmp_path / "out"
+    rc = main(["run", str(fleet), "-o", str(out), "--workers", "2", "--json"])
+    assert rc == 1  # one log failed
+    outcome = json.loads(capsys.readouterr().out)
+    ok = {item["log"].split("/")[-1]: item["ok"] for item in outcome["logs"]}
+    assert ok == {"a.mcap": True, "b.mcap": True, "broken.mcap": False}
+    assert (out / "a" / "trajectory.tum").is_file() and (out / "b" / "graph.g2o").is_file()
+    failed = next(i for i in outcome["logs"] if not i["ok"])
+    assert "broken.mcap" in failed["error"] or "MCAP" in failed["error"]
+
+
+def test_run_config_from_yaml(tmp_path):
+    p = tmp_path / "run.yaml"
+    p.write_text("grid:\n  resolution: 0.1\nsolver:\n  method: isam2\nfrontend:\n  revisit_radius: 2.0\n")
+    cfg = load_run_config(p)
+    assert cfg.grid.resolution == 0.1 and cfg.solver.method.value == "isam2"
+    assert cfg.frontend.revisit_radius == 2.0
+    assert load_run_config(None) == RunConfig()
+    with pytest.raises(ConfigError, match="planning.robot_radius_m: expected a number"):
+        from_mapping(RunConfig, {"planning": {"robot_radius_m": "wide"}})
+
+
+def test_optimised_trajectory_follows_anchors():
+    from holoslam import geometry as g
+    from holoslam.pipeline import optimised_trajectory
+
+    dr_stamps = np.arange(0, 100, dtype=np.int64) * 10
+    dr = np.column_stack([np.linspace(0, 9.9, 100), np.zeros(100), np.zeros(100)])
+    anchors = np.array([0, 500], dtype=np.int64)
+    wTa = np.array([[0.0, 0.0, 0.0], [5.0, 1.0, 0.5]])  # the second anchor was corrected by the solver
+    out = optimised_trajectory(dr_stamps, dr_stamps, dr, anchors, wTa)
+    assert np.allclose(out[0], wTa[0]) and np.allclose(out[50], wTa[1])
+    # after the second anchor the motion is dead reckoning expressed from the corrected anchor
+    assert np.allclose(out[60], g.compose(wTa[1], np.array([1.0, 0.0, 0.0])))
