@@ -147,7 +147,8 @@ def bench_decoders(n: int, seed: int) -> None:
             false[name]["clutter"] += len(detect_qr(img, decs, fb))
     total = sum(images.values())
     print(
-        f"\n## Decoding ({total} rendered VGA views + {n_clutter} clutter-only views, f = {F:.0f} px, label tilt "
+        f"\n## Decoding ({total} rendered VGA views + {n_clutter} clutter-only views, f = {F:.0f} px, "
+        "label tilt "
         "0-60 deg, any in-plane rotation)"
     )
     print("decode rate by module size (px), all conditions; false decodes; corner error (max of 4 corners):")
@@ -159,7 +160,8 @@ def bench_decoders(n: int, seed: int) -> None:
         rates = "".join(f"{_rate([r[4] for r in recs[name] if r[1] == m]):>7s}" for m in modules)
         e = np.array(err[name])
         print(
-            f"{name:20s}{rates}{sum(false[name].values()):>7d}{np.median(e):>12.3f}{np.percentile(e, 90):>8.3f}"
+            f"{name:20s}{rates}{sum(false[name].values()):>7d}{np.median(e):>12.3f}"
+            f"{np.percentile(e, 90):>8.3f}"
             f"{np.median(ms[name]):>12.2f}"
         )
     print(
@@ -174,7 +176,8 @@ def bench_decoders(n: int, seed: int) -> None:
         )
         print(f"{name:20s}{cells}{false[name]['clutter']:>9d}")
     print(
-        "\ndecode rate by label tilt (deg, angle between the label normal and the viewing ray), modules >= 3 px:"
+        "\ndecode rate by label tilt (deg, angle between the label normal and the viewing ray), "
+        "modules >= 3 px:"
     )
     tb = list(zip(TILT_BINS[:-1], TILT_BINS[1:], strict=True))
     print(f"{'decoder':20s}" + "".join(f"{f'{a}-{b}':>8s}" for a, b in tb))
@@ -211,7 +214,8 @@ def bench_household_log(path: str, step: int) -> None:
     pix = [im.decode() for im in ims]
     n_labels = sum(len(tags[im.stamp_ns]) for im in ims)
     print(
-        f"\n## Household log ({path}: {len(ims)} of {len(log.images)} simulator JPEG views, {n_labels} labels; "
+        f"\n## Household log ({path}: {len(ims)} of {len(log.images)} simulator JPEG views, "
+        f"{n_labels} labels; "
         "truth = the simulator's tag corners)"
     )
     print(
@@ -233,7 +237,8 @@ def bench_household_log(path: str, step: int) -> None:
                 errs.append(float(np.linalg.norm(d.corners - truth[d.payload], axis=1).max()))
         e = np.array(errs) if errs else np.array([math.nan])
         print(
-            f"{name:20s}{f'{found}/{n_labels}':>10s}{bad:>7d}{np.median(e):>15.3f}{np.percentile(e, 90):>8.3f}"
+            f"{name:20s}{f'{found}/{n_labels}':>10s}{bad:>7d}{np.median(e):>15.3f}"
+            f"{np.percentile(e, 90):>8.3f}"
             f"{np.median(ms):>12.2f}"
         )
 
@@ -242,7 +247,8 @@ def bench_position(n: int, seed: int) -> None:
     rng = np.random.default_rng(seed + 1)
     print(
         "\n## Object position error vs range (label side 0.12 m, noise 2, blur 1 px; the PTZ zooms so modules"
-        " are ~4 px:\n   f = max(600, 4 * 29 * range / 0.12); two views: 0.3 m baseline, second camera turned to"
+        " are ~4 px:\n   f = max(600, 4 * 29 * range / 0.12); two views: 0.3 m baseline, second camera "
+        "turned to"
         " the label; medians)"
     )
     print(
@@ -342,7 +348,8 @@ def main() -> None:
     bench_position(n, a.seed)
     bench_speed(10 if a.quick else 30)
     print(
-        "\n## Real photos: not run. This benchmark works offline and the project bundles no public photos of QR"
+        "\n## Real photos: not run. This benchmark works offline and the project bundles no public photos "
+        "of QR"
         " codes;\n   decode rates above are on rendered views and the simulator's log only."
     )
     print(f"\n(total {time.perf_counter() - t0:.0f} s)")

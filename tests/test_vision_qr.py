@@ -152,3 +152,22 @@ def test_corrupt_and_missing_files_raise_clear_errors(tmp_path):
         decode_image_file(tmp_path / "missing.png")
     with pytest.raises(VisionError, match="uint8"):
         detect_qr(np.zeros((10, 10), np.float32))
+
+
+def test_read_image_file_channels_and_errors(tmp_path):
+    import cv2
+
+    from holoslam.io.images import read_image_file
+
+    bgra = np.zeros((8, 10, 4), np.uint8)
+    bgra[..., 0], bgra[..., 2], bgra[..., 3] = 200, 50, 255
+    p = tmp_path / "c.png"
+    cv2.imwrite(str(p), bgra)
+    img = read_image_file(p)
+    assert img.shape == (8, 10, 3) and img.dtype == np.uint8 and tuple(img[0, 0]) == (200, 0, 50)  # alpha dropped
+    grey = read_image_file(p, grayscale=True)
+    assert grey.shape == (8, 10) and grey[0, 0] == cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[0, 0]
+    with pytest.raises(ImageDecodeError, match="directory"):
+        read_image_file(tmp_path)
+    with pytest.raises(ImageDecodeError, match="missing.png.*no such file"):
+        read_image_file(tmp_path / "missing.png")

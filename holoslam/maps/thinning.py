@@ -236,27 +236,31 @@ class _Flat:
         self.offsets = [self.itype(dr * self.w2 + dc) for dr, dc in NEIGHBOUR_OFFSETS]
         # clearing bit (k + 4) % 8 of the cell at d + offset[k] tells it that d was deleted
         self.clear = [np.uint8(0xFF ^ (1 << ((k + 4) % 8))) for k in range(8)]
-        self.scratch = np.empty(self.a.shape[0], dtype=self.itype)
 
     def unique(self, idx: np.ndarray) -> np.ndarray:
-        """Distinct values of idx, without sorting."""
-        pos = np.arange(idx.shape[0], dtype=self.itype)
-        np.put(self.scratch, idx, pos)
-        return idx[np.take(self.scratch, idx) == pos]
+        """Distinct values of idx, sorted (the sort is cheap and makes the later gathers run in memory order)."""
+        if idx.shape[0] < 2:
+            return idx
+        s = np.sort(idx)
+        keep = np.empty(s.shape[0], dtype=bool)
+        keep[0] = True
+        np.not_equal(s[1:], s[:-1], out=keep[1:])
+        return s[keep]
 
     def delete(self, idx: np.ndarray) -> np.ndarray:
-        """Delete the cells idx (repeats are harmless); return their set 8-neighbours, each once."""
+        """Delete the cells idx (repeats are harmless); return their set 8-neighbours, each once, sorted.
+        Only set cells' codes are kept up to date (a deleted cell's code is never read again)."""
         if idx.size == 0:
             return idx
-        self.a[idx] = 0
+        a, code = self.a, self.code
+        a[idx] = 0
         nbs = []
-        code = self.code
         for off, clear in zip(self.offsets, self.clear, strict=True):
             q = idx + off
+            q = q[np.take(a, q) != 0]
             np.put(code, q, np.take(code, q) & clear)
             nbs.append(q)
-        nb = np.concatenate(nbs)
-        return self.unique(nb[np.take(self.a, nb) != 0])
+        return self.unique(np.concatenate(nbs))
 
     def parity(self, idx: np.ndarray) -> np.ndarray:
         r = idx // self.w2

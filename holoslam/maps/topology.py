@@ -80,16 +80,18 @@ def _pointer_jump(
     ptr = nxt.copy()
     mn = val.copy() if val is not None else None
     rounds = max(1, int(np.ceil(np.log2(max(n, 2)))) + 1)
+    act = np.flatnonzero(ptr >= 0)  # live states only: the set shrinks as chains are resolved
     for _ in range(rounds):
-        live = ptr >= 0
-        if not live.any():
+        if act.size == 0:
             break
-        p = ptr[live]
-        rank[live] += rank[p]
-        root[live] = root[p]
+        p = ptr[act]
+        rank[act] += rank[p]
+        root[act] = root[p]
         if mn is not None:
-            mn[live] = np.minimum(mn[live], mn[p])
-        ptr[live] = ptr[p]
+            mn[act] = np.minimum(mn[act], mn[p])
+        nptr = ptr[p]
+        ptr[act] = nptr
+        act = act[nptr >= 0]
     done = ptr < 0
     return rank, (root if mn is None else np.where(done, root, mn)), done
 
@@ -447,7 +449,8 @@ def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray):
     s = np.arange(nxt.shape[0])
     keep = root < root[s ^ 1]  # one direction per chain
     ks = s[keep]
-    order = ks[np.lexsort((-rank[ks], root[ks]))]
+    top = int(rank.max()) + 1
+    order = ks[np.argsort(root[ks] * top + (top - 1 - rank[ks]))]  # by chain, then from its u end
     r = root[order]
     first = np.ones(order.shape[0], dtype=bool)
     first[1:] = r[1:] != r[:-1]
