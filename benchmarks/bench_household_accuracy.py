@@ -1,89 +1,56 @@
-"""Accuracy of the front end + solver against ground truth: dead reckoning alone vs the optimised graph.
+"""Accuracy of the front end + solver on household logs against ground truth: dead reckoning vs the graph.
 
-Usage: .venv/bin/python benchmarks/bench_household_accuracy.py [--seeds 3] [--log PATH]
+Usage: .venv/bin/python benchmarks/bench_household_accuracy.py [--quick] [--seeds 3] [--duration 300]
+       [--noise 1,2] [--log PATH]
 
-Worlds:
-* ``household``: the reference household log (``datasets/household_small.mcap`` or --log) read with
-  ``holoslam.io.mcap.read_log``, object observations from ``holoslam.vision.locate`` (not wired yet: the
-  script says which part is missing and skips the world rather than print a made-up number);
-* ``two-rooms``: the synthetic two-room world of ``tests/test_frontend.py`` (ray-cast laser, noisy odometry and
-  compass, object observations), default and noisier variants, several seeds, clean and with 10 % of the
-  object observations corrupted (half moved 1-2 m, half given another object's id).
+Logs:
+* ``reference``: the bundled reference household log (``datasets/household_small.mcap`` or --log), read with
+  ``holoslam.io.mcap.read_log``, object observations from ``holoslam.vision.observe.observations_from_log``;
+* ``sim/s<seed>/x<noise>``: in-memory simulated households (``holoslam.sim``, other seeds, ``--duration`` s,
+  every sensor noise times ``--noise``), same pipeline.
 
-Printed per variant (medians over seeds): anchor position RMSE (m), heading RMSE (deg), object RMSE (m) for
-dead reckoning and for the optimised graph, the ratio DR/graph, and the fraction of anchors whose true position
-lies inside the 95 % ellipse of its marginal covariance. Estimates are compared after fixing the gauge with
-the first anchor's true pose (the first anchor is the graph's fixed pose).
+Variants of every log: ``clean``; ``corrupt10%`` (10 % of the object observations corrupted, half moved 1-2 m
+in the base frame, half given another object's id); ``moved3`` (three objects moved 0.8 m half-way through the
+run: their later observations are shifted by the move expressed in the base frame at that stamp, using ground
+truth, as if the object had been carried away); ``nocompass+nocamera`` (compass and camera removed: odometry,
+laser and tf only; scan-only loop closures).
+
+Printed per row: anchors, anchor position RMSE (m) and heading RMSE (deg) for dead reckoning (DR) and the graph,
+the ratio DR/graph, the object RMSE (m) for DR (sightings placed with the DR anchor poses, averaged per object)
+and the graph, the fraction of true anchor positions in their 95 % ellipses (``cov95``, after alignment; the
+first-anchor gauge variant in ``cov95@0``), for corrupted variants the ratio to clean, and for ``moved3`` how
+many of the moved objects the solver reported as moved. Every estimate is aligned to the truth with
+``holoslam.evaluate.align_se2`` on the anchors (the SLAM world frame is arbitrary). Last column: front-end
+seconds. ``--quick``: the reference log only, clean / corrupt / moved.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
 
-from holoslam import geometry as g  # noqa: E402
-
-
-def _truth_at(t, wTb, q):
-    return np.column_stack([np.interp(q, t, wTb[:, 0]), np.interp(q, t, wTb[:, 1]),
-                            g.wrap(np.interp(q, t, np.unwrap(wTb[:, 2])))])
-
-
-def _gauge(truth0, est0):
-    return g.compose(truth0, g.inverse(est0))
-
-
-def evaluate(fe, sol, t, wTb, objects):
-    truth = _truth_at(t, wTb, fe.anchor_stamps_ns)
-    dr = _truth_at(fe.dr_stamps_ns, fe.dr_wTb, fe.anchor_stamps_ns)
-    out = {}
-    for name, est in (("dr", dr), ("graph", sol.wTa)):
-        T = _gauge(truth[0], est[0])
-        e = g.compose(np.broadcast_to(T, est.shape), est)
-        out[f"{name}_pos"] = float(np.sqrt(np.mean(np.sum((e[:, :2] - truth[:, :2]) ** 2, axis=1))))
-        out[f"{name}_head"] = float(np.degrees(np.sqrt(np.mean(g.wrap(e[:, 2] - truth[:, 2]) ** 2))))
-        # objects: dead reckoning places each sighting with the DR anchor pose; average per object
-        P = fe.problem.landmarks
-        if name == "dr":
-            w = np.array([g.transform_points(e[i], xy[None])[0] for i, xy in zip(P.i, P.a_position, strict=True)])
-            est_obj = {k: w[[n == k for n in P.landmark]].mean(axis=0) for k in set(P.landmark)}
-        else:
-            Tl = _gauge(truth[0], sol.wTa[0])
-            est_obj = {k: g.transform_points(Tl, p[None])[0] for k, p in zip(sol.landmark_ids, sol.w_landmarks,
-                                                                              strict=True) if "@" not in k}
-        errs = [np.hypot(*(est_obj[k] - objects[k][:2])) for k in est_obj if k in objects]
-        out[f"{name}_obj"] = float(np.sqrt(np.mean(np.square(errs)))) if errs else float("nan")
-    if sol.cov_wTa is not None:
-        T = _gauge(truth[0], sol.wTa[0])
-        e = g.compose(np.broadcast_to(T, sol.wTa.shape), sol.wTa)
-        R = g.rot2(e[:, 2])
-        d = np.einsum("nji,nj->ni", R, truth[:, :2] - e[:, :2])  # error in each anchor's own frame
-        inside = []
-        for k in range(1, len(e)):  # anchor 0 is the gauge
-            c = sol.cov_wTa[k][:2, :2]
-            if np.all(np.isfinite(c)):
-                inside.append(d[k] @ np.linalg.solve(c, d[k]) < 5.991)
-        out["coverage"] = float(np.mean(inside)) if inside else float("nan")
-    else:
-        out["coverage"] = float("nan")
-    return out
+MOVE = 0.8  # m, how far each of the three objects is carried half-way
 
 
 def corrupt(obs, frac, rng, ids):
-    obs = list(obs)
-    pick = rng.choice(len(obs), max(1, int(round(frac * len(obs)))), replace=False)
+    """10 % of the observations: half shifted 1-2 m, half given another object's id."""
     from holoslam.types import ObjectObservation
 
+    obs = list(obs)
+    pick = rng.choice(len(obs), max(1, int(round(frac * len(obs)))), replace=False)
     for n, k in enumerate(pick):
         o = obs[k]
         if n % 2 == 0:
-            shift = rng.uniform(1.0, 2.0) * np.array([np.cos(a := rng.uniform(0, 6.28)), np.sin(a), 0.0])
+            a = rng.uniform(0, 2 * np.pi)
+            shift = rng.uniform(1.0, 2.0) * np.array([np.cos(a), np.sin(a), 0.0])
             obs[k] = ObjectObservation(o.stamp_ns, o.object_id, o.payload, o.b_position + shift, o.cov_b_position)
         else:
             other = [i for i in ids if i != o.object_id][int(rng.integers(len(ids) - 1))]
@@ -91,58 +58,143 @@ def corrupt(obs, frac, rng, ids):
     return obs
 
 
-def run_two_rooms(seeds):
-    from test_frontend import OBJECTS, make_log
+def move_objects(obs, gt_t, gt_wTb, rng, n=3):
+    """Three objects seen both before and after the middle of their sightings are carried MOVE m at that
+    time: later sightings are shifted by the move in the base frame at their stamp. Returns (obs, moved ids,
+    truth after the move {id: xy})."""
+    from holoslam.evaluate import truth_at
+    from holoslam.types import ObjectObservation
 
-    from holoslam import solve
-    from holoslam.submaps.deadreckon import DeadReckoningConfig
-    from holoslam.submaps.frontend import FrontEndConfig, build_problem
+    by_id: dict[str, list[int]] = {}
+    for k, o in enumerate(obs):
+        by_id.setdefault(o.object_id, []).append(k)
+    cands = sorted(i for i, ks in by_id.items() if len({obs[k].stamp_ns for k in ks}) >= 4)
+    chosen = [cands[j] for j in rng.choice(len(cands), min(n, len(cands)), replace=False)]
+    out = list(obs)
+    deltas = {}
+    for oid in chosen:
+        ks = sorted(by_id[oid], key=lambda k: obs[k].stamp_ns)
+        half = ks[len(ks) // 2:]
+        a = rng.uniform(0, 2 * np.pi)
+        d = MOVE * np.array([np.cos(a), np.sin(a)])
+        deltas[oid] = d
+        st = np.array([obs[k].stamp_ns for k in half])
+        wTb = truth_at(st, gt_t, gt_wTb)
+        for k, T in zip(half, wTb, strict=True):
+            o = obs[k]
+            c, s = np.cos(T[2]), np.sin(T[2])
+            db = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], 0.0])
+            out[k] = ObjectObservation(o.stamp_ns, o.object_id, o.payload, o.b_position + db, o.cov_b_position,
+                                       o.method)
+    return out, chosen, deltas
 
-    variants = {"default": dict(), "noisy": dict(odo_scale=0.04, slip=0.004, compass_sigma=0.04, laser_sigma=0.02)}
+
+def evaluate_run(log, obs, truth_objects, moved_deltas=None):
+    """Front end + solve + errors for one log and observation list -> dict of numbers."""
+    from holoslam import geometry as g
+    from holoslam.evaluate import object_errors, trajectory_errors, truth_at
+    from holoslam.solve import CovarianceScope, SolveOptions, solve
+    from holoslam.submaps.frontend import build_problem
+
+    t0 = time.perf_counter()
+    fe = build_problem(log, obs)
+    t1 = time.perf_counter()
+    sol = solve(fe.problem, SolveOptions(covariances=CovarianceScope.ANCHORS))
+    gt_t, gt_wTb = log.ground_truth_arrays()
+    true = truth_at(fe.anchor_stamps_ns, gt_t, gt_wTb)
+    te = trajectory_errors(sol.wTa, true, sol.cov_wTa)
+    T0 = g.compose(true[0], g.inverse(sol.wTa[0]))  # the solver's gauge: anchor 0 fixed
+    te0 = trajectory_errors(g.compose(np.broadcast_to(T0, sol.wTa.shape), sol.wTa), true, sol.cov_wTa, align=False)
+    dr = truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb)
+    de = trajectory_errors(dr, true)
+    truth = dict(truth_objects)
+    if moved_deltas:  # a moved object's landmark is its final place; "<id>@before" its first
+        truth = {k: (np.asarray(v)[:2] + moved_deltas[k] if k in moved_deltas else v) for k, v in truth.items()}
+    oe = object_errors(sol.landmark_ids, sol.w_landmarks, truth, te.T)
+    P = fe.problem.landmarks
+    if len(P.i):
+        dw = g.compose(np.broadcast_to(de.T, dr.shape), dr)
+        w = np.array([g.transform_points(dw[i], xy[None])[0] for i, xy in zip(P.i, P.a_position, strict=True)])
+        names = sorted(set(P.landmark))
+        lab = np.array(P.landmark)
+        est = np.array([w[lab == k].mean(axis=0) for k in names])
+        od = object_errors(names, est, truth, np.zeros(3))
+    else:
+        od = oe
+    moved_found = sorted(m.object_id for m in sol.moved_objects)
+    return dict(anchors=len(fe.submaps), dr_pos=de.rmse_m, pos=te.rmse_m, dr_head=de.heading_rmse_deg,
+                head=te.heading_rmse_deg, dr_obj=od.rmse_m, obj=oe.rmse_m, n_obj=oe.n_matched, cov95=te.coverage95,
+                cov95_0=te0.coverage95, fe_s=t1 - t0, moved_found=moved_found,
+                loops=int(np.sum(fe.problem.relative.kind == "loop")))
+
+
+def strip_compass_camera(log):
+    return dataclasses.replace(log, headings=(), images=(), camera_infos=(), tags=())
+
+
+def variants(log, obs, name, rng_seed, quick):
+    truth = {o["id"]: np.array(o["position"]) for o in json.loads(log.world_json)["objects"]}
+    ids = sorted(truth)
+    gt_t, gt_wTb = log.ground_truth_arrays()
     rows = []
-    for vname, kw in variants.items():
-        scale = 2.0 if vname == "noisy" else 1.0
-        dr = DeadReckoningConfig(sigma_s_per_m=0.03 * scale, sigma_s_floor=0.002 * scale,
-                                 odo_sigma_dtheta_per_rad=0.02, odo_sigma_dtheta_per_m=0.0,
-                                 odo_sigma_dtheta_floor=0.002)
-        for corr in (False, True):
-            res = []
-            for seed in range(seeds):
-                log, obs, t, wTb = make_log(seed=seed, **kw)
-                if corr:
-                    obs = corrupt(obs, 0.10, np.random.default_rng(100 + seed), sorted(OBJECTS))
-                fe = build_problem(log, obs, FrontEndConfig(dead_reckoning=dr))
-                sol = solve.solve(fe.problem, solve.SolveOptions(covariances=solve.CovarianceScope.ANCHORS))
-                res.append(evaluate(fe, sol, t, wTb, OBJECTS))
-            med = {k: float(np.median([r[k] for r in res])) for k in res[0]}
-            rows.append((f"two-rooms/{vname}" + ("/corrupt10%" if corr else ""), med, len(fe.submaps)))
+    clean = evaluate_run(log, obs, truth)
+    rows.append((name, "clean", clean, None))
+    bad = corrupt(obs, 0.10, np.random.default_rng(rng_seed), ids)
+    rows.append((name, "corrupt10%", evaluate_run(log, bad, truth), clean))
+    mv, chosen, deltas = move_objects(obs, gt_t, gt_wTb, np.random.default_rng(rng_seed + 1))
+    r = evaluate_run(log, mv, truth, deltas)
+    r["moved_expected"] = chosen
+    rows.append((name, "moved3", r, clean))
+    if not quick:
+        bare = strip_compass_camera(log)
+        rows.append((name, "nocompass+nocamera", evaluate_run(bare, [], truth), None))
     return rows
+
+
+def print_table(rows):
+    hdr = (f"{'log':18s} {'variant':19s} {'anch':>4s} {'DR m':>6s} {'graph m':>7s} {'ratio':>5s} {'DR°':>5s} "
+           f"{'graph°':>6s} {'DR obj':>6s} {'obj m':>6s} {'n':>3s} {'cov95':>5s} {'cov95@0':>7s} {'/clean':>6s} "
+           f"{'moved':>5s} {'loops':>5s} {'fe s':>5s}")
+    print(hdr)
+    for name, var, m, clean in rows:
+        rel = f"{max(m['pos'] / clean['pos'], m['obj'] / clean['obj']):6.2f}" if clean else f"{'':6s}"
+        mv = (f"{len(set(m['moved_found']) & set(m['moved_expected']))}/{len(m['moved_expected'])}"
+              if "moved_expected" in m else "")
+        print(f"{name:18s} {var:19s} {m['anchors']:4d} {m['dr_pos']:6.3f} {m['pos']:7.4f} "
+              f"{m['dr_pos'] / m['pos']:5.1f} {m['dr_head']:5.2f} {m['head']:6.3f} {m['dr_obj']:6.3f} "
+              f"{m['obj']:6.3f} {m['n_obj']:3d} {m['cov95']:5.2f} {m['cov95_0']:7.2f} {rel} {mv:>5s} "
+              f"{m['loops']:5d} {m['fe_s']:5.1f}", flush=True)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="reference log only: clean, corrupt, moved")
+    ap.add_argument("--seeds", type=int, default=2, help="simulated seeds besides the reference log")
+    ap.add_argument("--duration", type=float, default=300.0, help="simulated run length (s)")
+    ap.add_argument("--noise", type=str, default="1,2", help="noise scales of the simulated logs")
     ap.add_argument("--log", type=Path, default=ROOT / "datasets" / "household_small.mcap")
     a = ap.parse_args(argv)
-    missing = []
-    if not a.log.exists():
-        missing.append(f"household log {a.log}")
-    try:
-        from holoslam.vision import locate  # noqa: F401
-        if not hasattr(locate, "observations_from_log"):
-            missing.append("holoslam.vision.locate.observations_from_log (ObjectObservations from /tags)")
-    except ImportError:
-        missing.append("holoslam.vision.locate")
-    if missing:
-        print("household: skipped, missing: " + "; ".join(missing))
-    rows = run_two_rooms(a.seeds)
-    hdr = (f"{'world/variant':32s} {'anch':>4s} {'DR pos m':>9s} {'graph m':>8s} {'ratio':>6s} {'DR hd°':>7s} "
-           f"{'graph°':>7s} {'DR obj m':>9s} {'graph obj':>9s} {'ratio':>6s} {'cov95':>6s}")
-    print(hdr)
-    for name, m, n in rows:
-        print(f"{name:32s} {n:4d} {m['dr_pos']:9.3f} {m['graph_pos']:8.3f} {m['dr_pos'] / m['graph_pos']:6.1f} "
-              f"{m['dr_head']:7.2f} {m['graph_head']:7.2f} {m['dr_obj']:9.3f} {m['graph_obj']:9.3f} "
-              f"{m['dr_obj'] / m['graph_obj']:6.1f} {m['coverage']:6.2f}")
+    from holoslam.io.mcap import read_log
+    from holoslam.vision.observe import observations_from_log
+
+    rows = []
+    log, _ = read_log(a.log)
+    obs, _ = observations_from_log(log)
+    rows += variants(log, obs, "reference", 100, a.quick)
+    print_table(rows)
+    if a.quick:
+        return 0
+    from holoslam.sim import SimConfig, simulate_household
+    from holoslam.sim.records import to_log_data
+
+    for k in [float(x) for x in a.noise.split(",")]:
+        for seed in range(10, 10 + a.seeds):
+            run = simulate_household(SimConfig(seed=seed, duration_s=a.duration).with_noise_scale(k))
+            slog = to_log_data(run)
+            sobs, _ = observations_from_log(slog)
+            srows = variants(slog, sobs, f"sim/s{seed}/x{k:g}", 200 + seed, False)
+            print_table(srows)
+            rows += srows
     return 0
 
 

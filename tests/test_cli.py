@@ -148,3 +148,16 @@ def test_bad_config_is_exit_2_with_the_key(tmp_path, capsys):
 def test_console_script_entry_point():
     r = subprocess.run([sys.executable, "-m", "holoslam.cli", "--version"], capture_output=True, text=True)
     assert r.returncode == 0 and r.stdout.startswith("holoslam ")
+
+
+def test_simulate_writes_a_log_that_inspect_reads(tmp_path, capsys):
+    out = tmp_path / "sim.mcap"
+    assert main(["simulate", "-o", str(out), "--seed", "1", "--duration", "20", "--image-rate", "0.2", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert Path(summary["path"]) == out and out.stat().st_size == summary["bytes"]
+    assert main(["inspect", str(out), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    topics = {c["topic"] for c in data["channels"]}
+    assert {"/odom", "/scan", "/compass", "/ground_truth/pose", "/tf_static"} <= topics
+    assert main(["simulate", "-o", str(tmp_path / "no" / "dir.mcap")]) == 2
+    assert "does not exist" in capsys.readouterr().err

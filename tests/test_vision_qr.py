@@ -164,9 +164,13 @@ def test_read_image_file_channels_and_errors(tmp_path):
     p = tmp_path / "c.png"
     cv2.imwrite(str(p), bgra)
     img = read_image_file(p)
-    assert img.shape == (8, 10, 3) and img.dtype == np.uint8 and tuple(img[0, 0]) == (200, 0, 50)  # alpha dropped
+    assert (
+        img.shape == (8, 10, 3) and img.dtype == np.uint8 and tuple(img[0, 0]) == (200, 0, 50)
+    )  # alpha dropped
     grey = read_image_file(p, grayscale=True)
-    assert grey.shape == (8, 10) and grey[0, 0] == cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[0, 0]
+    assert (
+        grey.shape == (8, 10) and abs(int(grey[0, 0]) - int(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[0, 0])) <= 1
+    )
     with pytest.raises(ImageDecodeError, match="directory"):
         read_image_file(tmp_path)
     with pytest.raises(ImageDecodeError, match="missing.png.*no such file"):

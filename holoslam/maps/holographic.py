@@ -147,7 +147,7 @@ def _cut_line(mask: np.ndarray, rc: np.ndarray, direction: np.ndarray, half_len_
 
 
 def _doorway_candidates(
-    topology, clr: np.ndarray, res: float, p: PlaceParams
+    topology, clr: np.ndarray, res: float, p: PlaceParams, min_width_m: float = 0.0
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges: in every run
     of narrow skeleton cells (free width 2 x clearance <= ``doorway_width_m``) the narrowest cell of a run no
@@ -158,10 +158,20 @@ def _doorway_candidates(
     half = max(int(round(0.5 * p.doorway_window_m / res)), 1)
     for _u, _v, data in topology.edges(data=True):
         path = np.asarray(data.get("path", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
+        # the path with its two node cells (a doorway's narrowest cell is often the junction itself)
+        ends = []
+        for nd in (_u, _v):
+            a = topology.nodes[nd]
+            if "row" in a:
+                ends.append(np.array([int(a["row"]), int(a["col"])]))
+        if path.shape[0] and len(ends) == 2:
+            if np.abs(ends[0] - path[0]).sum() > np.abs(ends[1] - path[0]).sum():
+                ends = ends[::-1]
+            path = np.vstack([ends[0], path, ends[1]])
         if path.shape[0] < 3:
             continue
         c = clr[path[:, 0], path[:, 1]]
-        narrow = 2.0 * c <= p.doorway_width_m
+        narrow = (2.0 * c <= p.doorway_width_m) & (2.0 * c >= min_width_m)
         if not narrow.any():
             continue
         d = np.diff(np.concatenate([[0], narrow.astype(np.int8), [0]]))
@@ -188,7 +198,13 @@ def _doorway_candidates(
                 if not direction.any():
                     continue
                 out.append((path[i], direction))
-    return out
+    # one candidate per place (two edges meeting at a junction both find it)
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    sep = 0.5 * p.doorway_window_m / res
+    for rc, dvec in sorted(out, key=lambda q: float(clr[q[0][0], q[0][1]])):
+        if all(np.hypot(*(rc - k[0])) > sep for k in kept):
+            kept.append((rc, dvec))
+    return kept
 
 
 def _side_labels(lab: np.ndarray, free: np.ndarray, rc: np.ndarray, direction: np.ndarray, max_cells: int):
@@ -247,8 +263,14 @@ def build_holographic(
         return np.column_stack([ox + (rc[:, 1] + 0.5) * res, oy + (rc[:, 0] + 0.5) * res])
 
     # ---- doorways and rooms -------------------------------------------------------------------------------
-    cands = _doorway_candidates(topology, clr, res, p)
-    free_u8 = free.astype(np.uint8)
+    rr_cells = reach_model.robot_radius_m / res
+    cands = _doorway_candidates(topology, clr, res, p, min_width_m=2.0 * reach_model.robot_radius_m)
+    # the space the robot can use: free cells covered by a robot-sized disc that fits (a morphological
+    # opening); gaps in walls and between furniture narrower than the robot are not passages
+    rad = max(int(np.floor(rr_cells)), 1)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1))
+    nav = cv2.dilate((clr >= reach_model.robot_radius_m).astype(np.uint8), disc) & free.astype(np.uint8)
+    free_u8 = nav
     min_room_cells = p.min_room_area_m2 / (res * res)
 
     def draw(cs) -> tuple[int, np.ndarray, np.ndarray, list[tuple[int, int]]]:
