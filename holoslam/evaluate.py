@@ -164,7 +164,8 @@ def object_errors(
     anchors). Compared in x, y. ``cov_w`` (M, 2, 2) world-frame position covariances (optional) give the
     coverage. Ids with an ``@`` (a moved object's earlier position, ``"<id>@before"``) are left out."""
     names = [str(k) for k in ids]
-    P = np.asarray(est_w, dtype=np.float64).reshape(len(names), -1)
+    P = np.asarray(est_w, dtype=np.float64)
+    P = P.reshape(len(names), -1) if len(names) else np.zeros((0, 2))
     if P.shape[0] and P.shape[1] < 2:
         raise ValueError(f"object_errors: est_w must be (M, 2) or (M, 3), got {P.shape}")
     keep = [k for k, n in enumerate(names) if "@" not in n]

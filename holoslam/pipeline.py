@@ -87,6 +87,7 @@ class VisionConfig:
     use_tags: bool = True
     sigma_px: float = 0.5
     base_frame: str = "base_link"
+    features: bool = True  # the object feature set of Eq. 13 (size, texture, colours, SIFT) from image crops
 
 
 @dataclass(frozen=True)
@@ -198,7 +199,21 @@ def optimised_trajectory(
     return g.compose(np.asarray(wTa)[k], g.between(dr_a[k], dr_t))
 
 
-def _objects(problem: Any, solution: Any, observations: Sequence[Any]) -> tuple:
+def _feature_attrs(f: Any) -> dict[str, Any]:
+    """The object feature set (Eq. 13) as node attributes: scalars and small arrays."""
+    s = f.to_summary()
+    return {
+        "size_m": s["size_m"] if s["size_m"] is not None else float("nan"),
+        "range_m": s["range_m"] if s["range_m"] is not None else float("nan"),
+        "n_crops": s["n_crops"],
+        "n_sift": s["n_sift"],
+        "texture_lbp": np.asarray(s["texture_lbp"], dtype=np.float64),
+        "colours_lab": np.asarray(s["colours_lab"], dtype=np.float64),
+        "colour_weights": np.asarray(s["colour_weights"], dtype=np.float64),
+    }
+
+
+def _objects(problem: Any, solution: Any, observations: Sequence[Any], features: dict | None = None) -> tuple:
     from holoslam.maps.holographic import ObjectInfo
     from holoslam.vision.label import parse_label
 
@@ -226,8 +241,10 @@ def _objects(problem: Any, solution: Any, observations: Sequence[Any]) -> tuple:
         if "@" in oid:  # a moved object's earlier place: kept in the result, not as a separate graph object
             continue
         xy = solution.w_landmarks[k]
+        feats = _feature_attrs(features[oid]) if features and oid in features else {}
         objs.append(
-            ObjectInfo(oid, kind, np.array([xy[0], xy[1], 0.0 if not np.isfinite(z) else z]), cov, attrs, text)
+            ObjectInfo(oid, kind, np.array([xy[0], xy[1], 0.0 if not np.isfinite(z) else z]), cov, attrs, text,
+                       feats)
         )
     return tuple(objs)
 
@@ -277,6 +294,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     ]
 
     observations: tuple = ()
+    features: dict = {}
     vision_report: dict[str, Any] = {"skipped": "the log has no images and no tag sightings"}
     if log.images or log.tags:
         with _stage(progress, timings, "vision"):
@@ -289,6 +307,11 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             )
             vision_report = dataclasses.asdict(vrep)
             vision_report["problems"] = list(vision_report.get("problems", ()))[:50]
+        if cfg.vision.features and log.images and observations:
+            from holoslam.vision.features import object_features_from_log
+
+            with _stage(progress, timings, "object features (Eq. 13)"):
+                features = object_features_from_log(log, observations)
 
     with _stage(progress, timings, "front end (submaps, Eq. 12/14/15/16)"):
         fe = build_problem(log, observations, cfg.frontend)
@@ -307,7 +330,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         stamps, _ = log.odometry_arrays()
         dr = _interp(fe.dr_stamps_ns, fe.dr_wTb, stamps)
         wTb = optimised_trajectory(stamps, fe.dr_stamps_ns, fe.dr_wTb, fe.anchor_stamps_ns, sol.wTa)
-        objects = _objects(fe.problem, sol, observations)
+        objects = _objects(fe.problem, sol, observations, features)
 
     with _stage(progress, timings, "occupancy grid"):
         scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
@@ -476,6 +499,7 @@ def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects,
         pl = str(holo.nodes[n].get("place", "?"))
         places[pl] = places.get(pl, 0) + 1
     obj_nodes = [n for n, d in holo.nodes(data=True) if d.get("kind") == "object"]
+    env_set = set(env)
     reachable = {n for u, v in holo.edges() for n in (u, v) if n in obj_nodes and ((u in obj_nodes) != (v in obj_nodes))}
     return {
         "source": log.source,
@@ -528,7 +552,8 @@ def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects,
             "object_edges": sum(1 for u, v in holo.edges() if (u in obj_nodes) != (v in obj_nodes)),
             "objects_with_edge": len(reachable),
             "edges": holo.number_of_edges(),
-            "connected": bool(_connected(holo)),
+            # the unreachable objects have no edge by definition: connectivity is of the rest
+            "connected": bool(_connected(holo.subgraph([n for n in holo if n in reachable or n in env]))),
         },
         "planning": {"layer1_blocks": int(planning.n_blocks), "layer2_regions": int(planning.n_regions)},
         "timings_s": timings,

@@ -70,6 +70,7 @@ class Initialisation(str, Enum):
     ODOMETRY = "odometry"  # compose the relative measurements in order
     LAGO = "lago"  # gtsam.lago.initialize on the pose graph (diagonal part of each covariance)
     INCREMENTAL = "incremental"  # an iSAM2 pass, each new pose initialised from the current estimate
+    AUTO = "auto"  # try the candidates of SolveOptions.auto_candidates, keep the lowest final error
 
 
 class Factorization(str, Enum):
@@ -97,6 +98,7 @@ class SolveOptions:
     isam2_relinearize_threshold: float = 0.1
     isam2_relinearize_skip: int = 1
     isam2_extra_updates: int = 0  # updates without new factors after the last anchor (relinearise, converge)
+    isam2_final_lm_iterations: int = 0  # Method.ISAM2: this many batch LM iterations polish the iSAM2 estimate
     reject_outliers: bool = True
     chi2_probability: float = 0.9999  # a measurement is an outlier beyond this chi2 quantile of its dimension
     max_rounds: int = 4
@@ -106,6 +108,14 @@ class SolveOptions:
     min_move_distance: float = 0.25  # m
     covariances: CovarianceScope = CovarianceScope.NONE
     covariance_anchors: tuple[int, ...] | None = None  # None: all anchors (when covariances asks for anchors)
+    # Initialisation.AUTO: solve from each of these starts (a start equal to an earlier one, or that fails, is
+    # skipped) and keep the solution with the lowest final error (ties: the earlier candidate)
+    auto_candidates: tuple[Initialisation, ...] = (
+        Initialisation.PROBLEM,
+        Initialisation.ODOMETRY,
+        Initialisation.LAGO,
+        Initialisation.INCREMENTAL,
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,6 +156,8 @@ class Solution:
     rounds: int = 1
     seconds: float = 0.0
     pose_ids: np.ndarray | None = None
+    initialisation: Initialisation | None = None  # the start used (AUTO: the winning candidate)
+    candidates: tuple[tuple[Initialisation, float], ...] = ()  # AUTO: (start, final error; nan = failed)
 
     def landmark(self, object_id: str) -> np.ndarray:
         try:
@@ -462,7 +474,10 @@ def _initial_wTa(problem: SlamProblem, built: BuiltGraph, options: SolveOptions)
 def solve(
     problem: SlamProblem, options: SolveOptions = SolveOptions(), iteration_hook: IterationHook | None = None
 ) -> Solution:
-    """Optimise a SLAM problem (see the module docstring for the outlier scheme)."""
+    """Optimise a SLAM problem (see the module docstring for the outlier scheme). With
+    ``Initialisation.AUTO`` the whole solve runs from each candidate start and the lowest final error wins."""
+    if Initialisation(options.initialisation) is Initialisation.AUTO:
+        return _solve_auto(problem, options, iteration_hook)
     t0 = time.perf_counter()
     problem = _with_gauge(problem, options)
     method = Method(options.method)
@@ -493,6 +508,10 @@ def solve(
         it0 = 0
     if method is Method.ISAM2:
         values, iterations = _isam2(problem, built, values, options, iteration_hook)
+        if options.isam2_final_lm_iterations > 0:
+            polish = replace(options, max_iterations=int(options.isam2_final_lm_iterations))
+            values, it_lm = _batch(built.graph, values, polish, iteration_hook, errs)
+            iterations += it_lm
     else:
         values, iterations = _batch(built.graph, values, options, iteration_hook, errs)
         if initial_error is None:
@@ -602,7 +621,42 @@ def solve(
         rounds=rounds,
         seconds=time.perf_counter() - t0,
         pose_ids=problem.pose_ids,
+        initialisation=Initialisation(options.initialisation),
     )
+
+
+def _solve_auto(problem: SlamProblem, options: SolveOptions, hook: IterationHook | None) -> Solution:
+    """Initialisation.AUTO: the global optimum is not guaranteed from any single start (SPEC §7: MITb needs the
+    incremental start, Victoria Park too, LAGO helps city10000), so solve from each candidate and keep the lowest
+    final error. A candidate whose start equals an earlier one (the odometry chain of a file without vertices is
+    its initial guess) is not solved twice; one that fails (LAGO on a graph it cannot handle) is skipped."""
+    t0 = time.perf_counter()
+    best: Solution | None = None
+    tried: list[tuple[Initialisation, float]] = []
+    starts: list[np.ndarray] = []
+    errors: list[str] = []
+    for cand in dict.fromkeys(Initialisation(c) for c in options.auto_candidates):
+        if cand is Initialisation.AUTO:
+            continue
+        if cand in (Initialisation.PROBLEM, Initialisation.ODOMETRY):
+            start = problem.initial_wTa if cand is Initialisation.PROBLEM else None
+            if start is None:
+                start = odometry_chain(problem.num_poses, problem.relative)
+            if any(np.array_equal(start, s) for s in starts):
+                continue
+            starts.append(start)
+        try:
+            sol = solve(problem, replace(options, initialisation=cand), hook)
+        except (SolverError, GraphError) as e:
+            tried.append((cand, float("nan")))
+            errors.append(f"{cand.value}: {e}")
+            continue
+        tried.append((cand, sol.final_error))
+        if best is None or sol.final_error < best.final_error * (1.0 - 1e-9):
+            best = sol
+    if best is None:
+        raise SolverError("every initialisation failed: " + "; ".join(errors))
+    return replace(best, seconds=time.perf_counter() - t0, candidates=tuple(tried))
 
 
 def _marginals(

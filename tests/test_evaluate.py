@@ -127,3 +127,8 @@ def test_truth_at_interpolates_across_wrap():
     np.testing.assert_allclose(q[2, :2], P[1, :2])
     with pytest.raises(ValueError):
         truth_at(q[:1, 0].astype(np.int64), t[::-1], P)
+
+
+def test_object_errors_without_estimates_lists_all_missing():
+    o = object_errors([], np.zeros((0, 2)), {"a": np.zeros(3)}, np.zeros(3))
+    assert o.n_matched == 0 and o.missing == ("a",) and np.isnan(o.rmse_m)

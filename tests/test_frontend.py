@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -161,3 +162,30 @@ def test_solver_recovers_truth(frontend_run):
     err_dr = np.hypot(*(g.transform_points(T_dr, dr[:, :2]) - truth).T)
     rmse, rmse_dr = np.sqrt(np.mean(err**2)), np.sqrt(np.mean(err_dr**2))
     assert rmse < 0.05 and rmse < 0.5 * rmse_dr, (rmse, rmse_dr)
+
+
+def test_at_most_one_loop_per_submap_pair(frontend_run):
+    fe = frontend_run[0]
+    P = fe.problem.relative
+    loop = P.kind == "loop"
+    pairs = list(zip(P.i[loop].tolist(), P.j[loop].tolist(), strict=True))
+    assert pairs and len(pairs) == len(set(pairs))
+    assert all(i < j - 1 for i, j in pairs)  # never the previous submap (that is the scan match)
+
+
+def test_without_compass_and_camera_scan_only_loops_recover_truth():
+    # a robot with odometry + laser + tf only: no headings, no observations
+    from holoslam.evaluate import trajectory_errors, truth_at
+
+    log, _, t, wTb = make_log(seed=1)
+    bare = dataclasses.replace(log, headings=(), images=(), camera_infos=(), tags=())
+    fe = build_problem(bare, ())
+    P = fe.problem
+    assert len(P.headings) == 0 and len(P.landmarks) == 0
+    assert "loop" in set(P.relative.kind.tolist())
+    solve = pytest.importorskip("holoslam.solve")
+    sol = solve.solve(P)
+    truth = truth_at(fe.anchor_stamps_ns, t, wTb)
+    err = trajectory_errors(sol.wTa, truth)
+    dr = trajectory_errors(truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb), truth)
+    assert err.rmse_m < 0.05 and err.rmse_m < 0.5 * dr.rmse_m, (err.rmse_m, dr.rmse_m)

@@ -167,3 +167,40 @@ def test_solve_g2o_file_matches_gtsam_and_writes(tmp_path):
     assert np.allclose(out.vertex_poses[1], [1, 0, np.pi / 2], atol=1e-3)
     assert out.fixed_ids.tolist() == [0] and out.edge_i.size == 4
     assert isinstance(out, G2oGraph)
+
+
+def test_fast_tokeniser_matches_line_by_line_path():
+    """The vectorised reader (np.loadtxt per tag) and the careful line-by-line reader (taken when the text has a
+    comment) give identical graphs; mixed g2o/TORO edges keep file order."""
+    body = SMALL.replace("# a tiny graph\n", "") + "EDGE2 1 0 -1.0 0.1 0.0 2 0 3 4 0 0\nEQUIV 1 2\n"
+    fast = parse_g2o(body)
+    slow = parse_g2o("# comment forces the careful path\n" + body)
+    for name in ("vertex_ids", "vertex_poses", "point_ids", "edge_i", "edge_j", "edge_measured", "edge_cov",
+                 "landmark_id", "landmark_measured", "landmark_cov", "fixed_ids"):
+        assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
+    assert np.array_equal(fast.edge_line + 1, slow.edge_line)  # one line shorter
+    assert fast.edge_i.tolist() == [0, 1, 2, 1]
+    assert [s.tag for s in fast.skipped] == ["EQUIV"] == [s.tag for s in slow.skipped]
+    with pytest.raises(G2oFormatError, match=r":3: EDGE_SE2 needs 11 fields"):
+        parse_g2o("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0\n")
+    with pytest.raises(G2oFormatError, match=r":2: field 4 \('x'\) is not a number"):
+        parse_g2o("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 0 x 0\n")
+
+
+def test_closed_form_small_matrix_algebra_matches_numpy():
+    from holoslam.graph.factors import noise_models
+    from holoslam.graph.linalg import chol_upper, inv_sym
+
+    rng = np.random.default_rng(1)
+    for d in (2, 3):
+        A = rng.normal(size=(200, d, d))
+        C = A @ np.swapaxes(A, 1, 2) + 1e-3 * np.eye(d)
+        assert np.allclose(inv_sym(C), np.linalg.inv(C), rtol=1e-8, atol=1e-10)
+        R = chol_upper(C)
+        assert np.allclose(R, np.swapaxes(np.linalg.cholesky(C), 1, 2), rtol=1e-10, atol=1e-12)
+    C3 = np.concatenate([C, C[:5], np.diag([1.0, 4.0, 9.0])[None]])
+    models, which = noise_models(C3)
+    assert len(models) == 201 and which[200:205].tolist() == which[:5].tolist()
+    for k in (0, 7, 200):
+        assert np.allclose(models[which[k]].covariance(), C3[k], rtol=1e-8)
+    assert np.allclose(models[which[-1]].sigmas(), [1.0, 2.0, 3.0])

@@ -219,3 +219,58 @@ def test_reference_household():
     reach = {o.object_id: o.reachable for o in world.objects}
     assert {n: G.degree(n) > 0 for n in object_nodes(G)} == reach
     assert sum(not v for v in reach.values()) == 1
+
+
+@pytest.fixture(scope="module")
+def household_run():
+    from pathlib import Path
+
+    from holoslam.evaluate import align_se2, truth_at
+    from holoslam.io.mcap import read_log
+    from holoslam.pipeline import run
+
+    path = Path(__file__).resolve().parents[1] / "datasets" / "household_small.mcap"
+    r = run(path)
+    log, _ = read_log(path)
+    gs, gp = log.ground_truth_arrays()
+    T = align_se2(r.wTa[:, :2], truth_at(r.anchor_stamps_ns, gs, gp)[:, :2])
+    import json
+
+    return r.holographic, T, json.loads(log.world_json)
+
+
+@pytest.mark.slow
+def test_household_log_holographic_graph(household_run):
+    """Issue 6 "Done when" on the bundled log (run frame aligned to the map by the anchors): environment graph
+    connected, every true room holds a room node, passages follow the skeleton, every object but the
+    unreachable one has an object edge, object positions within the backend's accuracy, and most true
+    doorways have a doorway node."""
+    G, T, world = household_run
+    env = environment_nodes(G)
+    assert nx.is_connected(G.subgraph(env))
+    # every object with an edge joins the connected environment graph
+    assert nx.is_connected(G.subgraph(env + [n for n in object_nodes(G) if G.degree(n) > 0]))
+
+    def in_map(n):
+        return transform_points(T, np.array([[G.nodes[n]["x"], G.nodes[n]["y"]]]))[0]
+
+    rooms = [n for n in env if G.nodes[n]["place"] == "room"]
+    for r in world["rooms"]:
+        inside = [n for n in rooms if r["xmin"] <= in_map(n)[0] <= r["xmax"] and r["ymin"] <= in_map(n)[1] <= r["ymax"]]
+        assert inside, r["name"]
+    for _u, _v, e in G.edges(data=True):
+        if e["kind"] == "passage":
+            assert e["passage_on_skeleton"]
+            assert e["length"] >= np.hypot(*(e["passage"][-1] - e["passage"][0])) - 1e-9
+    doors = np.array([in_map(n) for n in env if G.nodes[n]["place"] == "doorway"])
+    found = [
+        np.min(np.hypot(*(doors - (np.array(d["p0"]) + d["p1"]) / 2).T)) < 0.5 for d in world["doorways"]
+    ]
+    assert sum(found) >= len(found) - 1
+    truth = {o["id"]: o for o in world["objects"]}
+    errs = []
+    for n in object_nodes(G):
+        assert (G.degree(n) > 0) == truth[n]["reachable"], n
+        errs.append(np.hypot(*(in_map(n) - np.array(truth[n]["position"][:2]))))
+    assert len(errs) == len(truth)
+    assert np.sqrt(np.mean(np.square(errs))) < 0.08 and max(errs) < 0.3

@@ -177,3 +177,33 @@ def test_bad_inputs_raise_graph_error():
         HeadingMeasurements([0], [0.1], [0.0])
     with pytest.raises(GraphError, match="no measurements"):
         solve(SlamProblem(2), SolveOptions(fix_first=False))
+
+
+def test_auto_initialisation_keeps_the_lowest_error_start():
+    """A wrong initial guess (the true chain with every heading flipped by ~pi/2 steps) traps LM; AUTO tries the
+    other starts and returns the best, reporting every candidate's final error."""
+    problem, wTa, _ = make_world(seed=3, compass_bias=None)
+    rng = np.random.default_rng(0)
+    bad = problem.initial_wTa.copy()
+    bad[:, 2] = geo.wrap(bad[:, 2] + rng.choice([-2.5, 2.5], size=bad.shape[0]))
+    bad[:, :2] += rng.normal(0.0, 3.0, size=(bad.shape[0], 2))
+    bad[0] = problem.initial_wTa[0]
+    trapped = replace(problem, initial_wTa=bad)
+    opts = SolveOptions(reject_outliers=False, build=BuildOptions().without_kernels())
+    auto = solve(trapped, replace(opts, initialisation=Initialisation.AUTO))
+    singles = {c: solve(trapped, replace(opts, initialisation=c)).final_error for c in opts.auto_candidates}
+    assert auto.final_error == pytest.approx(min(singles.values()), rel=1e-9)
+    assert dict(auto.candidates).keys() <= singles.keys()
+    assert auto.initialisation in singles and auto.initialisation is not Initialisation.AUTO
+    assert auto.final_error < singles[Initialisation.PROBLEM]  # the bad guess is not the best start
+    assert rmse_xy(auto.wTa, wTa) < 0.5
+
+
+def test_isam2_final_lm_iterations_polish():
+    problem, _, _ = make_world(seed=4, compass_bias=None)
+    opts = SolveOptions(reject_outliers=False, build=BuildOptions().without_kernels(), method=Method.ISAM2)
+    raw = solve(problem, opts)
+    polished = solve(problem, replace(opts, isam2_final_lm_iterations=2))
+    batch = solve(problem, replace(opts, method=Method.BATCH))
+    assert polished.final_error <= raw.final_error + 1e-12
+    assert polished.final_error == pytest.approx(batch.final_error, rel=1e-6)

@@ -297,7 +297,9 @@ def _landmark_text_cov(
     v: np.ndarray, xy: np.ndarray, noise: TextNoise, rows: _Rows, path: str, text: list[str]
 ) -> np.ndarray:
     m = v.shape[0]
-    if m and np.any(np.hypot(xy[:, 0], xy[:, 1]) == 0.0):
+    if m == 0:
+        return np.zeros((0, 2, 2))
+    if np.any(np.hypot(xy[:, 0], xy[:, 1]) == 0.0):
         r = int(np.argmax(np.hypot(xy[:, 0], xy[:, 1]) == 0.0))
         raise _fail(path, rows.lines[r], text[rows.lines[r] - 1], "a landmark at range 0 has no bearing")
     all_rows = np.ones(m, bool)

@@ -124,6 +124,7 @@ class PlaceParams:
     corridor_width_m: float = 1.4
     min_room_area_m2: float = 1.0
     min_room_clearance_m: float = 0.45
+    room_to_doorway_clearance: float = 1.18
     doorway_window_m: float = 1.0
 
 
@@ -134,13 +135,30 @@ def _nearest_anchor(xy: np.ndarray, anchors: np.ndarray | None) -> np.ndarray:
     return np.argmin(d, axis=1)
 
 
-def _cut_line(mask: np.ndarray, rc: np.ndarray, direction: np.ndarray, half_len_cells: float) -> None:
+def _cut_line(
+    mask: np.ndarray, rc: np.ndarray, direction: np.ndarray, half_len_cells: float, free: np.ndarray | None = None
+) -> None:
+    """Draw (0) the line across the passage at ``rc`` (perpendicular to ``direction``) into ``mask``: with
+    ``free``, on each side up to the first non-free cell (at most 2 x ``half_len_cells``) and one cell into it,
+    so the cut closes the gap even when the skeleton cell is off the gap's middle; else ``half_len_cells``."""
     import cv2
 
     d = direction / (np.hypot(*direction) or 1.0)
     n = np.array([-d[1], d[0]])  # perpendicular, in (row, col)
-    a = rc + n * half_len_cells
-    b = rc - n * half_len_cells
+    ends = []
+    for sgn in (1.0, -1.0):
+        reach = half_len_cells
+        if free is not None:
+            t = np.arange(1, int(2 * half_len_cells) + 2, dtype=np.float64)
+            pts = np.rint(rc[None, :] + sgn * t[:, None] * n[None, :]).astype(np.int64)
+            h, w = free.shape
+            ok = (pts[:, 0] >= 0) & (pts[:, 0] < h) & (pts[:, 1] >= 0) & (pts[:, 1] < w)
+            blocked = ~ok
+            blocked[ok] = ~free[pts[ok, 0], pts[ok, 1]]
+            hit = np.nonzero(blocked)[0]
+            reach = float(t[hit[0]]) + 1.0 if hit.shape[0] else float(t[-1])
+        ends.append(rc + sgn * n * reach)
+    a, b = ends
     cv2.line(
         mask, (int(round(a[1])), int(round(a[0]))), (int(round(b[1])), int(round(b[0]))), 0, 1, cv2.LINE_8
     )
@@ -149,62 +167,82 @@ def _cut_line(mask: np.ndarray, rc: np.ndarray, direction: np.ndarray, half_len_
 def _doorway_candidates(
     topology, clr: np.ndarray, res: float, p: PlaceParams, min_width_m: float = 0.0
 ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges: in every run
-    of narrow skeleton cells (free width 2 x clearance <= ``doorway_width_m``) the narrowest cell of a run no
-    longer than ``doorway_depth_m``, and in a longer run (a door opening into a cluttered room continues as a
-    narrow passage) every cell that is the narrowest within ``doorway_window_m`` along the skeleton (one per
-    plateau). Whether a candidate separates anything is decided later by the regions it cuts."""
+    """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges (node cells
+    included): a skeleton cell whose free width (2 x clearance) lies in [``min_width_m``,
+    ``doorway_width_m``] and is the narrowest within ``doorway_window_m`` along the skeleton (one per plateau,
+    one per place). Beyond a junction the skeleton goes on; towards an endpoint (a spur running into a wall or
+    a furniture corner, clearance falling to its tip) there is no candidate within half a window of the tip.
+    Whether a candidate separates anything is decided later by the regions it cuts."""
     out = []
     half = max(int(round(0.5 * p.doorway_window_m / res)), 1)
-    for _u, _v, data in topology.edges(data=True):
+    for u, v, data in topology.edges(data=True):
         path = np.asarray(data.get("path", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
-        # the path with its two node cells (a doorway's narrowest cell is often the junction itself)
-        ends = []
-        for nd in (_u, _v):
-            a = topology.nodes[nd]
-            if "row" in a:
-                ends.append(np.array([int(a["row"]), int(a["col"])]))
-        if path.shape[0] and len(ends) == 2:
-            if np.abs(ends[0] - path[0]).sum() > np.abs(ends[1] - path[0]).sum():
-                ends = ends[::-1]
-            path = np.vstack([ends[0], path, ends[1]])
+        if path.shape[0] == 0:
+            continue
+        nu, nv = topology.nodes[u], topology.nodes[v]
+        if data.get("path_from", u) != u:
+            nu, nv = nv, nu
+        head, tail = [], []
+        if "row" in nu and "row" in nv:
+            head = [[int(nu["row"]), int(nu["col"])]]
+            tail = [[int(nv["row"]), int(nv["col"])]]
+        path = np.vstack([np.array(head, dtype=np.int64).reshape(-1, 2), path,
+                          np.array(tail, dtype=np.int64).reshape(-1, 2)])
         if path.shape[0] < 3:
             continue
         c = clr[path[:, 0], path[:, 1]]
         narrow = (2.0 * c <= p.doorway_width_m) & (2.0 * c >= min_width_m)
         if not narrow.any():
             continue
-        d = np.diff(np.concatenate([[0], narrow.astype(np.int8), [0]]))
-        starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
-        step = np.hypot(*np.diff(path, axis=0).T) * res
-        cum = np.concatenate([[0.0], np.cumsum(step)])
-        # running minimum over +-half cells (edges padded with +inf: a run end is not a minimum by itself)
-        pad = np.concatenate([np.full(half, np.inf), c, np.full(half, np.inf)])
-        win_min = np.lib.stride_tricks.sliding_window_view(pad, 2 * half + 1).min(axis=1)
-        for s_, e in zip(starts.tolist(), ends.tolist(), strict=False):
-            if cum[e - 1] - cum[s_] <= p.doorway_depth_m:
-                picks = [s_ + int(np.argmin(c[s_:e]))]
-            else:
-                is_min = c[s_:e] <= win_min[s_:e]
-                idx = np.nonzero(is_min)[0] + s_
-                # one per plateau of equal minima: its middle cell
-                if idx.shape[0] == 0:
-                    continue
-                groups = np.split(idx, np.nonzero(np.diff(idx) > 1)[0] + 1)
-                picks = [int(g[g.shape[0] // 2]) for g in groups]
-            for i in picks:
-                lo, hi = max(i - 3, 0), min(i + 3, path.shape[0] - 1)
-                direction = (path[hi] - path[lo]).astype(np.float64)
-                if not direction.any():
-                    continue
+        pads = [np.full(half, -np.inf if nd.get("kind") == "endpoint" else np.inf) for nd in (nu, nv)]
+        win_min = np.lib.stride_tricks.sliding_window_view(
+            np.concatenate([pads[0], c, pads[1]]), 2 * half + 1
+        ).min(axis=1)
+        idx = np.nonzero(narrow & (c <= win_min))[0]
+        if idx.shape[0] == 0:
+            continue
+        groups = np.split(idx, np.nonzero(np.diff(idx) > 1)[0] + 1)
+        for g in groups:
+            i = int(g[g.shape[0] // 2])
+            lo, hi = max(i - 3, 0), min(i + 3, path.shape[0] - 1)
+            direction = (path[hi] - path[lo]).astype(np.float64)
+            if direction.any():
                 out.append((path[i], direction))
-    # one candidate per place (two edges meeting at a junction both find it)
+    # one candidate per place (two edges meeting at a junction both find it): the narrowest wins
     kept: list[tuple[np.ndarray, np.ndarray]] = []
     sep = 0.5 * p.doorway_window_m / res
     for rc, dvec in sorted(out, key=lambda q: float(clr[q[0][0], q[0][1]])):
         if all(np.hypot(*(rc - k[0])) > sep for k in kept):
             kept.append((rc, dvec))
     return kept
+
+
+def _orient_cuts(cands, free: np.ndarray, clr: np.ndarray, res: float):
+    """The critical line of each candidate's gap: from the cell's nearest obstacle cell p1 to the nearest
+    obstacle cell p2 on the other side (``(p2 - rc) . (p1 - rc) < 0``), whatever way the skeleton bends there.
+    Returns ([(cell, direction along the passage = perpendicular to p1 p2)], {cell: (p1, p2)})."""
+    h, w = free.shape
+    out, lines = [], {}
+    for rc, d in cands:
+        k = int(np.ceil(2.0 * clr[rc[0], rc[1]] / res)) + 4
+        r0, r1, c0, c1 = max(rc[0] - k, 0), min(rc[0] + k + 1, h), max(rc[1] - k, 0), min(rc[1] + k + 1, w)
+        obs = np.argwhere(~free[r0:r1, c0:c1]) + np.array([r0, c0])
+        if obs.shape[0] == 0:
+            out.append((rc, d))
+            continue
+        v = (obs - rc).astype(np.float64)
+        d2 = (v**2).sum(1)
+        i1 = int(np.argmin(d2))
+        other = (v @ v[i1]) < 0
+        if not other.any() or d2[i1] == 0:
+            out.append((rc, d))
+            continue
+        i2 = int(np.argmin(np.where(other, d2, np.inf)))
+        p1, p2 = obs[i1].astype(np.float64), obs[i2].astype(np.float64)
+        n = p2 - p1
+        out.append((rc, np.array([n[1], -n[0]])))
+        lines[(int(rc[0]), int(rc[1]))] = (p1, p2)
+    return out, lines
 
 
 def _side_labels(lab: np.ndarray, free: np.ndarray, rc: np.ndarray, direction: np.ndarray, max_cells: int):
@@ -264,7 +302,9 @@ def build_holographic(
 
     # ---- doorways and rooms -------------------------------------------------------------------------------
     rr_cells = reach_model.robot_radius_m / res
-    cands = _doorway_candidates(topology, clr, res, p, min_width_m=2.0 * reach_model.robot_radius_m)
+    cands, cut_lines = _orient_cuts(
+        _doorway_candidates(topology, clr, res, p, min_width_m=2.0 * reach_model.robot_radius_m), free, clr, res
+    )
     # the space the robot can use: free cells covered by a robot-sized disc that fits (a morphological
     # opening); gaps in walls and between furniture narrower than the robot are not passages
     rad = max(int(np.floor(rr_cells)), 1)
@@ -273,10 +313,17 @@ def build_holographic(
     free_u8 = nav
     min_room_cells = p.min_room_area_m2 / (res * res)
 
+    region_clr: list[np.ndarray] = [np.zeros(0)]
+
     def draw(cs) -> tuple[int, np.ndarray, np.ndarray, list[tuple[int, int]]]:
         m = free_u8.copy()
         for rc, d in cs:
-            _cut_line(m, rc.astype(np.float64), d, clr[rc[0], rc[1]] / res + 2.0)
+            ln = cut_lines.get((int(rc[0]), int(rc[1])))
+            if ln is None:
+                _cut_line(m, rc.astype(np.float64), d, clr[rc[0], rc[1]] / res + 2.0, free)
+            else:  # obstacle to obstacle through the cell
+                for q0, q1 in ((ln[0], rc), (rc, ln[1])):
+                    cv2.line(m, (int(q0[1]), int(q0[0])), (int(q1[1]), int(q1[0])), 0, 1, cv2.LINE_8)
         n_l, lb = cv2.connectedComponents(m, connectivity=4)
         ar = np.bincount(lb.ravel(), minlength=n_l).astype(np.float64)
         # a region without room for a standing robot (a strip between furniture and a wall) is no room:
@@ -284,6 +331,7 @@ def build_holographic(
         mx = np.zeros(n_l)
         np.maximum.at(mx, lb.ravel(), clr.ravel())
         ar[mx < p.min_room_clearance_m] = np.minimum(ar[mx < p.min_room_clearance_m], min_room_cells - 0.5)
+        region_clr[:] = [mx]
         sd = [
             _side_labels(lb, free, rc.astype(np.float64), d, int(clr[rc[0], rc[1]] / res) + 8) for rc, d in cs
         ]
@@ -302,7 +350,19 @@ def build_holographic(
                 if a in small or b in small
             ]
             if not touching:
-                break
+                # a cut between two regions that are hardly wider than the gap itself is a constriction
+                # inside one room (furniture), not a doorway: drop the weakest such cut and repeat
+                mx = region_clr[0]
+                weak = [
+                    (min(mx[a], mx[b]) / max(clr[cands[i][0][0], cands[i][0][1]], 1e-9), i)
+                    for i, (a, b) in enumerate(sides)
+                ]
+                weak = [q for q in weak if q[0] < p.room_to_doorway_clearance]
+                if not weak:
+                    break
+                keep[min(weak)[1]] = False
+                cands = [c for c, k in zip(cands, keep, strict=False) if k]
+                continue
             # merge the smallest small region
             k_small = min(
                 {a for a, _ in sides if a in small} | {b for _, b in sides if b in small},
@@ -446,6 +506,11 @@ def build_holographic(
         if place in ("crossing", "dead_end") and region in room_of_label:
             add_env_edge(room_of_label[region], key)
 
+    # every place without a passage yet (e.g. a doorway whose side is no room, a crossing outside the rooms)
+    # and every component left apart are joined to the nearest place along the skeleton, so the environment
+    # graph is connected wherever the skeleton is
+    _join_components(G, places, index, cells, sk_graph, sk_cells, add_env_edge)
+
     # ---- objects ------------------------------------------------------------------------------------------
     rooms = [(pl[0], pl[3], index[pl[0]]) for pl in places if pl[1] == "room"]
     for ob in objects:
@@ -533,15 +598,57 @@ def _reach(pos, rm: ReachModel, free, clr, lab, safe_lab, rooms, cells, res, ox,
     return out
 
 
+def _join_components(G, places, index, cells, sk_graph, sk_cells, add_env_edge) -> None:
+    """Join the components of the environment graph: repeatedly, from the component of the first room, the
+    place of another component nearest along the skeleton (multi-source Dijkstra over skeleton cells) gets a
+    passage to the nearest place of the grown component. Places off every skeleton component stay apart."""
+    import networkx as nx
+
+    if sk_cells.shape[0] == 0 or len(places) < 2:
+        return
+    keys = [pl[0] for pl in places]
+    sk_of = {k: int(np.argmin(np.abs(sk_cells - cells[index[k]]).sum(1))) for k in keys}
+    owner: dict[int, list[str]] = {}
+    for k, c in sk_of.items():
+        owner.setdefault(c, []).append(k)
+    while True:
+        comps = list(nx.connected_components(G.subgraph(keys)))
+        if len(comps) < 2:
+            return
+        comps.sort(key=lambda c: (not any(G.nodes[k]["place"] == "room" for k in c), -len(c)))
+        grown = comps[0]
+        dist, paths = nx.multi_source_dijkstra(sk_graph, {sk_of[k] for k in grown}, weight="weight")
+        best = None
+        for c, dd in dist.items():
+            for k in owner.get(c, ()):
+                if k not in grown and (best is None or dd < best[0]):
+                    best = (dd, k, c)
+        if best is None:
+            return  # the rest is on skeleton components of its own
+        src_cell = paths[best[2]][0]
+        src = min((k for k in owner.get(src_cell, ()) if k in grown), default=None)
+        if src is None:
+            return
+        add_env_edge(src, best[1])
+
+
 def _skeleton_cell_graph(topology, res: float):
     """A graph over the skeleton cells of the topology's edge paths (8-connected steps, weights in metres)."""
     import networkx as nx
 
-    paths = [
-        np.asarray(d["path"], dtype=np.int64).reshape(-1, 2)
-        for _u, _v, d in topology.edges(data=True)
-        if "path" in d
-    ]
+    # each edge path with the cells of its two nodes (paths stop next to a junction cluster's representative
+    # cell, so without them the paths would not join)
+    paths = []
+    for u, v, d in topology.edges(data=True):
+        if "path" not in d:
+            continue
+        q = np.asarray(d["path"], dtype=np.int64).reshape(-1, 2)
+        nu, nv = topology.nodes[u], topology.nodes[v]
+        if d.get("path_from", u) != u:
+            nu, nv = nv, nu
+        if q.shape[0] and "row" in nu and "row" in nv:
+            q = np.vstack([[int(nu["row"]), int(nu["col"])], q, [int(nv["row"]), int(nv["col"])]])
+        paths.append(q)
     if not paths:
         return nx.Graph(), np.zeros((0, 2), dtype=np.int64)
     allc = np.concatenate(paths)

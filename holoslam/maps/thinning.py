@@ -164,15 +164,15 @@ def _as_mask(free: np.ndarray) -> np.ndarray:
 
 
 def neighbour_codes(mask: np.ndarray) -> np.ndarray:
-    """(H, W) uint8: bit k set when neighbour p(k+2) is set (outside the grid counts as 0)."""
-    m = _as_mask(mask)
-    h, w = m.shape
-    pad = np.zeros((h + 2, w + 2), dtype=np.uint8)
-    pad[1:-1, 1:-1] = m
-    code = np.zeros((h, w), dtype=np.uint8)
+    """(H, W) uint8: bit k set when neighbour p(k+2) is set (outside the grid counts as 0). One cv2.filter2D
+    correlation with the powers of two (exact: the sum is at most 255)."""
+    import cv2
+
+    m = np.ascontiguousarray(_as_mask(mask)).view(np.uint8)
+    kernel = np.zeros((3, 3), dtype=np.float32)
     for k, (dr, dc) in enumerate(NEIGHBOUR_OFFSETS):
-        code |= pad[1 + dr : 1 + dr + h, 1 + dc : 1 + dc + w] << k
-    return code
+        kernel[1 + dr, 1 + dc] = 1 << k
+    return cv2.filter2D(m, cv2.CV_8U, kernel, borderType=cv2.BORDER_CONSTANT)
 
 
 def removable_mask(skeleton: np.ndarray) -> np.ndarray:
@@ -227,12 +227,15 @@ class _Flat:
 
     def __init__(self, mask: np.ndarray) -> None:
         h, w = mask.shape
-        self.h, self.w, self.w2 = h, w, w + 2
-        pad = np.zeros((h + 2, w + 2), dtype=np.uint8)
-        pad[1:-1, 1:-1] = mask
+        # rows padded to a power of two (at least w + 2): a cell's row and column parity are then bit tests
+        self.shift = (w + 1).bit_length()
+        self.h, self.w, self.w2 = h, w, 1 << self.shift
+        pad = np.zeros((h + 2, self.w2), dtype=np.uint8)
+        pad[1:-1, 1 : w + 1] = mask
         self.a = pad.ravel()
         self.code = neighbour_codes(pad).ravel()
-        self.itype = np.int32 if self.a.shape[0] < 2**31 - 16 else np.int64
+        # intp indices: numpy gathers/scatters with int32 indices convert them first (several times slower)
+        self.itype = np.intp
         self.offsets = [self.itype(dr * self.w2 + dc) for dr, dc in NEIGHBOUR_OFFSETS]
         # clearing bit (k + 4) % 8 of the cell at d + offset[k] tells it that d was deleted
         self.clear = [np.uint8(0xFF ^ (1 << ((k + 4) % 8))) for k in range(8)]
@@ -248,31 +251,32 @@ class _Flat:
         return s[keep]
 
     def delete(self, idx: np.ndarray) -> np.ndarray:
-        """Delete the cells idx (repeats are harmless); return their set 8-neighbours, each once, sorted.
-        Only set cells' codes are kept up to date (a deleted cell's code is never read again)."""
+        """Delete the set cells idx (repeats are harmless); return their neighbours that were set before
+        this call (with repeats; callers skip the ones deleted since). A cell's own code says which
+        neighbours are set, so only those codes are touched; only set cells' codes are kept up to date (a
+        deleted cell's code is never read again)."""
         if idx.size == 0:
             return idx
         a, code = self.a, self.code
+        c = np.take(code, idx)
         a[idx] = 0
         nbs = []
-        for off, clear in zip(self.offsets, self.clear, strict=True):
-            q = idx + off
-            q = q[np.take(a, q) != 0]
-            np.put(code, q, np.take(code, q) & clear)
+        for k, (off, clear) in enumerate(zip(self.offsets, self.clear, strict=True)):
+            q = idx[(c & np.uint8(1 << k)) != 0] + off
+            code[q] = np.take(code, q) & clear  # setitem: much faster than np.put
             nbs.append(q)
-        return self.unique(np.concatenate(nbs))
+        return np.concatenate(nbs)  # not deduplicated: callers deduplicate the (fewer) cells they mark
 
     def parity(self, idx: np.ndarray) -> np.ndarray:
-        r = idx // self.w2
-        c = idx - r * self.w2
-        return (r & 1) * 2 + (c & 1)
+        """Class (row % 2) * 2 + (col % 2) of each cell."""
+        return ((idx >> self.shift) & 1) * 2 + (idx & 1)
 
     def boundary(self) -> np.ndarray:
         """Set cells with at least one unset 8-neighbour."""
         return np.flatnonzero((self.a != 0) & (self.code != 0xFF)).astype(self.itype)
 
     def mask(self) -> np.ndarray:
-        return self.a.reshape(self.h + 2, self.w2)[1:-1, 1:-1].astype(bool)
+        return self.a.reshape(self.h + 2, self.w2)[1:-1, 1 : self.w + 1].astype(bool)
 
 
 def _zs_passes(g: _Flat, guard: bool) -> None:

@@ -207,3 +207,317 @@ def path_regions(nodes, nrp, nri):
             else:
                 q += 1
     return out
+
+
+@nb.njit(**_JIT)
+def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, first, first_cost, rg, gx, gy, hw):
+    """Portal sequence (int64 array) of a shortest start -> goal route over the portal graph (nodes = portals
+    at their centres (cu, cv), edges = two portals of one region, weighted by centre distance; Euclidean
+    heuristic, consistent). ``first`` are the start region's portals with costs ``first_cost``; the goal is
+    reached from every portal of region ``rg`` (``ea[p] == rg or eb[p] == rg``). Empty when unreachable."""
+    n = cu.shape[0]
+    INF = np.inf
+    gcost = np.full(n, INF)
+    parent = np.full(n, -1, dtype=np.int64)
+    closed = np.zeros(n, dtype=np.bool_)
+    heap = [(0.0, 0.0, np.int64(-3))]
+    heap.pop()
+    for i in range(first.shape[0]):
+        j = first[i]
+        d = first_cost[i]
+        if d < gcost[j]:
+            gcost[j] = d
+            du = cu[j] - gx
+            dv = cv[j] - gy
+            heapq.heappush(heap, (d + hw * math.sqrt(du * du + dv * dv), d, np.int64(j)))
+    GOAL = np.int64(-2)
+    best_goal = INF
+    goal_parent = np.int64(-1)
+    while len(heap) > 0:
+        f, gc, u = heapq.heappop(heap)
+        if u == GOAL:
+            break
+        if closed[u] or gc > gcost[u]:
+            continue
+        closed[u] = True
+        if ea[u] == rg or eb[u] == rg:
+            du = cu[u] - gx
+            dv = cv[u] - gy
+            c = gc + math.sqrt(du * du + dv * dv)
+            if c < best_goal:
+                best_goal = c
+                goal_parent = u
+                heapq.heappush(heap, (c, c, GOAL))
+        for k in range(pptr[u], pptr[u + 1]):
+            j = pdst[k]
+            d = gc + pw[k]
+            if d < gcost[j]:
+                gcost[j] = d
+                parent[j] = u
+                du = cu[j] - gx
+                dv = cv[j] - gy
+                heapq.heappush(heap, (d + hw * math.sqrt(du * du + dv * dv), d, j))
+    if goal_parent < 0:
+        return np.zeros(0, dtype=np.int64)
+    m = 0
+    x = goal_parent
+    while x != -1:
+        m += 1
+        x = parent[x]
+    out = np.empty(m, dtype=np.int64)
+    x = goal_parent
+    for i in range(m - 1, -1, -1):
+        out[i] = x
+        x = parent[x]
+    return out
+
+
+@nb.njit(**_JIT)
+def _best_on_segment(ax, ay, bx, by, px, py, qx, qy):
+    """Point of segment p -> q minimising |x - a| + |x - b| (convex along the segment: ternary-free closed
+    form through the reflection of b across the segment's line, clamped to the segment)."""
+    dx = qx - px
+    dy = qy - py
+    L2 = dx * dx + dy * dy
+    if L2 <= 0.0:
+        return px, py
+    # signed side of a and b w.r.t. the line
+    sa = (ax - px) * dy - (ay - py) * dx
+    sb = (bx - px) * dy - (by - py) * dx
+    if sa * sb > 0.0:  # same side: reflect b
+        t = ((bx - px) * dx + (by - py) * dy) / L2
+        fx = px + t * dx
+        fy = py + t * dy
+        bx = 2.0 * fx - bx
+        by = 2.0 * fy - by
+        sb = -sb
+    den = sa - sb
+    if den == 0.0:  # a and b both on the line: the nearest point of the segment to a's projection
+        t = ((ax - px) * dx + (ay - py) * dy) / L2
+    else:
+        # intersection of a -> b with the line, as a parameter along p -> q
+        lam = sa / den
+        ix = ax + lam * (bx - ax)
+        iy = ay + lam * (by - ay)
+        t = ((ix - px) * dx + (iy - py) * dy) / L2
+    t = min(max(t, 0.0), 1.0)
+    return px + t * dx, py + t * dy
+
+
+@nb.njit(**_JIT)
+def _best_in_box(ax, ay, bx, by, u0, v0, u1, v1):
+    """Point x of the closed box [u0, u1] x [v0, v1] minimising |x - a| + |x - b|."""
+    # the segment a -> b meets the box: the middle of its clipped part (Liang-Barsky)
+    t0 = 0.0
+    t1 = 1.0
+    dx = bx - ax
+    dy = by - ay
+    ok = True
+    for k in range(4):
+        if k == 0:
+            p, q = -dx, ax - u0
+        elif k == 1:
+            p, q = dx, u1 - ax
+        elif k == 2:
+            p, q = -dy, ay - v0
+        else:
+            p, q = dy, v1 - ay
+        if p == 0.0:
+            if q < 0.0:
+                ok = False
+                break
+        else:
+            r = q / p
+            if p < 0.0:
+                if r > t0:
+                    t0 = r
+            else:
+                if r < t1:
+                    t1 = r
+            if t0 > t1:
+                ok = False
+                break
+    if ok:
+        t = 0.5 * (t0 + t1)
+        return min(max(ax + t * dx, u0), u1), min(max(ay + t * dy, v0), v1)
+    best = np.inf
+    rx, ry = u0, v0
+    for k in range(4):
+        if k == 0:
+            px, py, qx, qy = u0, v0, u1, v0
+        elif k == 1:
+            px, py, qx, qy = u1, v0, u1, v1
+        elif k == 2:
+            px, py, qx, qy = u1, v1, u0, v1
+        else:
+            px, py, qx, qy = u0, v1, u0, v0
+        x, y = _best_on_segment(ax, ay, bx, by, px, py, qx, qy)
+        c = math.hypot(x - ax, y - ay) + math.hypot(x - bx, y - by)
+        if c < best:
+            best = c
+            rx, ry = x, y
+    return rx, ry
+
+
+@nb.njit(**_JIT)
+def refine(su, sv, gu, gv, boxes, sweeps, tol):
+    """Shortest polyline start -> p_1 -> ... -> p_m -> goal with each p_i in the closed box
+    ``boxes[i] = (u0, v0, u1, v1)`` (a convex problem), by alternating forward and backward exact
+    coordinate updates from the box centres until no point moves more than ``tol`` or ``sweeps`` sweeps.
+    Returns the (m + 2, 2) points."""
+    m = boxes.shape[0]
+    P = np.empty((m + 2, 2))
+    P[0, 0], P[0, 1] = su, sv
+    P[m + 1, 0], P[m + 1, 1] = gu, gv
+    for i in range(m):
+        P[i + 1, 0] = 0.5 * (boxes[i, 0] + boxes[i, 2])
+        P[i + 1, 1] = 0.5 * (boxes[i, 1] + boxes[i, 3])
+    for it in range(sweeps):
+        moved = 0.0
+        for s in range(m):
+            i = s if it % 2 == 0 else m - 1 - s
+            x, y = _best_in_box(
+                P[i, 0], P[i, 1], P[i + 2, 0], P[i + 2, 1], boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 3]
+            )
+            mv = abs(x - P[i + 1, 0]) + abs(y - P[i + 1, 1])
+            if mv > moved:
+                moved = mv
+            P[i + 1, 0] = x
+            P[i + 1, 1] = y
+        if moved <= tol:
+            break
+    return P
+
+
+@nb.njit(**_JIT)
+def simplify_validate(free, pts, eps, tol):
+    """Drop the points where the polyline does not turn (|cross| <= tol * |a| * |b|, same direction), then
+    check every remaining segment exactly on the grid. Returns (points, ok)."""
+    k = pts.shape[0]
+    keep = np.empty(k, dtype=np.int64)
+    nk = 1
+    keep[0] = 0
+    for i in range(1, k - 1):
+        p = keep[nk - 1]
+        ax = pts[i, 0] - pts[p, 0]
+        ay = pts[i, 1] - pts[p, 1]
+        bx = pts[i + 1, 0] - pts[i, 0]
+        by = pts[i + 1, 1] - pts[i, 1]
+        la = math.hypot(ax, ay)
+        lb = math.hypot(bx, by)
+        if la <= 1e-12:
+            continue
+        if lb > 1e-12 and (abs(ax * by - ay * bx) > tol * la * lb or ax * bx + ay * by < 0.0):
+            keep[nk] = i
+            nk += 1
+    if k > 1:
+        keep[nk] = k - 1
+        nk += 1
+    out = np.empty((nk, 2))
+    for q in range(nk):
+        out[q, 0] = pts[keep[q], 0]
+        out[q, 1] = pts[keep[q], 1]
+    for q in range(nk - 1):
+        if not seg_free(free, out[q, 0], out[q, 1], out[q + 1, 0], out[q + 1, 1], eps):
+            return out, False
+    if nk == 1 and not _point_free(free, out[0, 0], out[0, 1], eps):
+        return out, False
+    return out, True
+
+
+@nb.njit(**_JIT)
+def _box_interval(ax, ay, b, i):
+    """Absolute angular interval (lo, hi, lo corner u, v, hi corner u, v, inside) of box ``b[i]`` seen from
+    (ax, ay); ``inside`` when the point lies in the closed box (no constraint)."""
+    u0, v0, u1, v1 = b[i, 0], b[i, 1], b[i, 2], b[i, 3]
+    if u0 <= ax <= u1 and v0 <= ay <= v1:
+        return 0.0, 0.0, ax, ay, ax, ay, True
+    cx = 0.5 * (u0 + u1) - ax
+    cy = 0.5 * (v0 + v1) - ay
+    tc = math.atan2(cy, cx)
+    lo = np.inf
+    hi = -np.inf
+    lu = lv = hu = hv = 0.0
+    ld = hd = np.inf
+    for k in range(4):
+        x = u0 if (k == 0 or k == 3) else u1
+        y = v0 if k < 2 else v1
+        dx = x - ax
+        dy = y - ay
+        r = math.atan2(cx * dy - cy * dx, cx * dx + cy * dy)
+        d2 = dx * dx + dy * dy
+        # ties (corners on one ray from the point): the nearer corner is where a path touching the box
+        # bends
+        if r < lo - 1e-12 or (r <= lo + 1e-12 and d2 < ld):
+            lo, lu, lv, ld = min(r, lo), x, y, d2
+        if r > hi + 1e-12 or (r >= hi - 1e-12 and d2 < hd):
+            hi, hu, hv, hd = max(r, hi), x, y, d2
+    return tc + lo, tc + hi, lu, lv, hu, hv, False
+
+
+@nb.njit(**_JIT)
+def funnel(su, sv, gu, gv, boxes):
+    """Shortest polyline start -> goal passing through the closed boxes ``boxes[i] = (u0, v0, u1, v1)`` in
+    order, where consecutive boxes (and the start / goal with the first / last box) lie in one convex region:
+    the funnel algorithm on angular intervals seen from the current apex. A straight piece from the apex that
+    meets boxes i..j is covered by the regions between them, so it is collision-free. Returns (K, 2)."""
+    m = boxes.shape[0]
+    # boxes plus the goal as a degenerate last box
+    B = np.empty((m + 1, 4))
+    B[:m] = boxes
+    B[m, 0] = gu
+    B[m, 2] = gu
+    B[m, 1] = gv
+    B[m, 3] = gv
+    out = np.empty((m + 2, 2))
+    out[0, 0], out[0, 1] = su, sv
+    n_out = 1
+    ax, ay = su, sv
+    i = 0
+    guard = 0
+    while True:
+        guard += 1
+        if guard > 4 * (m + 2) * (m + 2):  # cannot happen: every restart moves the apex forward
+            break
+        has = False
+        L = H = 0.0
+        lu = lv = hu = hv = 0.0
+        li = hi_i = -1
+        bent = False
+        j = i
+        while j <= m:
+            bl, bh, blu, blv, bhu, bhv, inside = _box_interval(ax, ay, B, j)
+            if not inside:
+                if not has:
+                    L, H, lu, lv, hu, hv, li, hi_i = bl, bh, blu, blv, bhu, bhv, j, j
+                    has = True
+                else:
+                    # bring the box interval next to the funnel (angles mod 2 pi)
+                    k = np.rint(((bl + bh) - (L + H)) / (4.0 * math.pi))
+                    bl -= 2.0 * math.pi * k
+                    bh -= 2.0 * math.pi * k
+                    if bh < L:  # wholly on the low side: bend at the low corner
+                        ax, ay = lu, lv
+                        i = li + 1 if li < m else m
+                        bent = True
+                        break
+                    if bl > H:
+                        ax, ay = hu, hv
+                        i = hi_i + 1 if hi_i < m else m
+                        bent = True
+                        break
+                    if bl >= L:
+                        L, lu, lv, li = bl, blu, blv, j
+                    if bh <= H:
+                        H, hu, hv, hi_i = bh, bhu, bhv, j
+            j += 1
+        if bent:
+            out[n_out, 0], out[n_out, 1] = ax, ay
+            n_out += 1
+            if n_out >= m + 1:
+                break
+            continue
+        break
+    out[n_out, 0], out[n_out, 1] = gu, gv
+    n_out += 1
+    return out[:n_out].copy()

@@ -52,6 +52,9 @@ __all__ = [
 
 LENGTH_FACTOR = 1.15
 EPS_CELLS = 1e-9  # geometric tolerance of the collision check, in cells
+REFINE_SWEEPS = 60  # at most this many coordinate sweeps of the corridor refinement
+REFINE_TOL = 1e-4  # cells: the refinement stops when no point moves more than this in a sweep
+HEURISTIC_WEIGHT = 1.0  # weighted A* over the portal graph (1 = exact over portal centres)
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,23 +73,21 @@ class Route:
 class RoutePlanner:
     """The precomputed query structure over a :class:`TwoLayerGraph` (see the module docstring).
 
-    Points are in cell-boundary coordinates (u = column axis, v = row axis). Node k at ``node_uv[k]`` is a
-    corner or the centre of one or more portals (coincident points are one node) and lies on the regions
-    ``node_region_ids[node_region_ptr[k]:node_region_ptr[k+1]]`` (ascending); ``region_node_ptr`` /
-    ``region_node_ids`` list each region's nodes. The edges (CSR ``adj_ptr``, ``adj_dst``, ``adj_w``) join
-    the nodes sharing a region, weighted by their distance in cells (straight segments inside one convex
-    region, so collision-free). ``kernels`` is the compiled kernel module (``holoslam.planning._fast``) or
-    None when numba is not installed (pure-Python search, same answers, much slower).
+    Points are in cell-boundary coordinates (u = column axis, v = row axis). Portal k (= region edge k of the
+    graph, joining regions ``graph.region_edges[k]``) is the closed box ``portal_boxes[k]`` = (u0, v0, u1,
+    v1), with centre ``portal_uv[k]``; ``region_portal_ptr`` / ``region_portal_ids`` (CSR) list each
+    region's portals. The portal graph (CSR ``adj_ptr``, ``adj_dst``, ``adj_w``) joins two portals of one
+    region, weighted by the distance of their centres in cells. ``kernels`` is the compiled kernel module
+    (:mod:`holoslam.planning._fast`).
     """
 
     graph: TwoLayerGraph
-    node_uv: np.ndarray  # (P, 2)
-    node_region_ptr: np.ndarray  # (P+1,) CSR: the regions each node lies on
-    node_region_ids: np.ndarray
-    region_node_ptr: np.ndarray  # (R+1,)
-    region_node_ids: np.ndarray
+    portal_uv: np.ndarray  # (F, 2)
+    portal_boxes: np.ndarray  # (F, 4) u0, v0, u1, v1
+    region_portal_ptr: np.ndarray  # (R+1,)
+    region_portal_ids: np.ndarray
     region_component: np.ndarray  # (R,) connected component of the region graph
-    adj_ptr: np.ndarray = field(repr=False)  # (P+1,)
+    adj_ptr: np.ndarray = field(repr=False)  # (F+1,)
     adj_dst: np.ndarray = field(repr=False)  # (A,)
     adj_w: np.ndarray = field(repr=False)  # (A,) cells
     free: np.ndarray = field(repr=False)  # (H, W) bool planner free mask
@@ -94,14 +95,13 @@ class RoutePlanner:
     _cache: dict = field(repr=False, default_factory=dict, compare=False)
 
 
-def _kernels(use_compiled: bool = True):
-    """The numba kernel module, or None when numba is missing or ``use_compiled`` is False."""
-    if not use_compiled:
-        return None
+def _kernels():
     try:
         from holoslam.planning import _fast
-    except ImportError:  # pragma: no cover - numba is a declared dependency
-        return None
+    except ImportError as e:  # pragma: no cover - numba is a declared dependency
+        raise PlanningError(
+            f"the compiled planning kernels need numba ({e}); install it: pip install numba"
+        ) from e
     return _fast
 
 
@@ -125,52 +125,37 @@ def _components(n: int, edges: np.ndarray) -> np.ndarray:
         np.minimum.at(parent, hi, lo)
 
 
-def build_planner(graph: TwoLayerGraph, use_compiled: bool = True) -> RoutePlanner:
-    """Precompute the portal-point graph of a two-layer graph (vectorised; its size is the sum over regions of
-    the square of the region's number of portal points)."""
-    P = graph.portals.astype(np.float64)
-    F = P.shape[0]
+def build_planner(graph: TwoLayerGraph) -> RoutePlanner:
+    """Precompute the portal graph of a two-layer graph (vectorised; its size is the sum over regions of the
+    square of the region's number of portals)."""
+    E = graph.region_edges.astype(np.int64)
+    F = E.shape[0]
     R = graph.n_regions
-    vlo, ulo, vhi, uhi = P[:, 0], P[:, 1], P[:, 2], P[:, 3]
-    cu = np.stack([ulo, uhi, ulo, uhi, (ulo + uhi) / 2], axis=1).ravel()
-    cv = np.stack([vlo, vlo, vhi, vhi, (vlo + vhi) / 2], axis=1).ravel()
-    H2, _W2 = 2 * graph.shape[0] + 1, 2 * graph.shape[1] + 1
-    pkey = np.rint(cu * 2).astype(np.int64) * H2 + np.rint(cv * 2).astype(np.int64)  # a point, in half cells
-    ukey = unique_int(pkey)  # coincident points of different portals are one node
-    node_uv = np.column_stack([(ukey // H2) / 2.0, (ukey % H2) / 2.0])
-    n_nodes = node_uv.shape[0]
-    node_of = np.searchsorted(ukey, pkey)
-    E = graph.region_edges
-    fid = np.repeat(np.arange(F, dtype=np.int64), 5)
-    inc = unique_int(
-        np.concatenate([E[fid, 0] * max(n_nodes, 1) + node_of, E[fid, 1] * max(n_nodes, 1) + node_of])
-        if F
-        else np.zeros(0, np.int64)
-    )
-    owner, nid = inc // max(n_nodes, 1), inc % max(n_nodes, 1)  # sorted by region: (region, node) incidences
+    P = graph.portals.astype(np.float64)  # (row_lo, col_lo, row_hi, col_hi)
+    boxes = np.column_stack([P[:, 1], P[:, 0], P[:, 3], P[:, 2]]).reshape(-1, 4)
+    cen = np.column_stack([(boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2]).reshape(-1, 2)
+    # (region, portal) incidences sorted by region
+    owner = np.concatenate([E[:, 0], E[:, 1]])
+    pid = np.concatenate([np.arange(F, dtype=np.int64)] * 2)
+    o = np.argsort(owner, kind="stable")
+    owner, pid = owner[o], pid[o]
     ptr = np.searchsorted(owner, np.arange(R + 1))
-    o3 = np.argsort(nid, kind="stable")
-    node_region_ptr = np.searchsorted(nid[o3], np.arange(n_nodes + 1))
-    node_region_ids = owner[o3]
-    # all ordered pairs of distinct nodes of one region
+    # all ordered pairs of distinct portals of one region
     deg = np.diff(ptr)
     dv = deg[owner]
     rep = np.repeat(np.arange(owner.shape[0]), dv)
     off = np.arange(rep.shape[0]) - np.repeat(np.cumsum(dv) - dv, dv)
-    src = nid[rep]
-    dst = nid[ptr[owner[rep]] + off]
+    src = pid[rep]
+    dst = pid[ptr[owner[rep]] + off]
     m = src != dst
     src, dst = src[m], dst[m]
-    d = np.hypot(*(node_uv[src] - node_uv[dst]).T) if src.shape[0] else np.zeros(0)
-    o2 = np.argsort(src * max(n_nodes, 1) + dst)  # by source, then destination (deterministic)
-    src, dst, d = src[o2], dst[o2], d[o2]
-    aptr = np.searchsorted(src, np.arange(n_nodes + 1))
+    o2 = np.argsort(src * max(F, 1) + dst)  # by source, then destination (deterministic)
+    src, dst = src[o2], dst[o2]
+    d = np.hypot(*(cen[src] - cen[dst]).T) if src.shape[0] else np.zeros(0)
+    aptr = np.searchsorted(src, np.arange(F + 1))
     comp = _components(R, graph.region_edges)
-    ro = [
-        _ro(a)
-        for a in (node_uv, node_region_ptr, node_region_ids, ptr, nid, comp, aptr, dst, d.astype(np.float64))
-    ]
-    return RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels(use_compiled))
+    ro = [_ro(a) for a in (cen, boxes, ptr, pid, comp, aptr, dst, d.astype(np.float64))]
+    return RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels())
 
 
 def _ro(a: np.ndarray) -> np.ndarray:
@@ -285,131 +270,35 @@ def _locate(planner: RoutePlanner, xy: np.ndarray, snap_radius_m: float, what: s
     )
 
 
-def _search(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray, rg: int) -> np.ndarray:
-    """A* over portal points (Euclidean heuristic, admissible and consistent); returns the node sequence
-    (int64, empty when the goal is unreachable). Compiled when numba is available."""
-    uv = planner.node_uv
-    ptr, nid = planner.region_node_ptr, planner.region_node_ids
-    first = nid[ptr[rs] : ptr[rs + 1]]
-    q = uv[first]
+def _corridor(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray, rg: int) -> np.ndarray:
+    """Portal sequence of the region corridor from region ``rs`` to ``rg`` (compiled A* over the portal
+    graph, Euclidean heuristic); empty when unreachable."""
+    c = planner._cache
+    if "cu" not in c:
+        E = planner.graph.region_edges
+        c["cu"] = np.ascontiguousarray(planner.portal_uv[:, 0])
+        c["cv"] = np.ascontiguousarray(planner.portal_uv[:, 1])
+        c["ea"] = np.ascontiguousarray(E[:, 0], dtype=np.int64)
+        c["eb"] = np.ascontiguousarray(E[:, 1], dtype=np.int64)
+    ptr, ids = planner.region_portal_ptr, planner.region_portal_ids
+    first = ids[ptr[rs] : ptr[rs + 1]]
+    q = planner.portal_uv[first]
     d0 = np.hypot(q[:, 0] - s_uv[0], q[:, 1] - s_uv[1])
-    gx, gy = float(g_uv[0]), float(g_uv[1])
-    K = planner.kernels
-    if K is not None:
-        return K.astar(
-            planner.adj_ptr,
-            planner.adj_dst,
-            planner.adj_w,
-            *_uv_columns(planner),
-            planner.node_region_ptr,
-            planner.node_region_ids,
-            first,
-            d0,
-            rg,
-            gx,
-            gy,
-        )
-    return _search_py(planner, first, d0, rg, gx, gy)
-
-
-def _uv_columns(planner: RoutePlanner) -> tuple[np.ndarray, np.ndarray]:
-    c = planner._cache
-    if "U" not in c:
-        c["U"] = np.ascontiguousarray(planner.node_uv[:, 0])
-        c["V"] = np.ascontiguousarray(planner.node_uv[:, 1])
-    return c["U"], c["V"]
-
-
-def _search_py(planner: RoutePlanner, first: np.ndarray, d0: np.ndarray, rg: int, gx: float, gy: float):
-    """The pure-Python A* (same algorithm as ``_fast.astar``), used when numba is not installed."""
-    c = planner._cache
-    if "adj" not in c:
-        ap, ad, aw = planner.adj_ptr.tolist(), planner.adj_dst.tolist(), planner.adj_w.tolist()
-        c["adj"] = [list(zip(ad[ap[k] : ap[k + 1]], aw[ap[k] : ap[k + 1]], strict=True)) for k in range(len(ap) - 1)]
-        c["u"], c["v"] = planner.node_uv[:, 0].tolist(), planner.node_uv[:, 1].tolist()
-    adj, U, V = c["adj"], c["u"], c["v"]
-    nrp, nri = planner.node_region_ptr, planner.node_region_ids
-    goal_nodes = planner.region_node_ids[planner.region_node_ptr[rg] : planner.region_node_ptr[rg + 1]]
-    on_goal = set(goal_nodes.tolist())
-    del nrp, nri
-    gcost: dict[int, float] = {}
-    parent: dict[int, int] = {}
-    heap: list[tuple[float, float, int]] = []
-    sqrt = math.sqrt
-    for j, d in zip(first.tolist(), d0.tolist(), strict=True):
-        if d < gcost.get(j, math.inf):
-            gcost[j] = d
-            parent[j] = -1
-            heap.append((d + sqrt((U[j] - gx) ** 2 + (V[j] - gy) ** 2), d, j))
-    heapq.heapify(heap)
-    GOAL = -2
-    best_goal = math.inf
-    closed: set[int] = set()
-    while heap:
-        f, gc, n = heapq.heappop(heap)
-        if n == GOAL:
-            break
-        if n in closed or gc > gcost[n]:
-            continue
-        closed.add(n)
-        if n in on_goal:
-            cg = gc + sqrt((U[n] - gx) ** 2 + (V[n] - gy) ** 2)
-            if cg < best_goal:
-                best_goal = cg
-                parent[GOAL] = n
-                heapq.heappush(heap, (cg, cg, GOAL))
-        for j, w in adj[n]:
-            d = gc + w
-            if d < gcost.get(j, math.inf):
-                gcost[j] = d
-                parent[j] = n
-                du, dv = U[j] - gx, V[j] - gy
-                heapq.heappush(heap, (d + sqrt(du * du + dv * dv), d, j))
-    if GOAL not in parent:
-        return np.zeros(0, dtype=np.int64)
-    path = []
-    n = parent[GOAL]
-    while n != -1:
-        path.append(n)
-        n = parent[n]
-    return np.array(path[::-1], dtype=np.int64)
-
-
-def _string_pull(free: np.ndarray, pts: np.ndarray, window: int = 12, passes: int = 3) -> np.ndarray:
-    """Keep the start; from each kept point jump to the farthest of the next ``window`` points in line of
-    sight on the grid (checked exactly, in one vectorised call per kept point); repeat on the result
-    ``passes`` times. Short paths (at most ``window`` + 1 points) are pulled in one call over all pairs.
-    Every kept segment has been checked, so the result is validated on the grid."""
-    for _ in range(passes):
-        k = pts.shape[0]
-        if k <= 2:
-            if k == 2 and not segments_free(free, pts[:1], pts[1:]).all():
-                raise PlanningError("internal planning error: a path segment crosses an obstacle")
-            return pts
-        if k <= window + 1:
-            ii, jj = np.triu_indices(k, 1)
-            vis = np.zeros((k, k), dtype=bool)
-            vis[ii, jj] = segments_free(free, pts[ii], pts[jj])
-        keep = [0]
-        i = 0
-        while i < k - 1:
-            if k <= window + 1:
-                later = np.nonzero(vis[i, i + 1 :])[0]
-            else:
-                cand = np.arange(i + 1, min(i + window, k - 1) + 1)
-                later = np.nonzero(
-                    segments_free(free, np.repeat(pts[i : i + 1], cand.shape[0], axis=0), pts[cand])
-                )[0]
-            if later.shape[0] == 0:
-                raise PlanningError(
-                    "internal planning error: a path segment crosses an obstacle; rebuild the graph"
-                )
-            i = i + 1 + int(later[-1])
-            keep.append(i)
-        if len(keep) == k or k <= window + 1:  # all pairs were seen: another pass cannot shorten it
-            return pts[keep]
-        pts = pts[keep]
-    return pts
+    return planner.kernels.corridor_astar(
+        planner.adj_ptr,
+        planner.adj_dst,
+        planner.adj_w,
+        c["cu"],
+        c["cv"],
+        c["ea"],
+        c["eb"],
+        first,
+        d0,
+        int(rg),
+        float(g_uv[0]),
+        float(g_uv[1]),
+        HEURISTIC_WEIGHT,
+    )
 
 
 def plan_path(
@@ -434,30 +323,26 @@ def plan_path(
             f"({float(start_xy[0]):.2f}, {float(start_xy[1]):.2f}): no free passage joins them in the "
             "planning graph"
         )
-    if rs == rg:
-        mid = np.zeros((0, 2))
-        regions: tuple[int, ...] = (rs,)
-    else:
-        nodes = _search(planner, s_uv, rs, g_uv, rg)
-        if not nodes.shape[0]:  # pragma: no cover - the component check above makes this unreachable
+    regions: tuple[int, ...] = (rs,)
+    if rs != rg:
+        portals = _corridor(planner, s_uv, rs, g_uv, rg)
+        if not portals.shape[0]:  # pragma: no cover - the component check above makes this unreachable
             raise PlanningError("no route found between connected regions; rebuild the planning graph")
-        nrp, nri = planner.node_region_ptr, planner.node_region_ids
-        K = planner.kernels
-        if K is not None:
-            shared = K.path_regions(nodes, nrp, nri).tolist()
-        else:
-            sets = [set(nri[nrp[k] : nrp[k + 1]].tolist()) for k in nodes.tolist()]
-            shared = [min(p & q) for p, q in zip(sets[:-1], sets[1:], strict=False)]
-        regs = [rs, *shared, rg]
+        E = planner.graph.region_edges[portals]
+        # the region between consecutive portals is the one they share
+        a_, b_ = E[:-1], E[1:]
+        shared = np.where((a_[:, 0] == b_[:, 0]) | (a_[:, 0] == b_[:, 1]), a_[:, 0], a_[:, 1])
+        regs = [rs, *shared.tolist(), rg]
         regions = tuple(r for i, r in enumerate(regs) if i == 0 or r != regs[i - 1])
-        mid = planner.node_uv[nodes]
-    raw = np.vstack([s_uv[None], mid, g_uv[None]])
-    if planner.kernels is not None:
-        pts, ok = planner.kernels.string_pull(planner.free, raw, 12, 3, EPS_CELLS)
-        if not ok:
-            raise PlanningError("internal planning error: a path segment crosses an obstacle; rebuild the graph")
+    K = planner.kernels
+    if rs == rg:
+        raw = np.vstack([s_uv, g_uv])
     else:
-        pts = _string_pull(planner.free, raw)  # every kept segment is checked on the grid
+        # the shortest polyline through the corridor's portals: each segment lies in one convex region
+        raw = K.funnel(s_uv[0], s_uv[1], g_uv[0], g_uv[1], planner.portal_boxes[portals])
+    pts, ok = K.simplify_validate(planner.free, raw, EPS_CELLS, 1e-9)  # every segment checked on the grid
+    if not ok:
+        raise PlanningError("internal planning error: a path segment crosses an obstacle; rebuild the graph")
     wp = np.column_stack([g.origin_x + pts[:, 0] * g.resolution, g.origin_y + pts[:, 1] * g.resolution])
     wp.setflags(write=False)
     return Route(places=tuple(places), waypoints=wp, length=path_length(wp), regions=regions)

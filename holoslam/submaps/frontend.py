@@ -19,6 +19,12 @@ Steps (seed 002 §2, SPEC §4):
 6. Landmarks (Eq. 16): an observation at stamp t is put into the anchor frame of the submap active at t, using
    the robot's pose there (last keyframe ∘ dead reckoning to t): a_xy = R(theta) b_xy + t, z kept; its 2x2
    covariance is R cov_b R^T + J cov_aTb J^T.
+7. Ambiguous objects: an object seen at least twice whose sightings all disagree with one another (no two
+   within ``association_gate`` of each other under their covariances plus ``association_drift`` of the initial
+   anchors) cannot be located: no majority says which sighting is right (one misread id or one tag at the wrong
+   place among two sightings). Its sightings are left out and its id is listed in ``ambiguous_objects``, rather
+   than placing it at an arbitrary one. Objects with a consistent majority, or two self-consistent groups (a
+   moved object), go to the solver, whose outlier rejection and moved-object detection handle them.
 """
 
 from __future__ import annotations
@@ -57,12 +63,15 @@ class FrontEndConfig:
     default_heading_sigma: float = 0.03  # rad, when the log gives none
     base_frame: str = "base_link"
     build_grids: bool = True
+    association_drift: float = 0.15  # m, allowance for the initial anchors' drift when comparing sightings
+    association_gate: float = 13.8  # chi-square(2) 0.999: two sightings of one object agree below this
 
 
 @dataclass(frozen=True, eq=False)
 class FrontEnd:
     """Submaps, the SLAM problem, the whole-run dead reckoning (``dr_stamps_ns``, ``dr_wTb``), the anchors'
-    stamps, the base->laser pose ``bTs`` used, and what was skipped (observations before the first anchor)."""
+    stamps, the base->laser pose ``bTs`` used, and what was skipped (observations before the first anchor),
+    and ``ambiguous_objects``: ids whose sightings all disagree (step 7), left out of the problem."""
 
     submaps: tuple[Submap, ...]
     problem: object  # holoslam.graph.problem.SlamProblem
@@ -72,6 +81,7 @@ class FrontEnd:
     bTs: np.ndarray
     skipped_observations: int = 0
     loops_tried: int = 0
+    ambiguous_objects: tuple[str, ...] = ()
 
 
 def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "base_link") -> np.ndarray:
@@ -310,19 +320,47 @@ def build_problem(
             skipped += 1
             continue
         li.append(k), lid.append(ob.object_id), lxy.append(xy), lcov.append(c2), lz.append(z)
+    init = np.array(est_wTa).reshape(N, 3)
+    drop = _ambiguous_objects(init, li, lid, lxy, lcov, cfg)
+    if drop:
+        keep = [k for k, name in enumerate(lid) if name not in drop]
+        li, lid, lxy, lcov, lz = ([seq[k] for k in keep] for seq in (li, lid, lxy, lcov, lz))
     landmarks = (LandmarkMeasurements(np.array(li, np.int64), tuple(lid), np.array(lxy).reshape(-1, 2),
                                       np.array(lcov).reshape(-1, 2, 2), np.array(lz))
                  if li else LandmarkMeasurements.empty())
     relative = (RelativePoseMeasurements(np.array(rel_i), np.array(rel_j), np.array(rel_T), np.array(rel_cov),
                                          np.array(rel_kind, dtype=object))
                 if rel_i else RelativePoseMeasurements.empty())
-    init = np.array(est_wTa).reshape(N, 3)
     init_lm: dict[str, np.ndarray] = {}
     for k, name, xy in zip(li, lid, lxy, strict=True):
         init_lm.setdefault(name, g.transform_points(init[k], np.asarray(xy)[None])[0])
     problem = SlamProblem(num_poses=N, relative=relative, headings=headings, landmarks=landmarks,
                           initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
-    return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops_tried)
+    return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops_tried,
+                    tuple(sorted(drop)))
+
+
+def _ambiguous_objects(init_wTa, li, lid, lxy, lcov, cfg: FrontEndConfig) -> set[str]:
+    """Objects seen at least twice whose sightings all disagree with each other (module docstring, step 7)."""
+    by: dict[str, list[int]] = {}
+    for k, name in enumerate(lid):
+        by.setdefault(name, []).append(k)
+    out: set[str] = set()
+    for name, ks in by.items():
+        if len(ks) < 2:
+            continue
+        T = init_wTa[np.array([li[k] for k in ks])]
+        R = g.rot2(T[:, 2])
+        w = np.einsum("nij,nj->ni", R, np.array([lxy[k] for k in ks])) + T[:, :2]
+        C = R @ np.array([lcov[k] for k in ks]) @ np.swapaxes(R, 1, 2)
+        d = w[:, None, :] - w[None, :, :]
+        S = C[:, None] + C[None, :] + np.eye(2) * cfg.association_drift**2
+        m2 = np.einsum("abi,abi->ab", d, np.linalg.solve(S, d[..., None])[..., 0])
+        agree = m2 < cfg.association_gate
+        np.fill_diagonal(agree, False)
+        if not agree.any():
+            out.add(name)
+    return out
 
 
 def _eq15(mTr, cov_mTr, nTr, cov_nTr):
