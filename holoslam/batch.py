@@ -138,7 +138,8 @@ def run_many(
         n = min(total, workers or os.cpu_count() or 1)
         with ProcessPoolExecutor(max_workers=n) as pool:
             pending: dict[Future, int] = {
-                pool.submit(_timed, job, str(p), o, kwargs): i for i, (p, o) in enumerate(zip(paths, outs, strict=True))
+                pool.submit(_timed, job, str(p), o, kwargs): i
+                for i, (p, o) in enumerate(zip(paths, outs, strict=True))
             }
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -147,6 +148,8 @@ def run_many(
                     try:
                         item = fut.result()
                     except Exception as e:  # the process died (killed, out of memory)
-                        item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=f"worker process failed: {e}")
+                        item = BatchItem(
+                            str(paths[i]), outs[i], False, 0.0, error=f"worker process failed: {e}"
+                        )
                     finished(i, item)
     return [results[i] for i in range(total)]

@@ -55,7 +55,9 @@ def _parse_xy(text: str) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected x,y in metres (for example 1.5,-2), got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected x,y in metres (for example 1.5,-2), got {text!r}"
+        ) from None
     return x, y
 
 
@@ -87,7 +89,9 @@ def cmd_run(a: argparse.Namespace) -> int:
     config = load_run_config(a.config)
     logs = collect_logs(a.logs)
     if not logs:
-        raise ConfigError(f"no logs found in {', '.join(map(str, a.logs))}; give .mcap files or folders of them")
+        raise ConfigError(
+            f"no logs found in {', '.join(map(str, a.logs))}; give .mcap files or folders of them"
+        )
     progress = Progress(quiet=a.quiet or a.json)
     outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress)
     if a.json:
@@ -150,7 +154,9 @@ def cmd_tags(a: argparse.Namespace) -> int:
         if a.json:
             print(json.dumps(item))
         else:
-            what = f"label {item['label']['id']} ({item['label']['type']})" if item.get("label") else "foreign"
+            what = (
+                f"label {item['label']['id']} ({item['label']['type']})" if item.get("label") else "foreign"
+            )
             print(f"{item['image']}: {what}: {item['payload']!r}")
     return EXIT_FAILED if failed and failed == len(a.images) else EXIT_OK
 
@@ -179,7 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, type=Path, help="output folder (one sub-folder per log)")
     s.add_argument("--config", type=Path, help="YAML run configuration (see README)")
     s.add_argument("--workers", type=int, help="parallel processes for many logs (default: all cores)")
-    s.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) to run many logs on a cluster")
+    s.add_argument(
+        "--scheduler", help="Dask scheduler address (tcp://host:8786) to run many logs on a cluster"
+    )
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     s.add_argument("--json", action="store_true", help="print the summary as JSON only")
     s.set_defaults(func=cmd_run)
@@ -193,7 +201,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("simulate", help="write a simulated reference-household log")
     s.add_argument("-o", "--output", required=True, type=Path, help="MCAP file to write")
     s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--duration", type=float, default=None, help="seconds of robot time (default: whole route)")
+    s.add_argument(
+        "--duration", type=float, default=None, help="seconds of robot time (default: whole route)"
+    )
     s.add_argument("--image-rate", type=float, default=None, help="max camera snapshots per second")
     s.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise by this")
     s.add_argument("--json", action="store_true")
@@ -218,7 +228,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("export", help="re-export a saved run (pictures, results MCAP, graphs)")
     s.add_argument("run", type=Path)
     s.add_argument("--to", type=Path, help="folder to write into (default: the run folder)")
-    s.add_argument("--formats", nargs="+", default=["all"], choices=["all", "pictures", "mcap", "graphs", "tum"])
+    s.add_argument(
+        "--formats", nargs="+", default=["all"], choices=["all", "pictures", "mcap", "graphs", "tum"]
+    )
     s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("datasets", help="list the bundled and known datasets and where they are")

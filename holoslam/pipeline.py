@@ -185,7 +185,11 @@ class RunResult:
 
 
 def optimised_trajectory(
-    stamps_ns: np.ndarray, dr_stamps_ns: np.ndarray, dr_wTb: np.ndarray, anchor_stamps_ns: np.ndarray, wTa: np.ndarray
+    stamps_ns: np.ndarray,
+    dr_stamps_ns: np.ndarray,
+    dr_wTb: np.ndarray,
+    anchor_stamps_ns: np.ndarray,
+    wTa: np.ndarray,
 ) -> np.ndarray:
     """The base pose at every stamp from the optimised anchors: within submap k (from its anchor's stamp to the
     next one's) the pose is wTa_k composed with the dead-reckoned motion since the anchor,
@@ -243,8 +247,9 @@ def _objects(problem: Any, solution: Any, observations: Sequence[Any], features:
         xy = solution.w_landmarks[k]
         feats = _feature_attrs(features[oid]) if features and oid in features else {}
         objs.append(
-            ObjectInfo(oid, kind, np.array([xy[0], xy[1], 0.0 if not np.isfinite(z) else z]), cov, attrs, text,
-                       feats)
+            ObjectInfo(
+                oid, kind, np.array([xy[0], xy[1], 0.0 if not np.isfinite(z) else z]), cov, attrs, text, feats
+            )
         )
     return tuple(objs)
 
@@ -371,19 +376,40 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             anchors_wTa=sol.wTa,
             submap_ids=[sm.index for sm in fe.submaps],
             objects=objects,
-            reach_model=ReachModel(robot_radius_m=cfg.holographic.robot_radius_m, arm_reach_m=cfg.holographic.arm_reach_m),
+            reach_model=ReachModel(
+                robot_radius_m=cfg.holographic.robot_radius_m, arm_reach_m=cfg.holographic.arm_reach_m
+            ),
             params=PlaceParams(
-                doorway_width_m=cfg.holographic.doorway_width_m, min_room_area_m2=cfg.holographic.min_room_area_m2
+                doorway_width_m=cfg.holographic.doorway_width_m,
+                min_room_area_m2=cfg.holographic.min_room_area_m2,
             ),
             submap_features=submap_features,
         )
 
     with _stage(progress, timings, "planning graph"):
-        planning = build_two_layer(_configuration_space(grid, cfg.planning.robot_radius_m), cfg.planning.min_block_cells)
+        planning = build_two_layer(
+            _configuration_space(grid, cfg.planning.robot_radius_m), cfg.planning.min_block_cells
+        )
 
     timings["total"] = round(time.perf_counter() - t_start, 4)
-    report = _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects, grid, topology, holo,
-                     planning, timings, absent, stamps, wTb, dr)
+    report = _report(
+        log,
+        ingest_report,
+        report_to_dict,
+        vision_report,
+        fe,
+        sol,
+        objects,
+        grid,
+        topology,
+        holo,
+        planning,
+        timings,
+        absent,
+        stamps,
+        wTb,
+        dr,
+    )
     return RunResult(
         source=str(log_path),
         config=cfg,
@@ -427,8 +453,9 @@ def _configuration_space(grid: Any, robot_radius_m: float) -> Any:
     return OccupancyGrid.from_free_mask(free.astype(bool), grid.resolution, grid.origin_x, grid.origin_y)
 
 
-def _accuracy(log: Any, fe: Any, sol: Any, objects: Sequence[Any], stamps: np.ndarray, wTb: np.ndarray,
-              dr: np.ndarray) -> dict[str, Any] | None:
+def _accuracy(
+    log: Any, fe: Any, sol: Any, objects: Sequence[Any], stamps: np.ndarray, wTb: np.ndarray, dr: np.ndarray
+) -> dict[str, Any] | None:
     """Errors against the log's ground truth after the best SE(2) alignment (the run's world frame is its own)."""
     if not log.ground_truth:
         return None
@@ -484,8 +511,24 @@ def _num_or_none(v: float | None, digits: int = 3) -> float | None:
     return None if v is None or not np.isfinite(v) else round(float(v), digits)
 
 
-def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects, grid, topology, holo, planning,
-            timings, absent, stamps, wTb, dr) -> dict[str, Any]:
+def _report(
+    log,
+    ingest_report,
+    report_to_dict,
+    vision_report,
+    fe,
+    sol,
+    objects,
+    grid,
+    topology,
+    holo,
+    planning,
+    timings,
+    absent,
+    stamps,
+    wTb,
+    dr,
+) -> dict[str, Any]:
     p = fe.problem
     kinds: dict[str, int] = {}
     for k in p.relative.kind:
@@ -499,8 +542,12 @@ def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects,
         pl = str(holo.nodes[n].get("place", "?"))
         places[pl] = places.get(pl, 0) + 1
     obj_nodes = [n for n, d in holo.nodes(data=True) if d.get("kind") == "object"]
-    env_set = set(env)
-    reachable = {n for u, v in holo.edges() for n in (u, v) if n in obj_nodes and ((u in obj_nodes) != (v in obj_nodes))}
+    reachable = {
+        n
+        for u, v in holo.edges()
+        for n in (u, v)
+        if n in obj_nodes and ((u in obj_nodes) != (v in obj_nodes))
+    }
     return {
         "source": log.source,
         "inputs_absent": absent,
@@ -520,7 +567,9 @@ def _report(log, ingest_report, report_to_dict, vision_report, fe, sol, objects,
             "initial_error": float(sol.initial_error),
             "final_error": float(sol.final_error),
             "rejected_measurements": len(sol.rejected),
-            "compass_bias_deg": None if sol.compass_bias is None else round(float(np.degrees(sol.compass_bias)), 3),
+            "compass_bias_deg": None
+            if sol.compass_bias is None
+            else round(float(np.degrees(sol.compass_bias)), 3),
             "seconds": round(float(sol.seconds), 4),
         },
         "objects": {
@@ -581,43 +630,61 @@ def format_run_report(report: dict[str, Any]) -> str:
         lines.append(f"  inputs absent: {', '.join(report['inputs_absent'])}")
     ing = report["ingest"]
     chans = ing.get("channels", [])
-    lines.append(f"  ingest: {len(chans)} channels, {sum(c.get('decoded', 0) for c in chans)} messages decoded, "
-                 f"{sum(c.get('failed', 0) for c in chans)} failed, {sum(c.get('skipped', 0) for c in chans)} "
-                 f"skipped, {len(ing.get('warnings', []))} warnings")
+    lines.append(
+        f"  ingest: {len(chans)} channels, {sum(c.get('decoded', 0) for c in chans)} messages decoded, "
+        f"{sum(c.get('failed', 0) for c in chans)} failed, {sum(c.get('skipped', 0) for c in chans)} "
+        f"skipped, {len(ing.get('warnings', []))} warnings"
+    )
     v = report["vision"]
     if "skipped" in v:
         lines.append(f"  vision: skipped ({v['skipped']})")
     else:
-        lines.append(f"  vision: {v['images']} images, {v['decodes']} codes decoded, {v['tag_sightings']} robot "
-                     f"sightings, {v['observations']} object observations, {v['foreign']} foreign codes")
+        lines.append(
+            f"  vision: {v['images']} images, {v['decodes']} codes decoded, {v['tag_sightings']} robot "
+            f"sightings, {v['observations']} object observations, {v['foreign']} foreign codes"
+        )
     sm = report["submaps"]
-    lines.append(f"  submaps: {sm['count']} ({', '.join(f'{k} {n}' for k, n in sm['split_reasons'].items())}); "
-                 f"{sm['loops_tried']} revisit registrations tried")
+    lines.append(
+        f"  submaps: {sm['count']} ({', '.join(f'{k} {n}' for k, n in sm['split_reasons'].items())}); "
+        f"{sm['loops_tried']} revisit registrations tried"
+    )
     lines.append("  factors: " + ", ".join(f"{k} {n}" for k, n in report["factors"].items()))
     s = report["solver"]
-    lines.append(f"  solver: {s['method']}, {s['iterations']} iterations in {s['rounds']} rounds, error "
-                 f"{s['initial_error']:.4g} -> {s['final_error']:.4g}, {s['rejected_measurements']} measurements "
-                 f"rejected, compass bias {s['compass_bias_deg']} deg")
+    lines.append(
+        f"  solver: {s['method']}, {s['iterations']} iterations in {s['rounds']} rounds, error "
+        f"{s['initial_error']:.4g} -> {s['final_error']:.4g}, {s['rejected_measurements']} measurements "
+        f"rejected, compass bias {s['compass_bias_deg']} deg"
+    )
     o = report["objects"]
-    lines.append(f"  objects: {o['count']}; moved: {[m['id'] for m in o['moved']] or 'none'}; "
-                 f"without a reach edge: {o['without_reach_edge'] or 'none'}")
+    lines.append(
+        f"  objects: {o['count']}; moved: {[m['id'] for m in o['moved']] or 'none'}; "
+        f"without a reach edge: {o['without_reach_edge'] or 'none'}"
+    )
     h = report["holographic"]
-    lines.append(f"  holographic graph: {h['environment_nodes']} environment nodes "
-                 f"({', '.join(f'{k} {n}' for k, n in h['places'].items())}), {h['object_nodes']} object nodes, "
-                 f"{h['object_edges']} object edges ({h['objects_with_edge']} objects reachable), connected: {h['connected']}")
+    lines.append(
+        f"  holographic graph: {h['environment_nodes']} environment nodes "
+        f"({', '.join(f'{k} {n}' for k, n in h['places'].items())}), {h['object_nodes']} object nodes, "
+        f"{h['object_edges']} object edges ({h['objects_with_edge']} objects reachable), connected: {h['connected']}"
+    )
     m = report["map"]
-    lines.append(f"  map: {m['shape'][1]} x {m['shape'][0]} cells at {m['resolution_m']} m; topology "
-                 f"{report['topology']['nodes']} nodes / {report['topology']['edges']} edges; planning "
-                 f"{report['planning']['layer1_blocks']} blocks / {report['planning']['layer2_regions']} regions")
+    lines.append(
+        f"  map: {m['shape'][1]} x {m['shape'][0]} cells at {m['resolution_m']} m; topology "
+        f"{report['topology']['nodes']} nodes / {report['topology']['edges']} edges; planning "
+        f"{report['planning']['layer1_blocks']} blocks / {report['planning']['layer2_regions']} regions"
+    )
     acc = report.get("accuracy")
     if acc:
         a, d = acc["anchors"], acc["anchors_dead_reckoning"]
-        lines.append(f"  accuracy vs ground truth: anchors {a['rmse_m']:.3f} m RMSE (dead reckoning {d['rmse_m']:.3f} m),"
-                     f" heading {a['heading_rmse_deg']:.2f} deg, 95% ellipse coverage {a['coverage95']}")
+        lines.append(
+            f"  accuracy vs ground truth: anchors {a['rmse_m']:.3f} m RMSE (dead reckoning {d['rmse_m']:.3f} m),"
+            f" heading {a['heading_rmse_deg']:.2f} deg, 95% ellipse coverage {a['coverage95']}"
+        )
         if "objects" in acc:
             ob = acc["objects"]
-            lines.append(f"                            objects {ob['rmse_m']:.3f} m RMSE (max {ob['max_m']:.3f} m), "
-                         f"{ob['matched']} matched, missing {ob['missing'] or 'none'}")
+            lines.append(
+                f"                            objects {ob['rmse_m']:.3f} m RMSE (max {ob['max_m']:.3f} m), "
+                f"{ob['matched']} matched, missing {ob['missing'] or 'none'}"
+            )
     lines.append("  timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in report["timings_s"].items()))
     return "\n".join(lines)
 
@@ -625,14 +692,20 @@ def format_run_report(report: dict[str, Any]) -> str:
 # --------------------------------------------------------------------------------------- jobs with outputs
 
 
-def run_log_to_folder(log: str, out_dir: str, config: RunConfig | None = None, progress: Progress | None = None
-                      ) -> dict[str, Any]:
+def run_log_to_folder(
+    log: str, out_dir: str, config: RunConfig | None = None, progress: Progress | None = None
+) -> dict[str, Any]:
     """Run one log and write its output folder; returns a short summary (for the batch runner)."""
     from holoslam.io.run_folder import write_run
 
     result = run(log, config, progress)
-    written = write_run(result, out_dir, pictures=result.config.pictures, results_mcap=result.config.results_mcap,
-                        progress=progress)
+    written = write_run(
+        result,
+        out_dir,
+        pictures=result.config.pictures,
+        results_mcap=result.config.results_mcap,
+        progress=progress,
+    )
     acc = result.report.get("accuracy") or {}
     return {
         "log": log,
@@ -647,8 +720,15 @@ def run_log_to_folder(log: str, out_dir: str, config: RunConfig | None = None, p
     }
 
 
-def run_logs(logs: Sequence[Path], out_root: str | Path, config: RunConfig, *, workers: int | None = None,
-             scheduler: str | None = None, progress: Progress | None = None) -> dict[str, Any]:
+def run_logs(
+    logs: Sequence[Path],
+    out_root: str | Path,
+    config: RunConfig,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
     """Run one or many logs. One log writes straight into ``out_root``; many logs get one sub-folder each,
     processed in parallel (local processes, or a Dask cluster given its scheduler address)."""
     from holoslam.batch import run_many
@@ -664,12 +744,21 @@ def run_logs(logs: Sequence[Path], out_root: str | Path, config: RunConfig, *, w
     def on_done(item, done, total):
         progress(f"{done}/{total} {'ok' if item.ok else 'FAILED'} {item.log} ({item.seconds:.1f} s)")
 
-    items = run_many(run_log_to_folder, logs, out_root, workers=workers, scheduler=scheduler, on_done=on_done,
-                     config=config)
+    items = run_many(
+        run_log_to_folder,
+        logs,
+        out_root,
+        workers=workers,
+        scheduler=scheduler,
+        on_done=on_done,
+        config=config,
+    )
     lines = [f"{sum(i.ok for i in items)} of {len(items)} logs processed into {out_root}"]
     for i in items:
-        lines.append(f"  {'ok    ' if i.ok else 'FAILED'} {i.log} -> {i.out_dir} ({i.seconds:.1f} s)"
-                     + ("" if i.ok else f": {i.error}"))
+        lines.append(
+            f"  {'ok    ' if i.ok else 'FAILED'} {i.log} -> {i.out_dir} ({i.seconds:.1f} s)"
+            + ("" if i.ok else f": {i.error}")
+        )
     return {
         "ok": all(i.ok for i in items),
         "logs": [dataclasses.asdict(i) for i in items],
@@ -677,8 +766,13 @@ def run_logs(logs: Sequence[Path], out_root: str | Path, config: RunConfig, *, w
     }
 
 
-def simulate(output: str | Path, seed: int = 0, duration_s: float | None = None, image_rate_hz: float | None = None,
-             noise_scale: float = 1.0) -> dict[str, Any]:
+def simulate(
+    output: str | Path,
+    seed: int = 0,
+    duration_s: float | None = None,
+    image_rate_hz: float | None = None,
+    noise_scale: float = 1.0,
+) -> dict[str, Any]:
     """Write a simulated reference-household log (``holoslam.sim``) to ``output``."""
     from holoslam.sim import SimConfig, simulate_to_file
 
@@ -710,16 +804,25 @@ def inspect(log: str | Path, mapping: str | Path | None = None) -> tuple[str, di
     return format_summary(s), summary_to_dict(s)
 
 
-def solve_graph_file(input_path: str | Path, output: str | Path, tum: str | Path | None = None,
-                     method: str = "lm", init: str = "file") -> dict[str, Any]:
+def solve_graph_file(
+    input_path: str | Path,
+    output: str | Path,
+    tum: str | Path | None = None,
+    method: str = "lm",
+    init: str = "file",
+) -> dict[str, Any]:
     """Optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result (g2o, and TUM).
     ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices), odometry, lago
     or incremental."""
     from holoslam.solve import Initialisation, Method, solve_g2o_file
 
     methods = {"lm": Method.BATCH, "isam2": Method.ISAM2}
-    inits = {"file": Initialisation.PROBLEM, "odometry": Initialisation.ODOMETRY, "lago": Initialisation.LAGO,
-             "incremental": Initialisation.INCREMENTAL}
+    inits = {
+        "file": Initialisation.PROBLEM,
+        "odometry": Initialisation.ODOMETRY,
+        "lago": Initialisation.LAGO,
+        "incremental": Initialisation.INCREMENTAL,
+    }
     if method not in methods or init not in inits:
         raise ConfigError(f"method must be one of {sorted(methods)} and init one of {sorted(inits)}")
     if not Path(input_path).is_file():
@@ -736,7 +839,9 @@ def solve_graph_file(input_path: str | Path, output: str | Path, tum: str | Path
     return {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v)) for k, v in out.items()}
 
 
-def plan_to_object(run_dir: str | Path, object_id: str, from_xy: tuple[float, float] | None = None) -> dict[str, Any]:
+def plan_to_object(
+    run_dir: str | Path, object_id: str, from_xy: tuple[float, float] | None = None
+) -> dict[str, Any]:
     """Route from a pose (default: the run's last pose) to an object in a saved run."""
     from holoslam.io.run_folder import load_run
     from holoslam.planning.routes import plan_to_object as _plan
@@ -779,7 +884,9 @@ def _resolve_object(holo: Any, id_or_type: str) -> str:
     return str(found[0].get("id", found[0].get("object_id")))
 
 
-def export_run(run_dir: str | Path, to: str | Path | None = None, formats: Sequence[str] = ("all",)) -> list[Path]:
+def export_run(
+    run_dir: str | Path, to: str | Path | None = None, formats: Sequence[str] = ("all",)
+) -> list[Path]:
     """Re-export a saved run (pictures, results MCAP, graphs, TUM) into ``to`` (default: the run folder)."""
     from holoslam.io.run_folder import export_saved, load_run
 
@@ -795,14 +902,16 @@ def list_datasets() -> list[dict[str, Any]]:
     for name, entry in load_manifest().items():
         path = find_dataset(name)
         extra = entry.extra or {}
-        rows.append({
-            "name": name,
-            "kind": entry.where,
-            "file": entry.file,
-            "path": None if path is None else str(path),
-            "source": str(extra.get("how_to_get") or extra.get("source") or extra.get("url") or ""),
-            "licence": entry.licence,
-        })
+        rows.append(
+            {
+                "name": name,
+                "kind": entry.where,
+                "file": entry.file,
+                "path": None if path is None else str(path),
+                "source": str(extra.get("how_to_get") or extra.get("source") or extra.get("url") or ""),
+                "licence": entry.licence,
+            }
+        )
     return rows
 
 

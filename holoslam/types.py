@@ -213,7 +213,9 @@ class TagSighting:
     corners: np.ndarray
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "corners", _readonly(np.asarray(self.corners, dtype=np.float64).reshape(4, 2)))
+        object.__setattr__(
+            self, "corners", _readonly(np.asarray(self.corners, dtype=np.float64).reshape(4, 2))
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -248,13 +250,25 @@ class ObjectObservation:
     method: str = "pnp"  # "pnp" (single view, known label size) or "triangulation" (two views)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "b_position", _readonly(np.asarray(self.b_position, dtype=np.float64).reshape(3)))
+        object.__setattr__(
+            self, "b_position", _readonly(np.asarray(self.b_position, dtype=np.float64).reshape(3))
+        )
         object.__setattr__(
             self, "cov_b_position", _readonly(np.asarray(self.cov_b_position, dtype=np.float64).reshape(3, 3))
         )
 
 
-Record = Odometry | Heading | Scan | Image | CameraInfo | Transform | TagSighting | GroundTruthPose | GroundTruthWorld
+Record = (
+    Odometry
+    | Heading
+    | Scan
+    | Image
+    | CameraInfo
+    | Transform
+    | TagSighting
+    | GroundTruthPose
+    | GroundTruthWorld
+)
 
 
 @dataclass(frozen=True, slots=True)

@@ -44,8 +44,14 @@ def test_collect_expands_folders_and_keeps_bags_whole(logs):
 def test_local_pool_runs_all_and_isolates_a_failure(logs, tmp_path):
     _, paths, _ = logs
     seen = []
-    items = run_many(count_bytes, paths, tmp_path / "out", workers=2, fail_on="log1.mcap",
-                     on_done=lambda item, done, total: seen.append((done, total)))
+    items = run_many(
+        count_bytes,
+        paths,
+        tmp_path / "out",
+        workers=2,
+        fail_on="log1.mcap",
+        on_done=lambda item, done, total: seen.append((done, total)),
+    )
     assert [i.ok for i in items] == [True, False, True]
     assert "simulated unreadable log" in items[1].error
     assert items[0].summary["bytes"] == 10 and items[2].summary["bytes"] == 12
@@ -57,8 +63,12 @@ def test_local_pool_runs_all_and_isolates_a_failure(logs, tmp_path):
 def test_real_dask_cluster(logs, tmp_path):
     distributed = pytest.importorskip("distributed")
     _, paths, _ = logs
-    with distributed.LocalCluster(n_workers=2, processes=False, threads_per_worker=1, dashboard_address=None) as c:
-        items = run_many(count_bytes, paths, tmp_path / "out", scheduler=c.scheduler_address, fail_on="log0.mcap")
+    with distributed.LocalCluster(
+        n_workers=2, processes=False, threads_per_worker=1, dashboard_address=None
+    ) as c:
+        items = run_many(
+            count_bytes, paths, tmp_path / "out", scheduler=c.scheduler_address, fail_on="log0.mcap"
+        )
     assert [i.ok for i in items] == [False, True, True]
     assert items[2].summary["bytes"] == 12
 

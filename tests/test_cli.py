@@ -27,7 +27,13 @@ def household_run(tmp_path_factory) -> Path:
 def test_run_writes_every_file_of_the_output_folder(household_run):
     from holoslam.io.run_folder import RUN_FILES
 
-    for name in RUN_FILES + ("results.mcap", "anchors.csv", "objects.csv", "trajectory.png", "holographic.png"):
+    for name in RUN_FILES + (
+        "results.mcap",
+        "anchors.csv",
+        "objects.csv",
+        "trajectory.png",
+        "holographic.png",
+    ):
         assert (household_run / name).is_file(), name
     report = json.loads((household_run / "report.json").read_text())
     assert report["objects"]["count"] == 35
@@ -74,8 +80,15 @@ def test_export_rewrites_pictures_and_results(household_run, tmp_path, capsys):
 def test_inspect_prints_every_topic(capsys):
     assert main(["inspect", str(bundled_household_log())]) == 0
     out = capsys.readouterr().out
-    for topic in ("/odom", "/scan", "/compass", "/camera/image/compressed", "/tags", "/tf_static",
-                  "/ground_truth/pose"):
+    for topic in (
+        "/odom",
+        "/scan",
+        "/compass",
+        "/camera/image/compressed",
+        "/tags",
+        "/tf_static",
+        "/ground_truth/pose",
+    ):
         assert topic in out
 
 
@@ -91,7 +104,10 @@ def test_solve_g2o_from_the_gtsam_wheel(tmp_path, capsys):
     import gtsam
 
     src = gtsam.findExampleDataFile("w100.graph")
-    assert main(["solve", src, "-o", str(tmp_path / "out.g2o"), "--tum", str(tmp_path / "out.tum"), "--json"]) == 0
+    assert (
+        main(["solve", src, "-o", str(tmp_path / "out.g2o"), "--tum", str(tmp_path / "out.tum"), "--json"])
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out)
     assert summary["final_error"] < summary["initial_error"]
     graph, _ = gtsam.load2D(src)
@@ -152,7 +168,10 @@ def test_console_script_entry_point():
 
 def test_simulate_writes_a_log_that_inspect_reads(tmp_path, capsys):
     out = tmp_path / "sim.mcap"
-    assert main(["simulate", "-o", str(out), "--seed", "1", "--duration", "20", "--image-rate", "0.2", "--json"]) == 0
+    assert (
+        main(["simulate", "-o", str(out), "--seed", "1", "--duration", "20", "--image-rate", "0.2", "--json"])
+        == 0
+    )
     summary = json.loads(capsys.readouterr().out)
     assert Path(summary["path"]) == out and out.stat().st_size == summary["bytes"]
     assert main(["inspect", str(out), "--json"]) == 0

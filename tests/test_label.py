@@ -8,7 +8,9 @@ from holoslam.vision.label import MAX_PAYLOAD_CHARS, ObjectLabel, encode_label, 
 ids = st.from_regex(r"[A-Z0-9-]{1,16}", fullmatch=True)
 kinds = st.from_regex(r"[a-z0-9_]{1,24}", fullmatch=True)
 attrs = st.dictionaries(
-    st.from_regex(r"[a-z]{1,8}", fullmatch=True), st.from_regex(r"[A-Za-z0-9._-]{0,16}", fullmatch=True), max_size=3
+    st.from_regex(r"[a-z]{1,8}", fullmatch=True),
+    st.from_regex(r"[A-Za-z0-9._-]{0,16}", fullmatch=True),
+    max_size=3,
 )
 
 

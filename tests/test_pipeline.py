@@ -35,7 +35,9 @@ def _write(run_, path, keep):
 
 
 def test_odometry_and_laser_only_log_runs_end_to_end(short_run, tmp_path):
-    log = _write(short_run, tmp_path / "plain_robot.mcap", ["odometry", "scans", "transforms", "ground_truth"])
+    log = _write(
+        short_run, tmp_path / "plain_robot.mcap", ["odometry", "scans", "transforms", "ground_truth"]
+    )
     result = run(log)
     assert set(result.report["inputs_absent"]) == {"compass", "camera images", "tag sightings"}
     assert result.report["vision"]["skipped"]

@@ -31,15 +31,15 @@ def test_results_log_decodes_with_stock_foxglove_decoders(tmp_path):
     for schema, channel, message, decoded in msgs:
         by_topic.setdefault(channel.topic, []).append((schema.name, decoded))
     assert len(by_topic["/holoslam/pose"]) == 10
-    (name, traj), = by_topic["/holoslam/trajectory"]
+    ((name, traj),) = by_topic["/holoslam/trajectory"]
     assert name == "foxglove.PosesInFrame" and len(traj.poses) == n
     assert traj.poses[-1].position.x == 4.0
-    (name, g), = by_topic["/holoslam/map"]
+    ((name, g),) = by_topic["/holoslam/map"]
     assert name == "foxglove.Grid" and g.column_count == 30
     cells = np.frombuffer(g.data, np.uint8).reshape(20, 30)
     assert cells[0, 0] == 255 and cells[6, 6] == 0 and cells[5, 6] == 100
-    (name, objs), = by_topic["/holoslam/objects"]
+    ((name, objs),) = by_topic["/holoslam/objects"]
     assert [e.id for e in objs.entities] == ["object/O01", "object/O02"]
     assert objs.entities[1].cubes[0].pose.position.y == -1.0
-    (name, graph), = by_topic["/holoslam/graph"]
+    ((name, graph),) = by_topic["/holoslam/graph"]
     assert len(graph.entities[0].lines[0].points) == 4

@@ -127,9 +127,12 @@ def write_results_mcap(scene: ResultsScene, path: str | Path, max_pose_messages:
             msg = PoseInFrame(frame_id="map")
             _timestamp(msg.timestamp, int(s))
             msg.pose.position.x, msg.pose.position.y = float(x), float(y)
-            (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z, msg.pose.orientation.w) = (
-                _quat_z(float(t))
-            )
+            (
+                msg.pose.orientation.x,
+                msg.pose.orientation.y,
+                msg.pose.orientation.z,
+                msg.pose.orientation.w,
+            ) = _quat_z(float(t))
             w.write_message("/holoslam/pose", msg, log_time=int(s), publish_time=int(s))
         w.write_message("/holoslam/trajectory", _poses_msg(scene.wTb, t1), log_time=t1, publish_time=t1)
         if scene.dead_reckoning_wTb is not None:

@@ -71,8 +71,11 @@ def _objects_csv(objects: Sequence[Any]) -> str:
     w.writerow(["id", "type", "x", "y", "z", "cov_xx", "cov_xy", "cov_yy", "payload"])
     for o in objects:
         c = o.cov_w_position
-        w.writerow([o.object_id, o.object_type] + [repr(float(v)) for v in o.w_position]
-                   + [repr(float(c[0, 0])), repr(float(c[0, 1])), repr(float(c[1, 1])), o.payload])
+        w.writerow(
+            [o.object_id, o.object_type]
+            + [repr(float(v)) for v in o.w_position]
+            + [repr(float(c[0, 0])), repr(float(c[0, 1])), repr(float(c[1, 1])), o.payload]
+        )
     return buf.getvalue()
 
 
@@ -108,8 +111,13 @@ def _scene(stamps, wTb, dr, wTa, grid, objects, topology, holographic):
 
     edges = []
     if topology is not None:
-        segs = [[(topology.nodes[u]["x"], topology.nodes[u]["y"]), (topology.nodes[v]["x"], topology.nodes[v]["y"])]
-                for u, v in topology.edges()]
+        segs = [
+            [
+                (topology.nodes[u]["x"], topology.nodes[u]["y"]),
+                (topology.nodes[v]["x"], topology.nodes[v]["y"]),
+            ]
+            for u, v in topology.edges()
+        ]
         edges.append(("topology", np.array(segs).reshape(-1, 2, 2)))
     if holographic is not None:
         segs = []
@@ -143,7 +151,10 @@ def _pictures(out: Path, wTb, dr, wTa, cov_wTa, grid, topology, holographic, pla
         fig.axes[0].legend(fontsize=7)
     for name, f in (
         ("trajectory.png", fig),
-        ("map_topology.png", viz.map_figure(grid, topology=topology, title="occupancy grid and thinning topology")),
+        (
+            "map_topology.png",
+            viz.map_figure(grid, topology=topology, title="occupancy grid and thinning topology"),
+        ),
         ("holographic.png", viz.map_figure(grid, holographic=holographic, title="holographic graph")),
         ("planning.png", viz.map_figure(grid, planning=planning, title="two-layer planning graph (regions)")),
     ):
@@ -153,8 +164,14 @@ def _pictures(out: Path, wTb, dr, wTa, cov_wTa, grid, topology, holographic, pla
     return written
 
 
-def write_run(result: Any, out_dir: str | Path, *, pictures: bool = True, results_mcap: bool = True,
-              progress: Callable[..., None] | None = None) -> list[Path]:
+def write_run(
+    result: Any,
+    out_dir: str | Path,
+    *,
+    pictures: bool = True,
+    results_mcap: bool = True,
+    progress: Callable[..., None] | None = None,
+) -> list[Path]:
     """Write every output file of a ``RunResult`` into ``out_dir`` (created if needed); returns the paths."""
     from holoslam.io.g2o import write_g2o
     from holoslam.io.graphs import write_graph_files
@@ -185,12 +202,29 @@ def write_run(result: Any, out_dir: str | Path, *, pictures: bool = True, result
     (out / "report.txt").write_text(format_run_report(result.report) + "\n")
     written += [out / "report.json", out / "report.txt"]
     if results_mcap:
-        scene = _scene(result.stamps_ns, result.wTb, result.dead_reckoning_wTb, result.wTa, result.grid,
-                       result.objects, result.topology, result.holographic)
+        scene = _scene(
+            result.stamps_ns,
+            result.wTb,
+            result.dead_reckoning_wTb,
+            result.wTa,
+            result.grid,
+            result.objects,
+            result.topology,
+            result.holographic,
+        )
         written.append(write_results_mcap(scene, out / "results.mcap"))
     if pictures:
-        written += _pictures(out, result.wTb, result.dead_reckoning_wTb, result.wTa, result.cov_wTa, result.grid,
-                             result.topology, result.holographic, result.planning)
+        written += _pictures(
+            out,
+            result.wTb,
+            result.dead_reckoning_wTb,
+            result.wTa,
+            result.cov_wTa,
+            result.grid,
+            result.topology,
+            result.holographic,
+            result.planning,
+        )
     return written
 
 
@@ -228,8 +262,10 @@ class SavedRun:
 def _need(folder: Path, name: str) -> Path:
     p = folder / name
     if not p.is_file():
-        raise IngestError(f"{folder} has no {name}: is it a holoslam run folder? (make one with 'holoslam run LOG -o "
-                          f"{folder}')")
+        raise IngestError(
+            f"{folder} has no {name}: is it a holoslam run folder? (make one with 'holoslam run LOG -o "
+            f"{folder}')"
+        )
     return p
 
 
@@ -258,8 +294,16 @@ def _read_objects(path: Path) -> tuple:
                 attrs = parse_label(r["payload"]).attributes
             except Exception:
                 attrs = ()
-            objs.append(ObjectInfo(r["id"], r["type"], np.array([float(r["x"]), float(r["y"]), float(r["z"])]), cov,
-                                   attrs, r["payload"]))
+            objs.append(
+                ObjectInfo(
+                    r["id"],
+                    r["type"],
+                    np.array([float(r["x"]), float(r["y"]), float(r["z"])]),
+                    cov,
+                    attrs,
+                    r["payload"],
+                )
+            )
         except (KeyError, ValueError, TypeError) as e:
             raise IngestError(f"{path}: malformed row {k + 2} ({e})") from None
     return tuple(objs)
@@ -320,10 +364,27 @@ def export_saved(saved: SavedRun, to: Path, formats: set[str]) -> list[Path]:
         written += list(write_graph_files(saved.holographic, out, "holographic"))
         written += list(write_graph_files(saved.topology, out, "topology"))
     if every or "mcap" in formats:
-        scene = _scene(saved.stamps_ns, saved.wTb, dr, saved.wTa, saved.grid, saved.objects, saved.topology,
-                       saved.holographic)
+        scene = _scene(
+            saved.stamps_ns,
+            saved.wTb,
+            dr,
+            saved.wTa,
+            saved.grid,
+            saved.objects,
+            saved.topology,
+            saved.holographic,
+        )
         written.append(write_results_mcap(scene, out / "results.mcap"))
     if every or "pictures" in formats:
-        written += _pictures(out, saved.wTb, dr, saved.wTa, saved.cov_wTa, saved.grid, saved.topology,
-                             saved.holographic, saved.planning)
+        written += _pictures(
+            out,
+            saved.wTb,
+            dr,
+            saved.wTa,
+            saved.cov_wTa,
+            saved.grid,
+            saved.topology,
+            saved.holographic,
+            saved.planning,
+        )
     return written

@@ -33,7 +33,9 @@ class OccupancyGrid:
         if occ.ndim != 2 or occ.size == 0:
             raise MapError(f"an occupancy grid must be a non-empty 2-D array, got shape {occ.shape}")
         if not np.isfinite(self.resolution) or self.resolution <= 0:
-            raise MapError(f"grid resolution must be a positive number of metres per cell, got {self.resolution}")
+            raise MapError(
+                f"grid resolution must be a positive number of metres per cell, got {self.resolution}"
+            )
         if not 0.0 <= self.free_thresh < self.occupied_thresh <= 1.0:
             raise MapError(
                 f"thresholds must satisfy 0 <= free_thresh < occupied_thresh <= 1, got "
@@ -73,7 +75,10 @@ class OccupancyGrid:
         """(N, 2) (row, col) -> (N, 2) world (x, y) of the cell centres."""
         rc = np.asarray(rc, dtype=np.float64).reshape(-1, 2)
         return np.column_stack(
-            [self.origin_x + (rc[:, 1] + 0.5) * self.resolution, self.origin_y + (rc[:, 0] + 0.5) * self.resolution]
+            [
+                self.origin_x + (rc[:, 1] + 0.5) * self.resolution,
+                self.origin_y + (rc[:, 0] + 0.5) * self.resolution,
+            ]
         )
 
     def contains(self, rc: np.ndarray) -> np.ndarray:
@@ -82,7 +87,9 @@ class OccupancyGrid:
         return (rc[:, 0] >= 0) & (rc[:, 0] < h) & (rc[:, 1] >= 0) & (rc[:, 1] < w)
 
     @classmethod
-    def from_free_mask(cls, free: np.ndarray, resolution: float, origin_x: float = 0.0, origin_y: float = 0.0):
+    def from_free_mask(
+        cls, free: np.ndarray, resolution: float, origin_x: float = 0.0, origin_y: float = 0.0
+    ):
         """A grid whose True cells are free (0) and False cells occupied (100)."""
         occ = np.where(np.asarray(free, dtype=bool), 0, 100).astype(np.int8)
         return cls(occ, resolution, origin_x, origin_y)

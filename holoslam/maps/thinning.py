@@ -280,25 +280,37 @@ class _Flat:
 
 
 def _zs_passes(g: _Flat, guard: bool) -> None:
-    """Zhang-Suen subiterations on g in place; with guard, deletions go through the topology guard."""
+    """Zhang-Suen subiterations on g in place; with guard, deletions go through the topology guard.
+
+    A cell's answer to a rule changes only when its neighbourhood does. So right after subiteration k the
+    set neighbours of its deleted cells (``touched``) are looked up once, for both rules: those the next
+    rule marks are exactly the next subiteration's marks from this batch (``now``); those the rule after
+    marks (``later``) are checked again two subiterations on, in case their neighbourhood changed in
+    between (then they are also in that batch's ``touched``). Cells that neither rule marks are dropped;
+    they come back only if a neighbour is deleted. The first two subiterations start from the free cells
+    that touch a non-free cell."""
     t = _tables()
     rules = (t["zs1"], t["zs2"])
     boundary = g.boundary()
-    recent: list[np.ndarray] = []  # set neighbours of the cells deleted in the last two subiterations
+    c = np.take(g.code, boundary)
+    now = boundary[np.take(rules[0], c)]
+    later_prev = boundary[np.take(rules[1], c)]  # to check at k + 1
+    later_new = boundary[:0]
     k = 0
     quiet = 0
     while quiet < 2:
-        # candidates may repeat (a cell next to cells deleted in both subiterations); marked cells are not
-        cand = np.concatenate([*recent, boundary] if k < 2 else recent) if k else boundary
-        cand = cand[np.take(g.a, cand) != 0]
-        marked = cand[np.take(rules[k % 2], np.take(g.code, cand))]
-        if k:
-            marked = g.unique(marked)
+        rule = rules[k % 2]
+        old = later_prev[np.take(g.a, later_prev) != 0]
+        old = old[np.take(rule, np.take(g.code, old))]
+        marked = g.unique(np.concatenate([now, old])) if old.size else g.unique(now)
         if guard:
             deleted, touched = _guarded_delete(g, marked)
         else:
             deleted, touched = marked, g.delete(marked)
-        recent = [*recent[-1:], touched]
+        touched = touched[np.take(g.a, touched) != 0]
+        c = np.take(g.code, touched)
+        now = touched[np.take(rules[(k + 1) % 2], c)]
+        later_prev, later_new = later_new, touched[np.take(rule, c)]
         quiet = quiet + 1 if deleted.size == 0 else 0
         k += 1
 

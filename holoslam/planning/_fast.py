@@ -121,32 +121,47 @@ def _point_free(free, u, v, eps):
 def seg_free(free, au, av, bu, bv, eps):
     """True when every point of the segment a -> b lies in the closed union of free cells (the rule of
     ``routes.segments_free``): the segment is cut at every integer u and v line it crosses and the middle of
-    each piece must be free."""
+    each piece must be free. The crossings of each axis are already sorted along the segment, so the two
+    sequences are merged on the fly (no allocation)."""
     if au == bu and av == bv:
         return _point_free(free, au, av, eps)
     lo = min(au, bu)
     hi = max(au, bu)
     f_u = np.int64(math.floor(lo + eps)) + 1
-    l_u = np.int64(math.ceil(hi - eps)) - 1
-    n_u = max(l_u - f_u + 1, 0)
+    n_u = max(np.int64(math.ceil(hi - eps)) - 1 - f_u + 1, 0)
     lo = min(av, bv)
     hi = max(av, bv)
     f_v = np.int64(math.floor(lo + eps)) + 1
-    l_v = np.int64(math.ceil(hi - eps)) - 1
-    n_v = max(l_v - f_v + 1, 0)
-    t = np.empty(n_u + n_v + 2)
-    t[0] = 0.0
-    t[1] = 1.0
-    for i in range(n_u):
-        t[2 + i] = (f_u + i - au) / (bu - au)
-    for i in range(n_v):
-        t[2 + n_u + i] = (f_v + i - av) / (bv - av)
-    t.sort()
-    for i in range(t.shape[0] - 1):
-        tm = 0.5 * (t[i] + t[i + 1])
-        if not _point_free(free, au + (bu - au) * tm, av + (bv - av) * tm, eps):
+    n_v = max(np.int64(math.ceil(hi - eps)) - 1 - f_v + 1, 0)
+    du = bu - au
+    dv = bv - av
+    iu = 0
+    iv = 0
+    t_prev = 0.0
+    while True:
+        # next crossing of each axis in increasing t (lines visited upward or downward with the direction)
+        tu = 2.0
+        if iu < n_u:
+            x = f_u + iu if du > 0 else f_u + n_u - 1 - iu
+            tu = (x - au) / du
+        tv = 2.0
+        if iv < n_v:
+            y = f_v + iv if dv > 0 else f_v + n_v - 1 - iv
+            tv = (y - av) / dv
+        if tu <= tv:
+            t = tu
+            iu += 1
+        else:
+            t = tv
+            iv += 1
+        if t > 1.0:
+            t = 1.0
+        tm = 0.5 * (t_prev + t)
+        if not _point_free(free, au + du * tm, av + dv * tm, eps):
             return False
-    return True
+        if t >= 1.0:
+            return True
+        t_prev = t
 
 
 @nb.njit(**_JIT)
@@ -210,13 +225,40 @@ def path_regions(nodes, nrp, nri):
 
 
 @nb.njit(**_JIT)
-def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, first, first_cost, rg, gx, gy, hw):
+def _h(D, dgoal, v, du, dv, hw):
+    """Consistent A* heuristic of portal v: the largest of the Euclidean distance to the goal and the
+    landmark (ALT) bounds |d(l, goal) - d(l, v)| (landmarks not reaching both are skipped)."""
+    h = math.sqrt(du * du + dv * dv)
+    for l in range(D.shape[1]):
+        a = dgoal[l]
+        b = D[v, l]
+        if a < np.inf and b < np.inf:
+            x = abs(a - b)
+            if x > h:
+                h = x
+    return hw * h
+
+
+@nb.njit(**_JIT)
+def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, first_cost, last, rg, gx, gy, hw):
     """Portal sequence (int64 array) of a shortest start -> goal route over the portal graph (nodes = portals
-    at their centres (cu, cv), edges = two portals of one region, weighted by centre distance; Euclidean
-    heuristic, consistent). ``first`` are the start region's portals with costs ``first_cost``; the goal is
-    reached from every portal of region ``rg`` (``ea[p] == rg or eb[p] == rg``). Empty when unreachable."""
+    at their centres (cu, cv), edges = two portals of one region, weighted by centre distance). ``first`` are
+    the start region's portals with costs ``first_cost``; the goal is reached from every portal of region
+    ``rg`` (``last``; ``ea[p] == rg or eb[p] == rg``) by a straight segment. Heuristic: Euclidean and ALT
+    landmark bounds from ``D`` (F, L) landmark distances, times ``hw`` (1 = exact). Empty when unreachable."""
     n = cu.shape[0]
     INF = np.inf
+    nl = D.shape[1]
+    dgoal = np.full(nl, INF)
+    for i in range(last.shape[0]):
+        p = last[i]
+        du = cu[p] - gx
+        dv = cv[p] - gy
+        e = math.sqrt(du * du + dv * dv)
+        for l in range(nl):
+            x = D[p, l] + e
+            if x < dgoal[l]:
+                dgoal[l] = x
     gcost = np.full(n, INF)
     parent = np.full(n, -1, dtype=np.int64)
     closed = np.zeros(n, dtype=np.bool_)
@@ -227,9 +269,7 @@ def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, first, first_cost, rg, gx, gy
         d = first_cost[i]
         if d < gcost[j]:
             gcost[j] = d
-            du = cu[j] - gx
-            dv = cv[j] - gy
-            heapq.heappush(heap, (d + hw * math.sqrt(du * du + dv * dv), d, np.int64(j)))
+            heapq.heappush(heap, (d + _h(D, dgoal, j, cu[j] - gx, cv[j] - gy, hw), d, np.int64(j)))
     GOAL = np.int64(-2)
     best_goal = INF
     goal_parent = np.int64(-1)
@@ -251,12 +291,10 @@ def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, first, first_cost, rg, gx, gy
         for k in range(pptr[u], pptr[u + 1]):
             j = pdst[k]
             d = gc + pw[k]
-            if d < gcost[j]:
+            if d < gcost[j] and d < best_goal:
                 gcost[j] = d
                 parent[j] = u
-                du = cu[j] - gx
-                dv = cv[j] - gy
-                heapq.heappush(heap, (d + hw * math.sqrt(du * du + dv * dv), d, j))
+                heapq.heappush(heap, (d + _h(D, dgoal, j, cu[j] - gx, cv[j] - gy, hw), d, j))
     if goal_parent < 0:
         return np.zeros(0, dtype=np.int64)
     m = 0

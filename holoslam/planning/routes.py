@@ -90,6 +90,7 @@ class RoutePlanner:
     adj_ptr: np.ndarray = field(repr=False)  # (F+1,)
     adj_dst: np.ndarray = field(repr=False)  # (A,)
     adj_w: np.ndarray = field(repr=False)  # (A,) cells
+    landmark_dist: np.ndarray = field(repr=False)  # (F, L) portal-graph distances from L landmark portals
     free: np.ndarray = field(repr=False)  # (H, W) bool planner free mask
     kernels: object = field(repr=False, default=None)
     _cache: dict = field(repr=False, default_factory=dict, compare=False)
@@ -125,9 +126,34 @@ def _components(n: int, edges: np.ndarray) -> np.ndarray:
         np.minimum.at(parent, hi, lo)
 
 
-def build_planner(graph: TwoLayerGraph) -> RoutePlanner:
+def _landmarks(aptr: np.ndarray, dst: np.ndarray, w: np.ndarray, n: int, k: int) -> np.ndarray:
+    """(n, k) shortest-path distances from k landmark nodes picked by farthest-point selection (the next
+    landmark is the node farthest from all chosen ones; unreachable counts as farthest, so every component
+    gets landmarks), one compiled Dijkstra (scipy.sparse.csgraph) per landmark."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    k = min(k, n)
+    if k == 0:
+        return np.zeros((n, 0))
+    # zero-length edges (portals with coincident centres) would vanish from a sparse matrix
+    A = csr_matrix((np.maximum(w, 1e-9), dst, aptr), shape=(n, n))
+    D = np.empty((n, k))
+    near = np.full(n, np.inf)
+    cur = 0
+    for i in range(k):
+        D[:, i] = dijkstra(A, directed=True, indices=cur)
+        near = np.minimum(near, D[:, i])
+        cur = int(np.argmax(near))
+        if near[cur] == 0.0:  # every node is a landmark already
+            return np.ascontiguousarray(D[:, : i + 1])
+    return D
+
+
+def build_planner(graph: TwoLayerGraph, n_landmarks: int = 16) -> RoutePlanner:
     """Precompute the portal graph of a two-layer graph (vectorised; its size is the sum over regions of the
-    square of the region's number of portals)."""
+    square of the region's number of portals) and the distances of ``n_landmarks`` landmark portals for the
+    ALT heuristic."""
     E = graph.region_edges.astype(np.int64)
     F = E.shape[0]
     R = graph.n_regions
@@ -154,7 +180,8 @@ def build_planner(graph: TwoLayerGraph) -> RoutePlanner:
     d = np.hypot(*(cen[src] - cen[dst]).T) if src.shape[0] else np.zeros(0)
     aptr = np.searchsorted(src, np.arange(F + 1))
     comp = _components(R, graph.region_edges)
-    ro = [_ro(a) for a in (cen, boxes, ptr, pid, comp, aptr, dst, d.astype(np.float64))]
+    D = _landmarks(aptr, dst, d, F, n_landmarks)
+    ro = [_ro(a) for a in (cen, boxes, ptr, pid, comp, aptr, dst, d.astype(np.float64), D)]
     return RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels())
 
 
@@ -244,10 +271,13 @@ def _locate(planner: RoutePlanner, xy: np.ndarray, snap_radius_m: float, what: s
     xy = np.asarray(xy, dtype=np.float64).reshape(2)
     if not np.all(np.isfinite(xy)):
         raise PlanningError(f"the {what} position {xy.tolist()} is not a finite (x, y) in metres")
-    uv = np.array([(xy[0] - g.origin_x) / g.resolution, (xy[1] - g.origin_y) / g.resolution])
-    r = int(g.region_at(xy[None])[0])
-    if r >= 0:
-        return uv, r
+    u, v = (float(xy[0]) - g.origin_x) / g.resolution, (float(xy[1]) - g.origin_y) / g.resolution
+    uv = np.array([u, v])
+    ci, ri = math.floor(u), math.floor(v)
+    if 0 <= ri < g.shape[0] and 0 <= ci < g.shape[1]:
+        b = int(g.labels[ri, ci])
+        if b >= 0:
+            return uv, int(g.region_of_block[b])
     # snap: nearest free-block cell in a window of the snap radius
     k = int(np.ceil(snap_radius_m / g.resolution))
     h, w = g.shape
@@ -282,6 +312,7 @@ def _corridor(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray
         c["eb"] = np.ascontiguousarray(E[:, 1], dtype=np.int64)
     ptr, ids = planner.region_portal_ptr, planner.region_portal_ids
     first = ids[ptr[rs] : ptr[rs + 1]]
+    last = ids[ptr[rg] : ptr[rg + 1]]
     q = planner.portal_uv[first]
     d0 = np.hypot(q[:, 0] - s_uv[0], q[:, 1] - s_uv[1])
     return planner.kernels.corridor_astar(
@@ -292,8 +323,10 @@ def _corridor(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray
         c["cv"],
         c["ea"],
         c["eb"],
+        planner.landmark_dist,
         first,
         d0,
+        last,
         int(rg),
         float(g_uv[0]),
         float(g_uv[1]),

@@ -10,12 +10,17 @@ Steps (seed 002 §2, SPEC §4):
    submap starts; its anchor is the base pose at that keyframe.
 3. Between consecutive anchors m and n two independent relative poses are emitted: ``dead_reckoning`` (Eq. 14
    from m's anchor to n's anchor stamp, with its analytic covariance) and, when the arrival scan registers into
-   submap m, ``scan_match`` (Eq. 15 with nTr = identity, since n's anchor is the arrival pose).
+   submap m, ``scan_match`` (Eq. 15 with nTr = identity, since n's anchor is the arrival pose); its covariance
+   is ICP's plus that of the last keyframe of submap m (the map the scan registered into was placed by it).
 4. Compass yaw at every anchor stamp (raw, with its bias) -> HeadingMeasurements.
-5. Revisits: every ``revisit_every`` keyframes the scan is registered into every older submap (not the
-   previous one) whose anchor lies within ``revisit_radius`` of the current estimate; a match that passes
-   ICP's quality gate and lies within ``max_loop_correction`` of its seed gives a ``loop`` relative pose by
-   Eq. 15, mTn = mTr ∘ (nTr)^-1 with nTr the keyframe's pose in its own submap.
+5. Revisits: every ``revisit_every`` keyframes the scan is registered into the older submaps (not the
+   previous one, nor one already linked to the current submap) that have a keyframe within ``revisit_radius``
+   of the current estimate, the ``max_loop_candidates`` nearest first; a match that passes ICP's quality gate
+   and lies within ``max_loop_correction`` of its seed gives a ``loop`` relative pose by Eq. 15,
+   mTn = mTr ∘ (nTr)^-1 with nTr the keyframe's pose in its own submap. Its covariance adds the old map's own
+   error where the scan matched (the nearest old keyframe's pose covariance) to ICP's; at most one loop links
+   a pair of submaps, and the k loops found from one keyframe are each inflated by k (they share that
+   keyframe's pose error, so together they count as one measurement).
 6. Landmarks (Eq. 16): an observation at stamp t is put into the anchor frame of the submap active at t, using
    the robot's pose there (last keyframe ∘ dead reckoning to t): a_xy = R(theta) b_xy + t, z kept; its 2x2
    covariance is R cov_b R^T + J cov_aTb J^T.
@@ -58,7 +63,8 @@ class FrontEndConfig:
     dead_reckoning: DeadReckoningConfig = field(default_factory=DeadReckoningConfig)
     segment: SegmentConfig = field(default_factory=SegmentConfig)
     revisit_every: int = 3  # keyframes
-    revisit_radius: float = 3.0  # m
+    revisit_radius: float = 1.5  # m from the nearest keyframe of an older submap
+    max_loop_candidates: int = 3  # the older submaps with the nearest keyframes are tried, at most this many
     max_loop_correction: float = 0.5  # m between a loop's seed and its match
     default_heading_sigma: float = 0.03  # rad, when the log gives none
     base_frame: str = "base_link"
@@ -272,11 +278,18 @@ def build_problem(
         if kf_count % cfg.revisit_every == 0 and len(closed) >= 2:
             wTr = g.compose(est_wTa[cur.index], aTb)
             found: list[tuple[int, np.ndarray, np.ndarray]] = []
+            cands = []
             for old in closed:
                 if old.index >= cur.index - 1 or (old.index, cur.index) in linked:
                     continue
-                if np.hypot(*(est_wTa[old.index][:2] - wTr[:2])) > cfg.revisit_radius:
+                if np.hypot(*(est_wTa[old.index][:2] - wTr[:2])) > cfg.revisit_radius + scfg.max_distance:
                     continue
+                kf_w = g.transform_points(est_wTa[old.index], old.aTb[:, :2])  # the old keyframes, world
+                dmin = float(np.min(np.hypot(*(kf_w - wTr[:2]).T)))
+                if dmin <= cfg.revisit_radius:
+                    cands.append((dmin, old.index))
+            for _, oi in sorted(cands)[: cfg.max_loop_candidates]:
+                old = closed[oi]
                 loops_tried += 1
                 seed_m = g.between(est_wTa[old.index], wTr)
                 lr = register_points(bpts[nok], old.points, old.normals, seed_m, scfg.icp)
