@@ -10,7 +10,8 @@ Maps:
 - apartment: a synthetic 4000 x 4000 grid of 5 m rooms with doors and 3000 random boxes.
 
 Times are medians over --repeat runs in this process; `ratio` is holoslam thin / skimage skeletonize on the
-same mask. Graph = skeleton_to_graph on thin's skeleton with a precomputed clearance map (the distance
+same mask (wall time), `cpu_ratio` the same with this process's CPU time (steadier on a shared machine;
+OpenCV's threads count in it), `graph_cpu_ms` the graph step's CPU time. Graph = skeleton_to_graph on thin's skeleton with a precomputed clearance map (the distance
 transform is timed separately, as `clear`). Quality, for both skeletons: 8-connected components of free
 space vs of the skeleton, holes (4-connected obstacle components not touching the border; all sizes, and
 those of at least MIN_HOLE cells) vs independent cycles of the graph, and cells still removable
@@ -25,7 +26,7 @@ import time
 
 import numpy as np
 
-MIN_HOLE = 9  # cells; smaller obstacles at a crossing may be absorbed by a junction cluster (topology.py)
+MIN_HOLE = 9  # cells; reported separately (holes of any size must give a cycle of the graph)
 
 
 def household_grid():
@@ -82,12 +83,20 @@ def topology_numbers(mask: np.ndarray) -> tuple[int, int, int]:
     return comps, len(sizes), int((sizes >= MIN_HOLE).sum())
 
 
-def median_time(f, repeat):
-    ts, out = [], None
+CPU: dict[str, float] = {}  # median process CPU time of the last median_time call per label
+
+
+def median_time(f, repeat, label=None):
+    """Median wall time over repeat runs (and, under label, the median CPU time of this process in CPU)."""
+    ts, cs, out = [], [], None
     for _ in range(repeat):
+        c = time.process_time()
         t = time.perf_counter()
         out = f()
         ts.append(time.perf_counter() - t)
+        cs.append(time.process_time() - c)
+    if label:
+        CPU[label] = statistics.median(cs)
     return statistics.median(ts), out
 
 
@@ -98,10 +107,12 @@ def run(name, free, resolution, repeat, rows):
     from holoslam.maps.thinning import count_removable, thin
     from holoslam.maps.topology import clearance_map, cycle_rank, skeleton_to_graph
 
-    t_sk, sk_ref = median_time(lambda: skeletonize(free), repeat)
-    t_thin, sk = median_time(lambda: thin(free), repeat)
+    t_sk, sk_ref = median_time(lambda: skeletonize(free), repeat, "sk")
+    t_thin, sk = median_time(lambda: thin(free), repeat, "thin")
     t_clear, clr = median_time(lambda: clearance_map(free, resolution), repeat)
-    t_graph, G = median_time(lambda: skeleton_to_graph(sk, resolution=resolution, clearance=clr), repeat)
+    t_graph, G = median_time(
+        lambda: skeleton_to_graph(sk, resolution=resolution, clearance=clr), repeat, "graph"
+    )
     Gref = skeleton_to_graph(sk_ref, resolution=resolution)
     comps, holes, big_holes = topology_numbers(free)
     rows.append(
@@ -112,7 +123,9 @@ def run(name, free, resolution, repeat, rows):
             skimage_s=t_sk,
             thin_s=t_thin,
             ratio=t_thin / t_sk,
+            cpu_ratio=CPU["thin"] / CPU["sk"],
             graph_ms=1e3 * t_graph,
+            graph_cpu_ms=1e3 * CPU["graph"],
             clear_ms=1e3 * t_clear,
             nodes=G.number_of_nodes(),
             edges=G.number_of_edges(),
@@ -154,7 +167,9 @@ def main() -> None:
         "skimage_s",
         "thin_s",
         "ratio",
+        "cpu_ratio",
         "graph_ms",
+        "graph_cpu_ms",
         "clear_ms",
         "nodes",
         "edges",
@@ -167,7 +182,9 @@ def main() -> None:
         "skimage_s": "{:.3f}",
         "thin_s": "{:.3f}",
         "ratio": "{:.2f}",
+        "cpu_ratio": "{:.2f}",
         "graph_ms": "{:.1f}",
+        "graph_cpu_ms": "{:.1f}",
         "clear_ms": "{:.1f}",
     }
     table = [[fmt.get(h, "{}").format(r[h]) for h in head] for r in rows]

@@ -70,7 +70,29 @@ SUBMODULES: tuple[str, ...] = (
     "vision",
 )
 
-__all__ = ["__version__", "SUBMODULES", *_LAZY]
+__all__ = [  # the names of _LAZY, spelled out for linters and ``from holoslam import *``
+    "__version__",
+    "SUBMODULES",
+    "run",
+    "RunConfig",
+    "RunResult",
+    "run_log_to_folder",
+    "run_logs",
+    "format_run_report",
+    "load_run_config",
+    "load_run",
+    "SavedRun",
+    "write_run",
+    "read_log",
+    "bundled_household_log",
+    "find_dataset",
+    "simulate_household",
+    "simulate_to_file",
+    "SimConfig",
+    "SimulatedRun",
+    "read_g2o",
+    "solve_g2o_file",
+]
 
 if TYPE_CHECKING:  # for type checkers and IDEs only; nothing is imported at run time
     from holoslam.io.datasets import bundled_household_log, find_dataset

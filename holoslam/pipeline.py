@@ -191,9 +191,9 @@ def optimised_trajectory(
     anchor_stamps_ns: np.ndarray,
     wTa: np.ndarray,
 ) -> np.ndarray:
-    """The base pose at every stamp from the optimised anchors: within submap k (from its anchor's stamp to the
-    next one's) the pose is wTa_k composed with the dead-reckoned motion since the anchor,
-    wTb(t) = wTa_k ∘ (drTa_k^-1 ∘ drTb(t)). Before the first anchor, anchor 0 is used backwards."""
+    """The base pose at every stamp from optimised reference poses (anchors or keyframes) ``wTa`` at
+    ``anchor_stamps_ns``: after reference k (until the next) the pose is wTa_k composed with the dead-reckoned
+    motion since it, wTb(t) = wTa_k ∘ (drTa_k^-1 ∘ drTb(t)). Before the first, reference 0 is used backwards."""
     from holoslam.submaps.deadreckon import interpolate_poses
 
     stamps = np.asarray(stamps_ns, dtype=np.int64)
@@ -215,6 +215,20 @@ def _feature_attrs(f: Any) -> dict[str, Any]:
         "colours_lab": np.asarray(s["colours_lab"], dtype=np.float64),
         "colour_weights": np.asarray(s["colour_weights"], dtype=np.float64),
     }
+
+
+def keyframe_poses(submaps: Sequence[Any], wTa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every submap keyframe's base pose in the world, sorted by stamp: wTb = wTa_k ∘ aTb (the keyframes are
+    registered in their submap by scan matching, so they are more accurate than dead reckoning between anchors)."""
+    stamps = [np.asarray(sm.scan_stamps_ns, dtype=np.int64) for sm in submaps]
+    poses = [g.compose(np.broadcast_to(wTa[sm.index], np.shape(sm.aTb)), sm.aTb) for sm in submaps]
+    if not stamps:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    s, p = np.concatenate(stamps), np.concatenate(poses).reshape(-1, 3)
+    order = np.argsort(s, kind="stable")
+    s, p = s[order], p[order]
+    keep = np.concatenate([[True], np.diff(s) > 0])
+    return s[keep], p[keep]
 
 
 def _objects(problem: Any, solution: Any, observations: Sequence[Any], features: dict | None = None) -> tuple:
@@ -332,14 +346,16 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         sol = solve(fe.problem, options)
 
     with _stage(progress, timings, "trajectory"):
-        stamps, _ = log.odometry_arrays()
+        stamps, odomTb = log.odometry_arrays()
         dr = _interp(fe.dr_stamps_ns, fe.dr_wTb, stamps)
-        wTb = optimised_trajectory(stamps, fe.dr_stamps_ns, fe.dr_wTb, fe.anchor_stamps_ns, sol.wTa)
+        key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
+        # between keyframes (a few tenths of a second) the wheel odometry's own motion is the most faithful
+        wTb = optimised_trajectory(stamps, stamps, odomTb, key_stamps, wTk)
         objects = _objects(fe.problem, sol, observations, features)
 
     with _stage(progress, timings, "occupancy grid"):
         scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
-        wTb_scan = optimised_trajectory(scan_stamps, fe.dr_stamps_ns, fe.dr_wTb, fe.anchor_stamps_ns, sol.wTa)
+        wTb_scan = optimised_trajectory(scan_stamps, stamps, odomTb, key_stamps, wTk)
         wTs = g.compose(wTb_scan, np.broadcast_to(fe.bTs, wTb_scan.shape))
         grid = build_grid(
             wTs,

@@ -98,7 +98,7 @@ class SolveOptions:
     isam2_relinearize_threshold: float = 0.1
     isam2_relinearize_skip: int = 1
     isam2_extra_updates: int = 0  # updates without new factors after the last anchor (relinearise, converge)
-    isam2_final_lm_iterations: int = 0  # Method.ISAM2: this many batch LM iterations polish the iSAM2 estimate
+    isam2_final_lm_iterations: int = 0  # Method.ISAM2: LM iterations that polish the iSAM2 estimate
     reject_outliers: bool = True
     chi2_probability: float = 0.9999  # a measurement is an outlier beyond this chi2 quantile of its dimension
     max_rounds: int = 4

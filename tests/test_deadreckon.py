@@ -200,3 +200,18 @@ def test_systematic_scale_error_grows_linearly_with_distance():
         P = np.column_stack([np.linspace(0, L, t.size), np.zeros(t.size), np.zeros(t.size)])
         r = dead_reckon(t, P, int(t[0]), int(t[-1]), config=cfg)
         assert np.sqrt(r.cov_aTb_end[0, 0]) == pytest.approx(0.015 * L, rel=1e-9)
+
+
+def test_interpolate_poses_matches_whole_stream_unwrap():
+    # interpolate_poses unwraps only the samples around the queries: same result as unwrapping everything
+    rng = np.random.default_rng(0)
+    t = np.cumsum(rng.integers(1, 100, 500)).astype(np.int64)
+    P = np.column_stack([rng.normal(size=(500, 2)).cumsum(0), g.wrap(rng.normal(0, 0.8, 500).cumsum())])
+    ts, th = (t - t[0]).astype(float), np.unwrap(P[:, 2])
+    for q in (np.array([t[0] - 5]), np.array([t[-1] + 5]), rng.integers(t[0] - 10, t[-1] + 10, 50),
+              np.array([t[10]]), np.array([t[10], t[11] - 1])):
+        qq = (q - t[0]).astype(float)
+        want = np.column_stack([np.interp(qq, ts, P[:, 0]), np.interp(qq, ts, P[:, 1]), np.interp(qq, ts, th)])
+        got = interpolate_poses(t, P, q)
+        np.testing.assert_allclose(got[:, :2], want[:, :2], atol=1e-12)
+        assert np.all(np.abs(g.wrap(got[:, 2] - want[:, 2])) < 1e-12)

@@ -175,8 +175,19 @@ def test_fast_tokeniser_matches_line_by_line_path():
     body = SMALL.replace("# a tiny graph\n", "") + "EDGE2 1 0 -1.0 0.1 0.0 2 0 3 4 0 0\nEQUIV 1 2\n"
     fast = parse_g2o(body)
     slow = parse_g2o("# comment forces the careful path\n" + body)
-    for name in ("vertex_ids", "vertex_poses", "point_ids", "edge_i", "edge_j", "edge_measured", "edge_cov",
-                 "landmark_id", "landmark_measured", "landmark_cov", "fixed_ids"):
+    for name in (
+        "vertex_ids",
+        "vertex_poses",
+        "point_ids",
+        "edge_i",
+        "edge_j",
+        "edge_measured",
+        "edge_cov",
+        "landmark_id",
+        "landmark_measured",
+        "landmark_cov",
+        "fixed_ids",
+    ):
         assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
     assert np.array_equal(fast.edge_line + 1, slow.edge_line)  # one line shorter
     assert fast.edge_i.tolist() == [0, 1, 2, 1]

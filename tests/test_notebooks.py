@@ -51,7 +51,7 @@ def test_every_public_name_resolves_to_its_module_object():
         assert getattr(holoslam, name) is getattr(importlib.import_module(module), name), name
     for sub in holoslam.SUBMODULES:
         assert getattr(holoslam, sub) is importlib.import_module(f"holoslam.{sub}"), sub
-    assert set(holoslam._LAZY) <= set(holoslam.__all__)
+    assert set(holoslam.__all__) == {"__version__", "SUBMODULES", *holoslam._LAZY}
     assert set(holoslam._LAZY) | set(holoslam.SUBMODULES) <= set(dir(holoslam))
     # ``from holoslam import X`` goes through the same lazy path
     from holoslam import load_run, run, viz
@@ -90,7 +90,9 @@ def test_notebook_is_valid_committed_without_outputs_and_uses_the_public_api(pat
     code = [c for c in nb.cells if c.cell_type == "code"]
     assert code and any(c.cell_type == "markdown" for c in nb.cells)
     for c in code:
-        assert c.outputs == [] and c.execution_count is None, f"{path.name}: strip the outputs before committing"
+        assert c.outputs == [] and c.execution_count is None, (
+            f"{path.name}: strip the outputs before committing"
+        )
     src = "\n".join(c.source for c in code)
     # public API only: no private holoslam name (a leading underscore) is imported or used
     private = re.findall(r"holoslam(?:\.\w+)*\._\w+|from holoslam[\w.]* import [^\n]*\b_\w+", src)

@@ -189,3 +189,77 @@ def test_path_string_round_trip_and_errors():
 def test_empty_skeleton_gives_empty_graph():
     G = skeleton_to_graph(np.zeros((5, 5), bool))
     assert G.number_of_nodes() == 0 and G.number_of_edges() == 0
+
+
+# Small obstacles (1 x 1 up to 3 x 3 cells), which can sit right at a crossing inside one junction cluster.
+small_rect = st.tuples(st.integers(0, 30), st.integers(0, 30), st.integers(1, 3), st.integers(1, 3))
+
+
+@settings(max_examples=120, deadline=None)
+@given(st.integers(3, 32), st.integers(3, 32), st.lists(small_rect, max_size=14))
+def test_holes_of_any_size_give_cycles(h, w, rects):
+    m = room_map(h, w, rects)
+    sk = thin(m)
+    G = skeleton_to_graph(sk)
+    comps, holes = topology(m)
+    assert nx.number_connected_components(G) == comps
+    assert cycle_rank(G) == holes
+    for _u, _v, d in G.edges(data=True):
+        p = d["path"]
+        assert sk[p[:, 0], p[:, 1]].all()
+        assert (np.abs(np.diff(p, axis=0)).max(axis=1) == 1).all()
+
+
+def test_one_cell_obstacle_at_a_crossing_is_a_self_loop_of_the_junction():
+    sk = np.zeros((11, 11), bool)
+    sk[5, :] = sk[:, 5] = True  # a plus: one crossing
+    sk[4:7, 4:7] = True
+    sk[5, 5] = False  # a one-cell hole enclosed by the crossing's junction cells
+    assert topology(sk) == (1, 1)
+    G = skeleton_to_graph(sk)
+    assert cycle_rank(G) == 1
+    ((n, kind),) = [(n, k) for n, k in G.nodes(data="kind") if k == "junction"]
+    (d,) = G.get_edge_data(n, n).values()  # the self-loop
+    p = d["path"]
+    assert np.array_equal(p[0], p[-1]) and len(p) >= 5
+    assert np.abs(p - 5).max(axis=1).tolist() == [1] * len(p)  # on the ring of junction cells around (5, 5)
+    steps = np.abs(np.diff(p, axis=0)).sum(axis=1)
+    assert d["length"] == pytest.approx((steps == 1).sum() + np.sqrt(2.0) * (steps == 2).sum())
+    assert sum(1 for _, k in G.nodes(data="kind") if k == "endpoint") == 4
+
+
+def test_bulk_graph_equals_networkx_public_build():
+    import holoslam.maps.topology as topo
+
+    rng = np.random.default_rng(5)
+    n = 30
+    u = rng.integers(0, n, 200)
+    v = rng.integers(0, n, 200)
+    nodes = [{"i": i} for i in range(n)]
+    edges = [{"e": e} for e in range(200)]
+    G = topo._bulk_multigraph(nodes, u, v, edges)
+    H = nx.MultiGraph()
+    H.add_nodes_from(enumerate({"i": i} for i in range(n)))
+    H.add_edges_from(zip(u.tolist(), v.tolist(), ({"e": e} for e in range(200)), strict=True))
+    assert dict(G.nodes(data=True)) == dict(H.nodes(data=True))
+    assert sorted(G.edges(keys=True, data="e")) == sorted(H.edges(keys=True, data="e"))
+    assert G.adj == H.adj
+    G.add_edge(0, 1)  # still an ordinary, mutable MultiGraph
+    assert G.number_of_edges() == 201 and G.has_edge(1, 0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(3, 40), st.integers(3, 40), st.lists(rect, max_size=8))
+def test_lockstep_walk_equals_pointer_jumping(h, w, rects):
+    import holoslam.maps.topology as topo
+
+    sk = topo._Skeleton(thin(room_map(h, w, rects)))
+    tip2 = topo._TIP2[sk.code]
+    is_node = (sk.deg != 2) | tip2
+    node_of, _kinds, _rep = topo._nodes(sk, is_node, np.full(sk.flat.shape[0], np.nan), tip2)
+    a = topo._trace(sk, is_node, node_of)
+    b = topo._trace(sk, is_node, node_of, max_steps=0)  # straight to pointer jumping
+    assert (a is None) == (b is None)
+    if a is not None:
+        for x, y in zip(a, b, strict=True):
+            assert np.array_equal(x, y)

@@ -322,7 +322,9 @@ def _landmark_text_cov(
     return _inv_checked(M, rows, all_rows, path, text, "information")
 
 
-def _split_fields(lines: list[str], source: str, strict: bool) -> tuple[dict[str, _Rows], dict[str, list[int]]]:
+def _split_fields(
+    lines: list[str], source: str, strict: bool
+) -> tuple[dict[str, _Rows], dict[str, list[int]]]:
     """The slow, line-by-line tokeniser: exact messages for malformed lines (the fallback of :func:`_tokenise`)."""
     by_kind: dict[str, _Rows] = defaultdict(_Rows)
     skipped: dict[str, list[int]] = {}

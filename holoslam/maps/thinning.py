@@ -294,8 +294,8 @@ def _zs_passes(g: _Flat, guard: bool) -> None:
     boundary = g.boundary()
     c = np.take(g.code, boundary)
     now = boundary[np.take(rules[0], c)]
-    later_prev = boundary[np.take(rules[1], c)]  # to check at k + 1
-    later_new = boundary[:0]
+    later_prev = boundary[:0]  # to check again at k
+    later_new = boundary[np.take(rules[1], c)]  # to check again at k + 1
     k = 0
     quiet = 0
     while quiet < 2:

@@ -9,9 +9,13 @@ self-loop edge. Parallel edges (two corridors around an obstacle between the sam
 graph is a ``networkx.MultiGraph``.
 
 Tracing is vectorised: every chain cell has exactly two skeleton neighbours, so "walk along the chain" is a
-successor function on (cell, direction) states; pointer jumping (doubling) gives each state its distance to
-the end of its chain and the node it ends at in O(n log L) array operations, without per-cell Python loops.
-Python loops only over edges (when the graph is built) and over pruned spurs.
+successor function on (cell, direction) states. All chains are walked in lockstep from their ends (one array
+step per cell of the longest chain; work proportional to the number of chain cells); chains longer than 2048
+cells fall back to pointer jumping (doubling: O(n log L) work in O(log L) array steps). Cells are found and
+classified with one pass over the grid (a padded copy, flat indices, 8-neighbour codes looked up in tables);
+no per-cell Python loops. The graph's dicts are written in bulk (``_bulk_multigraph``) with Python's cyclic
+garbage collector paused; edge paths are views into one concatenated (sum K, 2) array. Python loops only over
+edges and nodes when the graph is built, over junction clusters with holes, and over pruned spurs.
 
 Spur pruning (documented length): an edge with an endpoint node at one end and a junction at the other is
 a spur; it is removed when its length is below ``max(prune_spur_m, spur_clearance_factor * clearance of its
@@ -23,8 +27,10 @@ and of independent cycles does not change.
 Line tips: a cell with one skeleton neighbour, or with two that touch each other (the end of a diagonal or
 staircase line, which ``thin`` keeps as a line end), is an endpoint.
 
-Known limit: a hole enclosed only by junction cells (an obstacle of one or two cells right at a crossing) is
-inside one junction cluster and not represented by a cycle of the graph; holes of at least 3 x 3 cells are.
+Holes inside a junction cluster: an obstacle of a cell or two right at a crossing can be enclosed only by
+junction cells, which collapse to one node. Such clusters are found with their Euler number (2 x 2 bit
+quads) and each hole becomes a self-loop of the junction node whose path runs around the hole (the cluster's
+inner contour), so the graph's independent cycles equal the skeleton's holes at every size.
 
 Node attributes: ``x``, ``y`` (world metres, the cell centre), ``row``, ``col``, ``kind`` ('junction' |
 'endpoint' | 'isolated' | 'loop'), ``clearance`` (metres to the nearest obstacle), ``submap`` (index of the
@@ -36,6 +42,7 @@ cells x resolution), ``min_clearance`` (metres).
 
 from __future__ import annotations
 
+import gc
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,14 +65,18 @@ __all__ = [
     "cycle_rank",
 ]
 
+
 def clearance_map(free: np.ndarray, resolution: float = 1.0) -> np.ndarray:
     """(H, W) float64: Euclidean distance (metres) from each free cell's centre to the nearest non-free cell
-    (cells outside the grid count as non-free); 0 on non-free cells."""
+    (cells outside the grid count as non-free); 0 on non-free cells. One exact cv2.distanceTransform
+    (DIST_MASK_PRECISE) on a zero-bordered uint8 copy, scaled to metres in the same pass as the float64
+    conversion."""
     import cv2
 
-    m = np.pad(np.asarray(free, dtype=np.uint8), 1)
-    d = cv2.distanceTransform(m, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
-    return d.astype(np.float64) * float(resolution)
+    m = np.ascontiguousarray(np.asarray(free, dtype=bool)).view(np.uint8)
+    pad = cv2.copyMakeBorder(m, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    d = cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+    return np.multiply(d, float(resolution), dtype=np.float64)
 
 
 def _pointer_jump(
@@ -178,7 +189,6 @@ def skeleton_to_graph(
     """Topology graph of an 8-connected skeleton (module docstring). ``clearance`` is an (H, W) metres map
     (``clearance_map``); without it clearances are NaN. Cell (row, col) has its centre at
     (origin_x + (col + 0.5) * resolution, origin_y + (row + 0.5) * resolution), as in OccupancyGrid."""
-    import networkx as nx
 
     skel = np.asarray(skeleton, dtype=bool)
     if skel.ndim != 2:
@@ -248,57 +258,86 @@ def skeleton_to_graph(
     xs = origin_x + (node_rc[:, 1] + 0.5) * resolution
     ys = origin_y + (node_rc[:, 0] + 0.5) * resolution
     submap = _nearest_anchor(np.column_stack([xs, ys]), anchors_wTa)
-    node_attrs = [
-        {"x": x, "y": y, "row": r, "col": c, "kind": k, "clearance": cl, "submap": s}
-        for x, y, r, c, k, cl, s in zip(
-            xs.tolist(),
-            ys.tolist(),
-            node_rc[:, 0].tolist(),
-            node_rc[:, 1].tolist(),
-            kinds.tolist(),
-            clr[rep].tolist(),
-            submap.tolist(),
-            strict=True,
-        )
-    ]
-    # paths: views into one (sum K, 2) array, one per edge
-    st = starts.tolist()
-    ul = all_u.tolist()
-    edge_attrs = [
-        {"path": rc[a:b], "path_from": u, "length": ln, "min_clearance": mc}
-        for a, b, u, ln, mc in zip(st[:-1], st[1:], ul, length.tolist(), min_clr.tolist(), strict=True)
-    ]
-    G = _bulk_multigraph(node_attrs, ul, all_v.tolist(), edge_attrs)
+    # tens of thousands of small dicts: the cyclic garbage collector would rescan them all repeatedly
+    gc_was_on = gc.isenabled()
+    gc.disable()
+    try:
+        node_attrs = [
+            {"x": x, "y": y, "row": r, "col": c, "kind": k, "clearance": cl, "submap": s}
+            for x, y, r, c, k, cl, s in zip(
+                xs.tolist(),
+                ys.tolist(),
+                node_rc[:, 0].tolist(),
+                node_rc[:, 1].tolist(),
+                kinds.tolist(),
+                clr[rep].tolist(),
+                submap.tolist(),
+                strict=True,
+            )
+        ]
+        # paths: views into one (sum K, 2) array, one per edge
+        st = starts.tolist()
+        ul = all_u.tolist()
+        edge_attrs = [
+            {"path": rc[a:b], "path_from": u, "length": ln, "min_clearance": mc}
+            for a, b, u, ln, mc in zip(st[:-1], st[1:], ul, length.tolist(), min_clr.tolist(), strict=True)
+        ]
+        G = _bulk_multigraph(node_attrs, all_u, all_v, edge_attrs)
+    finally:
+        if gc_was_on:
+            gc.enable()
     G.graph.update(resolution=float(resolution), origin_x=float(origin_x), origin_y=float(origin_y))
     if prune_spur_m > 0 or spur_clearance_factor > 0:
         prune_spurs(G, prune_spur_m, spur_clearance_factor)
     return G
 
 
-def _bulk_multigraph(node_attrs: list[dict], u: list[int], v: list[int], edge_attrs: list[dict]):
+def _bulk_multigraph(node_attrs: list[dict], u: np.ndarray, v: np.ndarray, edge_attrs: list[dict]):
     """The MultiGraph that ``add_nodes_from(enumerate(node_attrs))`` then ``add_edges_from(zip(u, v,
-    edge_attrs))`` builds (same nodes, edge keys 0, 1, ... per node pair in order, shared key dicts), written
-    straight into networkx's documented dict-of-dict-of-dict adjacency (``G._node``, ``G._adj``): the public
-    calls cost ~10 us per edge, which is most of the time at 50k+ edges."""
+    edge_attrs))`` builds (same nodes, edge keys 0, 1, ... per node pair in insertion order, one key dict
+    shared by both directions), written straight into networkx's documented dict-of-dict-of-dict adjacency
+    (``G._node``, ``G._adj``) of a fresh graph (nothing cached yet): the public calls cost ~10 us per edge,
+    most of the time at 50k+ edges."""
     import networkx as nx
 
+    n, m = len(node_attrs), u.shape[0]
+    # key of each edge: its rank among the earlier edges between the same two nodes
+    pair = np.minimum(u, v) * max(n, 1) + np.maximum(u, v)
+    order = np.argsort(pair, kind="stable")
+    ps = pair[order]
+    new = np.ones(m, dtype=bool)
+    new[1:] = ps[1:] != ps[:-1]
+    group_start = np.maximum.accumulate(np.where(new, np.arange(m), 0))
+    key = np.empty(m, dtype=np.int64)
+    key[order] = np.arange(m) - group_start
     G = nx.MultiGraph()
     G._node.update(enumerate(node_attrs))
-    adj = G._adj
-    adj.update((i, {}) for i in range(len(node_attrs)))
-    for a, b, d in zip(u, v, edge_attrs, strict=True):
-        kd = adj[a].get(b)
-        if kd is None:
-            kd = {0: d}
-            adj[a][b] = kd
-            adj[b][a] = kd
-        else:
-            kd[len(kd)] = d  # keys are 0 .. len - 1, so len is the next free key
-    nx._clear_cache(G)
+    nbrs = [{} for _ in range(n)]
+    G._adj.update(enumerate(nbrs))
+    first = key == 0
+    for a, b, d in zip(
+        u[first].tolist(),
+        v[first].tolist(),
+        [edge_attrs[i] for i in np.flatnonzero(first).tolist()],
+        strict=True,
+    ):
+        kd = {0: d}
+        nbrs[a][b] = kd
+        nbrs[b][a] = kd
+    for a, b, k, i in zip(
+        u[~first].tolist(),
+        v[~first].tolist(),
+        key[~first].tolist(),
+        np.flatnonzero(~first).tolist(),
+        strict=True,
+    ):
+        nbrs[a][b][k] = edge_attrs[i]
     return G
 
 
-def _cluster_holes(sk: _Skeleton, node_of: np.ndarray, kinds: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+def _cluster_holes(
+    sk: _Skeleton, node_of: np.ndarray, kinds: np.ndarray
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """Holes enclosed by the cells of a single junction cluster (an obstacle of a cell or two at a crossing):
     the cluster collapses to one node, so each such hole becomes a self-loop of that node whose path runs
     around the hole. Clusters with holes are found with the Euler number (8-connected cells, 4-connected
@@ -436,13 +475,56 @@ def _loop_breakers(sk: _Skeleton, is_node: np.ndarray) -> np.ndarray:
     return np.unique(mn[~done])
 
 
-def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray):
+def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray, max_steps: int = 2048):
     """Edges along chains: (u, v, cells, starts) with cells the concatenated cell sequences (node cell,
-    chain cells ..., node cell) and starts their offsets (len m + 1); None when a chain is a closed loop."""
+    chain cells ..., node cell) and starts their offsets (len m + 1); None when a chain is a closed loop.
+
+    All chains are walked in lockstep from both of their ends (one array step per cell of the longest
+    chain, so the work is the number of chain cells); when a chain is longer than ``max_steps`` the walk
+    gives way to pointer jumping (O(n log L) work, but independent of L in steps)."""
     chain, here, frm, to, nxt = _states(sk, is_node)
     if chain.size == 0:
         e = np.zeros(0, dtype=np.int64)
         return e, e, e, np.zeros(1, dtype=np.int64)
+    start = np.flatnonzero(is_node[frm])  # states that leave a node: one at each end of each open chain
+    cur, wid = start, np.arange(start.shape[0])
+    term = np.empty(start.shape[0], dtype=np.int64)
+    seq, seq_wid = [], []
+    for _ in range(max_steps):
+        if cur.size == 0:
+            break
+        seq.append(cur)
+        seq_wid.append(wid)
+        nx_ = nxt[cur]
+        end = nx_ < 0
+        term[wid[end]] = cur[end]
+        cur, wid = nx_[~end], wid[~end]
+    if cur.size == 0:
+        sizes = np.array([x.shape[0] for x in seq], dtype=np.int64)
+        if int(sizes.sum()) != nxt.shape[0]:
+            return None  # chain cells no walk reached: closed loops without a node
+        # one direction per chain: the walk whose terminal state is smaller than its reverse walk's
+        keepw = term < (start ^ 1)
+        states = np.concatenate(seq)
+        w = np.concatenate(seq_wid)
+        step = np.repeat(np.arange(sizes.shape[0]), sizes)
+        sel = keepw[w]
+        states, w, step = states[sel], w[sel], step[sel]
+        kw = np.flatnonzero(keepw)
+        kw = kw[np.argsort(term[kw])]
+        m = kw.shape[0]
+        newid = np.empty(start.shape[0], dtype=np.int64)
+        newid[kw] = np.arange(m)
+        g = newid[w]
+        glen = np.bincount(g, minlength=m)
+        starts = np.concatenate([[0], np.cumsum(glen + 2)])
+        cells = np.empty(int(starts[-1]), dtype=np.int64)
+        cells[starts[g] + 1 + step] = here[states]
+        u_cell = frm[start[kw]]
+        v_cell = to[term[kw]]
+        cells[starts[:-1]] = u_cell
+        cells[starts[1:] - 1] = v_cell
+        return node_of[u_cell], node_of[v_cell], cells, starts
     rank, root, done = _pointer_jump(nxt)
     if not done.all():
         return None

@@ -25,77 +25,6 @@ _JIT = {"cache": True, "nogil": True}
 
 
 @nb.njit(**_JIT)
-def _on_region(nrp, nri, n, r):
-    for k in range(nrp[n], nrp[n + 1]):
-        if nri[k] == r:
-            return True
-    return False
-
-
-@nb.njit(**_JIT)
-def astar(aptr, adst, aw, U, V, nrp, nri, first, first_cost, rg, gx, gy):
-    """Node sequence (int64 array) of a shortest start -> goal path over the portal-point graph; empty when
-    the goal is unreachable. ``first`` are the start region's nodes with costs ``first_cost`` from the start
-    point; the goal is reached from any node on region ``rg`` by a straight segment to (gx, gy)."""
-    n = U.shape[0]
-    INF = np.inf
-    gcost = np.full(n, INF)
-    parent = np.full(n, -1, dtype=np.int64)
-    closed = np.zeros(n, dtype=np.bool_)
-    heap = [(0.0, 0.0, np.int64(-3))]
-    heap.pop()
-    for i in range(first.shape[0]):
-        j = first[i]
-        d = first_cost[i]
-        if d < gcost[j]:
-            gcost[j] = d
-            parent[j] = -1
-            du = U[j] - gx
-            dv = V[j] - gy
-            heapq.heappush(heap, (d + math.sqrt(du * du + dv * dv), d, np.int64(j)))
-    GOAL = np.int64(-2)
-    best_goal = INF
-    goal_parent = np.int64(-1)
-    while len(heap) > 0:
-        f, gc, u = heapq.heappop(heap)
-        if u == GOAL:
-            break
-        if closed[u] or gc > gcost[u]:
-            continue
-        closed[u] = True
-        if _on_region(nrp, nri, u, rg):
-            du = U[u] - gx
-            dv = V[u] - gy
-            c = gc + math.sqrt(du * du + dv * dv)
-            if c < best_goal:
-                best_goal = c
-                goal_parent = u
-                heapq.heappush(heap, (c, c, GOAL))
-        for k in range(aptr[u], aptr[u + 1]):
-            j = adst[k]
-            d = gc + aw[k]
-            if d < gcost[j]:
-                gcost[j] = d
-                parent[j] = u
-                du = U[j] - gx
-                dv = V[j] - gy
-                heapq.heappush(heap, (d + math.sqrt(du * du + dv * dv), d, j))
-    if goal_parent < 0:
-        return np.zeros(0, dtype=np.int64)
-    m = 0
-    x = goal_parent
-    while x != -1:
-        m += 1
-        x = parent[x]
-    out = np.empty(m, dtype=np.int64)
-    x = goal_parent
-    for i in range(m - 1, -1, -1):
-        out[i] = x
-        x = parent[x]
-    return out
-
-
-@nb.njit(**_JIT)
 def _point_free(free, u, v, eps):
     h, w = free.shape
     ru = np.rint(u)
@@ -162,66 +91,6 @@ def seg_free(free, au, av, bu, bv, eps):
         if t >= 1.0:
             return True
         t_prev = t
-
-
-@nb.njit(**_JIT)
-def string_pull(free, pts, window, passes, eps):
-    """Windowed string pulling (``routes._string_pull``): from each kept point jump to the farthest of the
-    next ``window`` points in line of sight (all pairs when the path has at most ``window`` + 1 points),
-    ``passes`` times. Returns (kept points, ok); ok is False when some point sees none of its successors."""
-    cur = pts.copy()
-    for _ in range(passes):
-        k = cur.shape[0]
-        if k <= 2:
-            if k == 2 and not seg_free(free, cur[0, 0], cur[0, 1], cur[1, 0], cur[1, 1], eps):
-                return cur, False
-            return cur, True
-        keep = np.empty(k, dtype=np.int64)
-        nk = 1
-        keep[0] = 0
-        i = 0
-        allpairs = k <= window + 1
-        while i < k - 1:
-            last = k - 1 if allpairs else min(i + window, k - 1)
-            nxt = -1
-            for j in range(last, i, -1):
-                if seg_free(free, cur[i, 0], cur[i, 1], cur[j, 0], cur[j, 1], eps):
-                    nxt = j
-                    break
-            if nxt < 0:
-                return cur, False
-            i = nxt
-            keep[nk] = i
-            nk += 1
-        out = np.empty((nk, 2))
-        for q in range(nk):
-            out[q, 0] = cur[keep[q], 0]
-            out[q, 1] = cur[keep[q], 1]
-        if nk == k or allpairs:
-            return out, True
-        cur = out
-    return cur, True
-
-
-@nb.njit(**_JIT)
-def path_regions(nodes, nrp, nri):
-    """(len(nodes) - 1,) the smallest region id shared by consecutive nodes (-1 if none); node region lists
-    are sorted ascending."""
-    m = nodes.shape[0]
-    out = np.full(max(m - 1, 0), -1, dtype=np.int64)
-    for i in range(m - 1):
-        a, b = nodes[i], nodes[i + 1]
-        p, q = nrp[a], nrp[b]
-        pe, qe = nrp[a + 1], nrp[b + 1]
-        while p < pe and q < qe:
-            if nri[p] == nri[q]:
-                out[i] = nri[p]
-                break
-            if nri[p] < nri[q]:
-                p += 1
-            else:
-                q += 1
-    return out
 
 
 @nb.njit(**_JIT)
@@ -559,3 +428,34 @@ def funnel(su, sv, gu, gv, boxes):
     out[n_out, 0], out[n_out, 1] = gu, gv
     n_out += 1
     return out[:n_out].copy()
+
+
+@nb.njit(**_JIT)
+def shortcut_corridor(regs, ekeys, nr):
+    """Greedy corridor shortcut: from each kept region jump to the last later region of ``regs`` adjacent
+    to it (``ekeys`` = sorted ``lo * nr + hi`` keys of the region edges); returns the portal (region edge)
+    ids of the shortened corridor."""
+    m = regs.shape[0]
+    out = np.empty(max(m - 1, 0), dtype=np.int64)
+    n = 0
+    i = 0
+    while i < m - 1:
+        best = -1
+        bk = -1
+        for j in range(m - 1, i, -1):
+            a = regs[i]
+            b = regs[j]
+            if a == b:
+                continue
+            key = min(a, b) * nr + max(a, b)
+            k = np.searchsorted(ekeys, key)
+            if k < ekeys.shape[0] and ekeys[k] == key:
+                best = j
+                bk = k
+                break
+        if best < 0:  # consecutive regions of a corridor are always adjacent; keep the rest as it is
+            return out[:0]
+        out[n] = bk
+        n += 1
+        i = best
+    return out[:n].copy()

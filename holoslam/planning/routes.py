@@ -30,7 +30,6 @@ shorter than grid A* (any-angle), worst 0.99 in the benchmark.
 
 from __future__ import annotations
 
-import heapq
 import math
 from dataclasses import dataclass, field
 
@@ -84,6 +83,8 @@ class RoutePlanner:
     graph: TwoLayerGraph
     portal_uv: np.ndarray  # (F, 2)
     portal_boxes: np.ndarray  # (F, 4) u0, v0, u1, v1
+    port_uv: np.ndarray  # (NP, 2) search nodes: the distinct corners and the centre of each portal
+    port_portal: np.ndarray  # (NP,) the portal of each port (ascending)
     region_portal_ptr: np.ndarray  # (R+1,)
     region_portal_ids: np.ndarray
     region_component: np.ndarray  # (R,) connected component of the region graph
@@ -166,22 +167,45 @@ def build_planner(graph: TwoLayerGraph, n_landmarks: int = 16) -> RoutePlanner:
     o = np.argsort(owner, kind="stable")
     owner, pid = owner[o], pid[o]
     ptr = np.searchsorted(owner, np.arange(R + 1))
-    # all ordered pairs of distinct portals of one region
-    deg = np.diff(ptr)
-    dv = deg[owner]
-    rep = np.repeat(np.arange(owner.shape[0]), dv)
+    # ports: the distinct corners and the centre of each portal (a segment portal has its two ends and its
+    # centre, a corner contact one point); sorted by portal, coordinates exact in half cells
+    H2, W2 = 2 * graph.shape[0] + 1, 2 * graph.shape[1] + 1
+    cu_ = np.stack([boxes[:, 0], boxes[:, 2], boxes[:, 0], boxes[:, 2]], axis=1)
+    cv_ = np.stack([boxes[:, 1], boxes[:, 1], boxes[:, 3], boxes[:, 3]], axis=1)
+    pkey = unique_int(
+        (
+            (np.arange(F, dtype=np.int64)[:, None] * H2 + np.rint(2 * cv_).astype(np.int64)) * W2
+            + np.rint(2 * cu_).astype(np.int64)
+        ).ravel()
+    )
+    port_portal = pkey // (H2 * W2)
+    ports = np.column_stack([(pkey % W2) / 2.0, ((pkey // W2) % H2) / 2.0]).reshape(-1, 2)
+    portal_port_ptr = np.searchsorted(port_portal, np.arange(F + 1))
+    NP = ports.shape[0]
+    # (region, port) incidences, grouped by region, then all ordered pairs of distinct ports of one region
+    npp = np.diff(portal_port_ptr)
+    cnt = npp[pid]
+    pown = np.repeat(owner, cnt)
+    off0 = np.arange(pown.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    pport = np.repeat(portal_port_ptr[pid], cnt) + off0
+    rptr = np.searchsorted(pown, np.arange(R + 1))
+    deg = np.diff(rptr)
+    dv = deg[pown]
+    rep = np.repeat(np.arange(pown.shape[0]), dv)
     off = np.arange(rep.shape[0]) - np.repeat(np.cumsum(dv) - dv, dv)
-    src = pid[rep]
-    dst = pid[ptr[owner[rep]] + off]
+    src = pport[rep]
+    dst = pport[rptr[pown[rep]] + off]
     m = src != dst
     src, dst = src[m], dst[m]
-    o2 = np.argsort(src * max(F, 1) + dst)  # by source, then destination (deterministic)
-    src, dst = src[o2], dst[o2]
-    d = np.hypot(*(cen[src] - cen[dst]).T) if src.shape[0] else np.zeros(0)
-    aptr = np.searchsorted(src, np.arange(F + 1))
+    key = unique_int(src * max(NP, 1) + dst)  # sorted by source, then destination; duplicates dropped
+    src, dst = key // max(NP, 1), key % max(NP, 1)
+    d = np.hypot(*(ports[src] - ports[dst]).T) if src.shape[0] else np.zeros(0)
+    aptr = np.searchsorted(src, np.arange(NP + 1))
     comp = _components(R, graph.region_edges)
-    D = _landmarks(aptr, dst, d, F, n_landmarks)
-    ro = [_ro(a) for a in (cen, boxes, ptr, pid, comp, aptr, dst, d.astype(np.float64), D)]
+    D = _landmarks(aptr, dst, d, NP, n_landmarks)
+    ro = [
+        _ro(a) for a in (cen, boxes, ports, port_portal, ptr, pid, comp, aptr, dst, d.astype(np.float64), D)
+    ]
     return RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels())
 
 
@@ -306,16 +330,23 @@ def _corridor(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray
     c = planner._cache
     if "cu" not in c:
         E = planner.graph.region_edges
-        c["cu"] = np.ascontiguousarray(planner.portal_uv[:, 0])
-        c["cv"] = np.ascontiguousarray(planner.portal_uv[:, 1])
-        c["ea"] = np.ascontiguousarray(E[:, 0], dtype=np.int64)
-        c["eb"] = np.ascontiguousarray(E[:, 1], dtype=np.int64)
-    ptr, ids = planner.region_portal_ptr, planner.region_portal_ids
-    first = ids[ptr[rs] : ptr[rs + 1]]
-    last = ids[ptr[rg] : ptr[rg + 1]]
-    q = planner.portal_uv[first]
+        c["cu"] = np.ascontiguousarray(planner.port_uv[:, 0])
+        c["cv"] = np.ascontiguousarray(planner.port_uv[:, 1])
+        c["ea"] = np.ascontiguousarray(E[planner.port_portal, 0], dtype=np.int64)
+        c["eb"] = np.ascontiguousarray(E[planner.port_portal, 1], dtype=np.int64)
+        c["pp"] = np.searchsorted(planner.port_portal, np.arange(E.shape[0] + 1))
+    ptr, ids, pp = planner.region_portal_ptr, planner.region_portal_ids, c["pp"]
+
+    def ports_of(r: int) -> np.ndarray:
+        f = ids[ptr[r] : ptr[r + 1]]
+        n = pp[f + 1] - pp[f]
+        return np.repeat(pp[f], n) + (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n))
+
+    first = ports_of(rs)
+    last = ports_of(rg)
+    q = planner.port_uv[first]
     d0 = np.hypot(q[:, 0] - s_uv[0], q[:, 1] - s_uv[1])
-    return planner.kernels.corridor_astar(
+    seq = planner.kernels.corridor_astar(
         planner.adj_ptr,
         planner.adj_dst,
         planner.adj_w,
@@ -332,6 +363,24 @@ def _corridor(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray
         float(g_uv[1]),
         HEURISTIC_WEIGHT,
     )
+    portals = planner.port_portal[seq]
+    if portals.shape[0] > 1:  # consecutive ports of one portal are one portal of the corridor
+        portals = portals[np.concatenate([[True], portals[1:] != portals[:-1]])]
+    return portals
+
+
+def _corridor_regions(
+    planner: RoutePlanner, rs: int, portals: np.ndarray, rg: int, dedupe: bool = True
+) -> tuple[int, ...]:
+    """The regions a corridor crosses: the start region, the region shared by each two consecutive portals,
+    the goal region (consecutive repeats dropped when ``dedupe``)."""
+    E = planner.graph.region_edges[portals]
+    a_, b_ = E[:-1], E[1:]
+    shared = np.where((a_[:, 0] == b_[:, 0]) | (a_[:, 0] == b_[:, 1]), a_[:, 0], a_[:, 1])
+    regs = [rs, *shared.tolist(), rg]
+    if not dedupe:
+        return tuple(regs)
+    return tuple(r for i, r in enumerate(regs) if i == 0 or r != regs[i - 1])
 
 
 def plan_path(
@@ -361,18 +410,40 @@ def plan_path(
         portals = _corridor(planner, s_uv, rs, g_uv, rg)
         if not portals.shape[0]:  # pragma: no cover - the component check above makes this unreachable
             raise PlanningError("no route found between connected regions; rebuild the planning graph")
-        E = planner.graph.region_edges[portals]
-        # the region between consecutive portals is the one they share
-        a_, b_ = E[:-1], E[1:]
-        shared = np.where((a_[:, 0] == b_[:, 0]) | (a_[:, 0] == b_[:, 1]), a_[:, 0], a_[:, 1])
-        regs = [rs, *shared.tolist(), rg]
+        regs = np.array(_corridor_regions(planner, rs, portals, rg, dedupe=False))
+        # the start (goal) may lie in later (earlier) regions of the corridor too (regions overlap): enter
+        # the corridor at the last region holding the start and leave it at the first holding the goal
+        rr = planner.graph.regions[regs]
+        s_in = (rr[:, 1] <= s_uv[0]) & (s_uv[0] <= rr[:, 3]) & (rr[:, 0] <= s_uv[1]) & (s_uv[1] <= rr[:, 2])
+        g_in = (rr[:, 1] <= g_uv[0]) & (g_uv[0] <= rr[:, 3]) & (rr[:, 0] <= g_uv[1]) & (g_uv[1] <= rr[:, 2])
+        i0 = int(np.nonzero(s_in)[0][-1])
+        g_after = np.nonzero(g_in[i0:])[0]
+        i1 = i0 + int(g_after[0])  # the goal's own region (last) always holds it
+        portals = portals[i0:i1]
+        regs = regs[i0 : i1 + 1].tolist()
         regions = tuple(r for i, r in enumerate(regs) if i == 0 or r != regs[i - 1])
     K = planner.kernels
-    if rs == rg:
+    if rs == rg or not portals.shape[0]:
         raw = np.vstack([s_uv, g_uv])
     else:
         # the shortest polyline through the corridor's portals: each segment lies in one convex region
         raw = K.funnel(s_uv[0], s_uv[1], g_uv[0], g_uv[1], planner.portal_boxes[portals])
+        # the port metric can pick a detour through a region that a direct portal skips: try the greedily
+        # shortcut corridor too and keep the shorter path (both are straight pieces in convex regions)
+        c = planner._cache
+        if "ekeys" not in c:
+            c["ekeys"] = np.ascontiguousarray(
+                planner.graph.region_edges[:, 0] * max(planner.graph.n_regions, 1)
+                + planner.graph.region_edges[:, 1]
+            )
+        short = K.shortcut_corridor(
+            np.asarray(regs, dtype=np.int64), c["ekeys"], max(planner.graph.n_regions, 1)
+        )
+        if 0 < short.shape[0] < portals.shape[0]:
+            alt = K.funnel(s_uv[0], s_uv[1], g_uv[0], g_uv[1], planner.portal_boxes[short])
+            if path_length(alt) < path_length(raw):
+                raw = alt
+                regions = _corridor_regions(planner, int(regs[0]), short, int(regs[-1]))
     pts, ok = K.simplify_validate(planner.free, raw, EPS_CELLS, 1e-9)  # every segment checked on the grid
     if not ok:
         raise PlanningError("internal planning error: a path segment crosses an obstacle; rebuild the graph")

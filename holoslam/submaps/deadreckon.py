@@ -127,8 +127,13 @@ def interpolate_poses(stamps_ns: np.ndarray, poses: np.ndarray, query_ns: np.nda
     if stamps.size == 0:
         raise IngestError("cannot interpolate poses: the odometry stream is empty; the log needs /odom")
     t0 = stamps[0]
+    qn = np.asarray(query_ns, dtype=np.int64).reshape(-1)
+    if qn.size:  # only the samples around the queries (unwrapping the whole stream per call is the cost)
+        lo = max(int(np.searchsorted(stamps, qn.min(), side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(stamps, qn.max(), side="left")) + 1, stamps.size)
+        stamps, poses = stamps[lo:hi], poses[lo:hi]
     ts = (stamps - t0).astype(np.float64)
-    q = (np.asarray(query_ns, dtype=np.int64) - t0).astype(np.float64)
+    q = (qn - t0).astype(np.float64)
     th = np.unwrap(poses[:, 2])
     out = np.column_stack([np.interp(q, ts, poses[:, 0]), np.interp(q, ts, poses[:, 1]), np.interp(q, ts, th)])
     out[:, 2] = g.wrap(out[:, 2])
