@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -51,7 +50,9 @@ def corrupt(obs, frac, rng, ids):
         if n % 2 == 0:
             a = rng.uniform(0, 2 * np.pi)
             shift = rng.uniform(1.0, 2.0) * np.array([np.cos(a), np.sin(a), 0.0])
-            obs[k] = ObjectObservation(o.stamp_ns, o.object_id, o.payload, o.b_position + shift, o.cov_b_position)
+            obs[k] = ObjectObservation(
+                o.stamp_ns, o.object_id, o.payload, o.b_position + shift, o.cov_b_position
+            )
         else:
             other = [i for i in ids if i != o.object_id][int(rng.integers(len(ids) - 1))]
             obs[k] = ObjectObservation(o.stamp_ns, other, o.payload, o.b_position, o.cov_b_position)
@@ -74,7 +75,7 @@ def move_objects(obs, gt_t, gt_wTb, rng, n=3):
     deltas = {}
     for oid in chosen:
         ks = sorted(by_id[oid], key=lambda k: obs[k].stamp_ns)
-        half = ks[len(ks) // 2:]
+        half = ks[len(ks) // 2 :]
         a = rng.uniform(0, 2 * np.pi)
         d = MOVE * np.array([np.cos(a), np.sin(a)])
         deltas[oid] = d
@@ -84,8 +85,9 @@ def move_objects(obs, gt_t, gt_wTb, rng, n=3):
             o = obs[k]
             c, s = np.cos(T[2]), np.sin(T[2])
             db = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], 0.0])
-            out[k] = ObjectObservation(o.stamp_ns, o.object_id, o.payload, o.b_position + db, o.cov_b_position,
-                                       o.method)
+            out[k] = ObjectObservation(
+                o.stamp_ns, o.object_id, o.payload, o.b_position + db, o.cov_b_position, o.method
+            )
     return out, chosen, deltas
 
 
@@ -104,17 +106,23 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
     true = truth_at(fe.anchor_stamps_ns, gt_t, gt_wTb)
     te = trajectory_errors(sol.wTa, true, sol.cov_wTa)
     T0 = g.compose(true[0], g.inverse(sol.wTa[0]))  # the solver's gauge: anchor 0 fixed
-    te0 = trajectory_errors(g.compose(np.broadcast_to(T0, sol.wTa.shape), sol.wTa), true, sol.cov_wTa, align=False)
+    te0 = trajectory_errors(
+        g.compose(np.broadcast_to(T0, sol.wTa.shape), sol.wTa), true, sol.cov_wTa, align=False
+    )
     dr = truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb)
     de = trajectory_errors(dr, true)
     truth = dict(truth_objects)
     if moved_deltas:  # a moved object's landmark is its final place; "<id>@before" its first
-        truth = {k: (np.asarray(v)[:2] + moved_deltas[k] if k in moved_deltas else v) for k, v in truth.items()}
+        truth = {
+            k: (np.asarray(v)[:2] + moved_deltas[k] if k in moved_deltas else v) for k, v in truth.items()
+        }
     oe = object_errors(sol.landmark_ids, sol.w_landmarks, truth, te.T)
     P = fe.problem.landmarks
     if len(P.i):
         dw = g.compose(np.broadcast_to(de.T, dr.shape), dr)
-        w = np.array([g.transform_points(dw[i], xy[None])[0] for i, xy in zip(P.i, P.a_position, strict=True)])
+        w = np.array(
+            [g.transform_points(dw[i], xy[None])[0] for i, xy in zip(P.i, P.a_position, strict=True)]
+        )
         names = sorted(set(P.landmark))
         lab = np.array(P.landmark)
         est = np.array([w[lab == k].mean(axis=0) for k in names])
@@ -122,10 +130,21 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
     else:
         od = oe
     moved_found = sorted(m.object_id for m in sol.moved_objects)
-    return dict(anchors=len(fe.submaps), dr_pos=de.rmse_m, pos=te.rmse_m, dr_head=de.heading_rmse_deg,
-                head=te.heading_rmse_deg, dr_obj=od.rmse_m, obj=oe.rmse_m, n_obj=oe.n_matched, cov95=te.coverage95,
-                cov95_0=te0.coverage95, fe_s=t1 - t0, moved_found=moved_found,
-                loops=int(np.sum(fe.problem.relative.kind == "loop")))
+    return dict(
+        anchors=len(fe.submaps),
+        dr_pos=de.rmse_m,
+        pos=te.rmse_m,
+        dr_head=de.heading_rmse_deg,
+        head=te.heading_rmse_deg,
+        dr_obj=od.rmse_m,
+        obj=oe.rmse_m,
+        n_obj=oe.n_matched,
+        cov95=te.coverage95,
+        cov95_0=te0.coverage95,
+        fe_s=t1 - t0,
+        moved_found=moved_found,
+        loops=int(np.sum(fe.problem.relative.kind == "loop")),
+    )
 
 
 def strip_compass_camera(log):
@@ -152,18 +171,26 @@ def variants(log, obs, name, rng_seed, quick):
 
 
 def print_table(rows):
-    hdr = (f"{'log':18s} {'variant':19s} {'anch':>4s} {'DR m':>6s} {'graph m':>7s} {'ratio':>5s} {'DR°':>5s} "
-           f"{'graph°':>6s} {'DR obj':>6s} {'obj m':>6s} {'n':>3s} {'cov95':>5s} {'cov95@0':>7s} {'/clean':>6s} "
-           f"{'moved':>5s} {'loops':>5s} {'fe s':>5s}")
+    hdr = (
+        f"{'log':18s} {'variant':19s} {'anch':>4s} {'DR m':>6s} {'graph m':>7s} {'ratio':>5s} {'DR°':>5s} "
+        f"{'graph°':>6s} {'DR obj':>6s} {'obj m':>6s} {'n':>3s} {'cov95':>5s} {'cov95@0':>7s} {'/clean':>6s} "
+        f"{'moved':>5s} {'loops':>5s} {'fe s':>5s}"
+    )
     print(hdr)
     for name, var, m, clean in rows:
         rel = f"{max(m['pos'] / clean['pos'], m['obj'] / clean['obj']):6.2f}" if clean else f"{'':6s}"
-        mv = (f"{len(set(m['moved_found']) & set(m['moved_expected']))}/{len(m['moved_expected'])}"
-              if "moved_expected" in m else "")
-        print(f"{name:18s} {var:19s} {m['anchors']:4d} {m['dr_pos']:6.3f} {m['pos']:7.4f} "
-              f"{m['dr_pos'] / m['pos']:5.1f} {m['dr_head']:5.2f} {m['head']:6.3f} {m['dr_obj']:6.3f} "
-              f"{m['obj']:6.3f} {m['n_obj']:3d} {m['cov95']:5.2f} {m['cov95_0']:7.2f} {rel} {mv:>5s} "
-              f"{m['loops']:5d} {m['fe_s']:5.1f}", flush=True)
+        mv = (
+            f"{len(set(m['moved_found']) & set(m['moved_expected']))}/{len(m['moved_expected'])}"
+            if "moved_expected" in m
+            else ""
+        )
+        print(
+            f"{name:18s} {var:19s} {m['anchors']:4d} {m['dr_pos']:6.3f} {m['pos']:7.4f} "
+            f"{m['dr_pos'] / m['pos']:5.1f} {m['dr_head']:5.2f} {m['head']:6.3f} {m['dr_obj']:6.3f} "
+            f"{m['obj']:6.3f} {m['n_obj']:3d} {m['cov95']:5.2f} {m['cov95_0']:7.2f} {rel} {mv:>5s} "
+            f"{m['loops']:5d} {m['fe_s']:5.1f}",
+            flush=True,
+        )
 
 
 def main(argv=None) -> int:

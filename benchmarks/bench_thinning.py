@@ -11,7 +11,8 @@ Maps:
 
 Times are medians over --repeat runs in this process; `ratio` is holoslam thin / skimage skeletonize on the
 same mask (wall time), `cpu_ratio` the same with this process's CPU time (steadier on a shared machine;
-OpenCV's threads count in it), `graph_cpu_ms` the graph step's CPU time. Graph = skeleton_to_graph on thin's skeleton with a precomputed clearance map (the distance
+OpenCV's threads count in it), `graph_cpu_ms` the graph step's CPU time (median of at least 3 runs; the
+first run in a process also pays the page faults of its first large allocations). Graph = skeleton_to_graph on thin's skeleton with a precomputed clearance map (the distance
 transform is timed separately, as `clear`). Quality, for both skeletons: 8-connected components of free
 space vs of the skeleton, holes (4-connected obstacle components not touching the border; all sizes, and
 those of at least MIN_HOLE cells) vs independent cycles of the graph, and cells still removable
@@ -88,16 +89,16 @@ CPU: dict[str, float] = {}  # median process CPU time of the last median_time ca
 
 def median_time(f, repeat, label=None):
     """Median wall time over repeat runs (and, under label, the median CPU time of this process in CPU)."""
-    ts, cs, out = [], [], None
+    ts, cs, outs = [], [], []
     for _ in range(repeat):
         c = time.process_time()
         t = time.perf_counter()
-        out = f()
+        outs.append(f())  # kept: freeing the previous result is not part of the next run
         ts.append(time.perf_counter() - t)
         cs.append(time.process_time() - c)
     if label:
         CPU[label] = statistics.median(cs)
-    return statistics.median(ts), out
+    return statistics.median(ts), outs[-1]
 
 
 def run(name, free, resolution, repeat, rows):
@@ -111,7 +112,7 @@ def run(name, free, resolution, repeat, rows):
     t_thin, sk = median_time(lambda: thin(free), repeat, "thin")
     t_clear, clr = median_time(lambda: clearance_map(free, resolution), repeat)
     t_graph, G = median_time(
-        lambda: skeleton_to_graph(sk, resolution=resolution, clearance=clr), repeat, "graph"
+        lambda: skeleton_to_graph(sk, resolution=resolution, clearance=clr), max(repeat, 3), "graph"
     )
     Gref = skeleton_to_graph(sk_ref, resolution=resolution)
     comps, holes, big_holes = topology_numbers(free)

@@ -108,7 +108,9 @@ def _inside95(err_w: np.ndarray, cov_w: np.ndarray) -> np.ndarray:
     det = cov_w[:, 0, 0] * cov_w[:, 1, 1] - cov_w[:, 0, 1] * cov_w[:, 1, 0]
     safe = np.where(det > 0, det, 1.0)
     ex, ey = err_w[:, 0], err_w[:, 1]
-    m2 = (cov_w[:, 1, 1] * ex * ex - (cov_w[:, 0, 1] + cov_w[:, 1, 0]) * ex * ey + cov_w[:, 0, 0] * ey * ey) / safe
+    m2 = (
+        cov_w[:, 1, 1] * ex * ex - (cov_w[:, 0, 1] + cov_w[:, 1, 0]) * ex * ey + cov_w[:, 0, 0] * ey * ey
+    ) / safe
     return (det > 0) & (m2 <= CHI2_2D_95)
 
 
@@ -135,7 +137,9 @@ def trajectory_errors(
             raise ValueError(f"trajectory_errors: {C.shape[0]} covariances for {est.shape[0]} poses")
         R = g.rot2(e[:, 2]).reshape(-1, 2, 2)
         Cw = R @ C[:, :2, :2] @ np.swapaxes(R, 1, 2)
-        use = np.all(np.isfinite(C[:, :2, :2]), axis=(1, 2)) & (np.trace(C[:, :2, :2], axis1=1, axis2=2) > _GAUGE_VAR)
+        use = np.all(np.isfinite(C[:, :2, :2]), axis=(1, 2)) & (
+            np.trace(C[:, :2, :2], axis1=1, axis2=2) > _GAUGE_VAR
+        )
         ncov = int(use.sum())
         if ncov:
             cov95 = float(np.mean(_inside95(d[use], Cw[use])))
@@ -206,13 +210,17 @@ def truth_at(stamps_ns: np.ndarray, gt_stamps_ns: np.ndarray, gt_wTb: np.ndarray
     t = np.asarray(gt_stamps_ns, dtype=np.int64).reshape(-1)
     P = np.asarray(gt_wTb, dtype=np.float64).reshape(-1, 3)
     if t.size == 0 or t.size != P.shape[0]:
-        raise ValueError(f"truth_at: {t.size} ground-truth stamps for {P.shape[0]} poses; need >= 1 of each, paired")
+        raise ValueError(
+            f"truth_at: {t.size} ground-truth stamps for {P.shape[0]} poses; need >= 1 of each, paired"
+        )
     if np.any(np.diff(t) < 0):
         raise ValueError("truth_at: ground-truth stamps must be sorted in time")
     tf = (t - t[0]).astype(np.float64)
     qf = (q - t[0]).astype(np.float64)
-    return np.column_stack([
-        np.interp(qf, tf, P[:, 0]),
-        np.interp(qf, tf, P[:, 1]),
-        g.wrap(np.interp(qf, tf, np.unwrap(P[:, 2]))),
-    ])
+    return np.column_stack(
+        [
+            np.interp(qf, tf, P[:, 0]),
+            np.interp(qf, tf, P[:, 1]),
+            g.wrap(np.interp(qf, tf, np.unwrap(P[:, 2]))),
+        ]
+    )

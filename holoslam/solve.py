@@ -10,6 +10,16 @@ self-consistent and significantly apart, are a *moved object*: the earlier clust
 variable ``"<id>@before"`` and the object is reported with both positions; (4) re-solve without the rejected
 measurements, repeat until nothing changes; (5) a last solve with plain Gaussian noise on the accepted
 measurements gives the final estimate and honest marginal covariances.
+
+Initialisation (``SolveOptions.initialisation``): the problem's guess, the odometry chain, LAGO, an incremental
+iSAM2 pass, or ``AUTO``, which solves from each of ``SolveOptions.auto_candidates`` and keeps the lowest final
+error (``Solution.candidates`` lists every start's final error, ``Solution.initialisation`` the winner). No single
+start reaches the global optimum everywhere: on MITb LM from the guess, the odometry chain or LAGO stops at
+E 385.12 while the incremental start reaches 20.60; on CSAIL all four agree. AUTO costs the sum of its candidates.
+
+``Method.ISAM2`` feeds the graph anchor by anchor (QR factorisation by default: Cholesky throws on the strongly
+anisotropic scan-match information of CSAIL / MITb / FR079); ``isam2_final_lm_iterations`` polishes the
+incremental estimate with a few batch LM iterations (on Victoria Park, 2 of them land on the batch optimum).
 """
 
 from __future__ import annotations
@@ -251,7 +261,7 @@ def _isam2(
             est[a] = geo.compose(est[i], iTa)
         elif a > 0:
             est[a] = geo.compose(est[a - 1], geo.between(init[a - 1], init[a]))
-        new_values.insert(anchor_key(a), gtsam.Pose2(*est[a]))
+        new_values.insert(anchor_key(a), pose2=gtsam.Pose2(*est[a]))
         for f in order[bounds[a] : bounds[a + 1]].tolist():
             new_factors.push_back(graph.at(f))
             for key in graph.at(f).keys():
@@ -642,7 +652,7 @@ def _solve_auto(problem: SlamProblem, options: SolveOptions, hook: IterationHook
             start = problem.initial_wTa if cand is Initialisation.PROBLEM else None
             if start is None:
                 start = odometry_chain(problem.num_poses, problem.relative)
-            if any(np.array_equal(start, s) for s in starts):
+            if any(np.allclose(start, s, rtol=0.0, atol=1e-9) for s in starts):
                 continue
             starts.append(start)
         try:
@@ -703,6 +713,8 @@ class G2oSolveSummary:
     seconds_solve: float
     seconds_write: float
     skipped: tuple[str, ...] = field(default_factory=tuple)
+    initialisation: str = "problem"  # the start used (with AUTO: the winner)
+    candidates: tuple[tuple[str, float], ...] = ()  # AUTO: (start, final error; nan = failed)
 
 
 def solve_g2o_file(
@@ -767,6 +779,8 @@ def solve_g2o_file(
             seconds_solve=t2 - t1,
             seconds_write=t3 - t2,
             skipped=tuple(f"{s.tag} x{s.count} (first at line {s.first_line})" for s in g.skipped),
+            initialisation=(sol.initialisation or Initialisation(opts.initialisation)).value,
+            candidates=tuple((c.value, e) for c, e in sol.candidates),
         ),
         sol,
     )

@@ -189,3 +189,43 @@ def test_without_compass_and_camera_scan_only_loops_recover_truth():
     err = trajectory_errors(sol.wTa, truth)
     dr = trajectory_errors(truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb), truth)
     assert err.rmse_m < 0.05 and err.rmse_m < 0.5 * dr.rmse_m, (err.rmse_m, dr.rmse_m)
+
+
+def test_object_whose_two_sightings_disagree_is_ambiguous(frontend_run):
+    fe, log, obs, t, wTb = frontend_run
+    assert fe.ambiguous_objects == ()  # clean sightings always agree
+    counts = {}
+    for o in obs:
+        counts[o.object_id] = counts.get(o.object_id, 0) + 1
+    name = max(counts, key=counts.get)
+    assert counts[name] >= 2
+    mine = [o for o in obs if o.object_id == name][:2]
+    bad = ObjectObservation(mine[1].stamp_ns, name, mine[1].payload, mine[1].b_position + np.array([1.5, 0.0, 0.0]),
+                            mine[1].cov_b_position)
+    others = [o for o in obs if o.object_id != name]
+    dr = DeadReckoningConfig(sigma_s_per_m=0.03, sigma_s_floor=0.002, odo_sigma_dtheta_per_rad=0.02,
+                             odo_sigma_dtheta_per_m=0.0, odo_sigma_dtheta_floor=0.002)
+    fe2 = build_problem(log, others + [mine[0], bad], FrontEndConfig(dead_reckoning=dr, build_grids=False))
+    assert fe2.ambiguous_objects == (name,)
+    assert name not in set(fe2.problem.landmarks.landmark)
+    # three sightings with a majority are left to the solver's outlier rejection
+    fe3 = build_problem(log, others + mine + [bad], FrontEndConfig(dead_reckoning=dr, build_grids=False))
+    assert fe3.ambiguous_objects == () and name in set(fe3.problem.landmarks.landmark)
+
+
+def test_initial_landmark_is_the_agreeing_majority_not_the_first_sighting(frontend_run):
+    fe, log, obs, t, wTb = frontend_run
+    name = sorted(OBJECTS)[0]
+    mine = sorted((o for o in obs if o.object_id == name), key=lambda o: o.stamp_ns)
+    assert len(mine) >= 2
+    first = mine[0]
+    bad = ObjectObservation(first.stamp_ns - 1, name, first.payload, first.b_position + np.array([0.0, 1.5, 0.0]),
+                            first.cov_b_position)  # a wrong sighting before all the good ones
+    dr = DeadReckoningConfig(sigma_s_per_m=0.03, sigma_s_floor=0.002, odo_sigma_dtheta_per_rad=0.02,
+                             odo_sigma_dtheta_per_m=0.0, odo_sigma_dtheta_floor=0.002)
+    fe2 = build_problem(log, [bad, *obs], FrontEndConfig(dead_reckoning=dr, build_grids=False))
+    init = fe2.problem.initial_landmarks[name]
+    # the initial estimate (world frame of the first anchor = the truth's first pose, up to drift) is near the
+    # clean estimate, not 1.5 m off
+    clean = fe.problem.initial_landmarks[name]
+    assert np.hypot(*(init - clean)) < 0.1

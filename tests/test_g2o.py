@@ -136,8 +136,18 @@ def test_unknown_tags_are_reported_or_raise():
         parse_g2o(text, strict=True)
 
 
-def test_problem_from_g2o_initialises_like_load2d(tmp_path):
-    text = "ODOMETRY 0 1 1 0 0.5 1 0 0 1 0 1\nLANDMARK 1 9 2 0 0.4 0 0.4\nODOMETRY 1 2 1 0 0.5 1 0 0 1 0 1\n"
+@pytest.mark.parametrize(
+    "text",
+    [
+        # the odometry chain places every pose first: the vectorised chain rule
+        "ODOMETRY 0 1 1 0 0.5 1 0 0 1 0 1\nLANDMARK 1 9 2 0 0.4 0 0.4\nODOMETRY 1 2 1 0 0.5 1 0 0 1 0 1\n"
+        "ODOMETRY 2 3 0.5 0.2 2.5 1 0 0 1 0 1\nLANDMARK 3 9 1 1 0.4 0 0.4\nODOMETRY 3 4 1 0 3.0 1 0 0 1 0 1\n",
+        # a closure reaches pose 2 before its odometry edge: gtsam's line-by-line rule
+        "ODOMETRY 0 1 1 0 0.5 1 0 0 1 0 1\nODOMETRY 0 2 1 1 0.2 1 0 0 1 0 1\nLANDMARK 2 9 2 0 0.4 0 0.4\n"
+        "ODOMETRY 1 2 1 0 0.5 1 0 0 1 0 1\n",
+    ],
+)
+def test_problem_from_g2o_initialises_like_load2d(tmp_path, text):
     path = tmp_path / "o.txt"
     path.write_text(text)
     _, values = gtsam.load2D(str(path))
@@ -170,11 +180,23 @@ def test_solve_g2o_file_matches_gtsam_and_writes(tmp_path):
 
 
 def test_fast_tokeniser_matches_line_by_line_path():
-    """The vectorised reader (np.loadtxt per tag) and the careful line-by-line reader (taken when the text has a
-    comment) give identical graphs; mixed g2o/TORO edges keep file order."""
+    """The vectorised reader (np.loadtxt per tag, comments allowed) and the careful line-by-line reader (taken for
+    lower-case tags) give identical graphs; mixed g2o/TORO edges keep file order."""
     body = SMALL.replace("# a tiny graph\n", "") + "EDGE2 1 0 -1.0 0.1 0.0 2 0 3 4 0 0\nEQUIV 1 2\n"
     fast = parse_g2o(body)
-    slow = parse_g2o("# comment forces the careful path\n" + body)
+    slow = parse_g2o("# a comment line\nedge_se2 0 1 1 0 0 1 0 0 1 0 1\n" + body)  # lower case: careful path
+    assert slow.edge_i.tolist()[0] == 0 and slow.edge_line[0] == 2
+    slow = G2oGraph(
+        **{
+            **{k: getattr(slow, k) for k in G2oGraph.__dataclass_fields__},
+            "edge_i": slow.edge_i[1:],
+            "edge_j": slow.edge_j[1:],
+            "edge_measured": slow.edge_measured[1:],
+            "edge_cov": slow.edge_cov[1:],
+            "edge_line": slow.edge_line[1:] - 1,
+        }
+    )
+    commented = parse_g2o("# header\n" + body.replace("FIX 0", "FIX 0  # inline comment"))
     for name in (
         "vertex_ids",
         "vertex_poses",
@@ -189,7 +211,9 @@ def test_fast_tokeniser_matches_line_by_line_path():
         "fixed_ids",
     ):
         assert np.array_equal(getattr(fast, name), getattr(slow, name)), name
-    assert np.array_equal(fast.edge_line + 1, slow.edge_line)  # one line shorter
+        assert np.array_equal(getattr(fast, name), getattr(commented, name)), name
+    assert np.array_equal(fast.edge_line + 1, slow.edge_line)
+    assert np.array_equal(fast.edge_line + 1, commented.edge_line)
     assert fast.edge_i.tolist() == [0, 1, 2, 1]
     assert [s.tag for s in fast.skipped] == ["EQUIV"] == [s.tag for s in slow.skipped]
     with pytest.raises(G2oFormatError, match=r":3: EDGE_SE2 needs 11 fields"):

@@ -157,3 +157,81 @@ def test_planning_errors_are_clear():
     # a start just inside a wall snaps to the nearest free cell
     r = plan_path(tl, np.array([0.06, 1.0]), np.array([1.0, 1.0]))
     assert tl.region_at(r.waypoints[:1])[0] >= 0
+
+
+@settings(max_examples=100, deadline=None)
+@given(
+    st.integers(0, 2**31 - 1),
+    st.lists(st.tuples(quarter, quarter, quarter, quarter), min_size=1, max_size=8),
+)
+def test_compiled_segment_check_matches_segments_free(seed, segs):
+    """The compiled check the planner validates with (``_fast.seg_free``) agrees with ``segments_free``,
+    itself checked against dense sampling above."""
+    from holoslam.planning import _fast
+
+    free = random_map(seed, 10, 10, 3, 8)
+    s = np.array(segs, dtype=np.float64)
+    ref = segments_free(free, s[:, :2], s[:, 2:])
+    got = [_fast.seg_free(free, u0, v0, u1, v1, 1e-9) for u0, v0, u1, v1 in s.tolist()]
+    assert got == ref.tolist()
+
+
+def _corridor_case(seed, h, w, qseed):
+    """A random map, a query and the corridor (portal boxes) the planner's regions give for it."""
+    free = random_map(seed, h, w, 6, 20)
+    tl = build_two_layer(free, 1, resolution=1.0)
+    planner = build_planner(tl)
+    return free, tl, planner
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(8, 40), st.integers(8, 40), st.integers(0, 2**31 - 1))
+def test_funnel_is_shortest_through_the_boxes_and_collision_free(seed, h, w, qseed):
+    """The corridor path through a chain of portal boxes (funnel, polished by coordinate descent where it
+    turns back) starts and ends right, is collision-free, is no longer than the polyline through the box
+    centres and within ``LENGTH_FACTOR`` of the convex optimum (exact coordinate descent, ``_fast.refine``,
+    run long). Not always equal to it: the funnel bends at box corners only."""
+    from holoslam.planning import _fast
+
+    free, tl, planner = _corridor_case(seed, h, w, qseed)
+    E = tl.region_edges
+    if E.shape[0] == 0:
+        return
+    rng = np.random.default_rng(qseed)
+    # a self-avoiding random walk along the region graph gives a chain of portals, consecutive ones sharing a region
+    r = int(rng.integers(0, tl.n_regions))
+    chain, regs = [], [r]
+    for _ in range(int(rng.integers(1, 8))):
+        inc = np.nonzero((E[:, 0] == r) | (E[:, 1] == r))[0]
+        inc = inc[~np.isin(np.where(E[inc, 0] == r, E[inc, 1], E[inc, 0]), regs)]  # self-avoiding
+        if inc.shape[0] == 0:
+            break
+        k = int(rng.choice(inc))
+        r = int(E[k, 0] if E[k, 1] == r else E[k, 1])
+        chain.append(k)
+        regs.append(r)
+    if not chain:
+        return
+    R = tl.regions  # start / goal: random points of the first / last region (boundary coordinates)
+    s = np.array([rng.uniform(R[regs[0], 1], R[regs[0], 3]), rng.uniform(R[regs[0], 0], R[regs[0], 2])])
+    g = np.array([rng.uniform(R[regs[-1], 1], R[regs[-1], 3]), rng.uniform(R[regs[-1], 0], R[regs[-1], 2])])
+    boxes = np.ascontiguousarray(planner.portal_boxes[chain])
+    f = _fast.corridor_path(s[0], s[1], g[0], g[1], boxes, 200)
+    ref = _fast.refine(s[0], s[1], g[0], g[1], boxes, 5000, 1e-12)
+    assert np.allclose(f[0], s) and np.allclose(f[-1], g)
+    centres = np.vstack([s, (boxes[:, :2] + boxes[:, 2:]) / 2, g])
+    assert path_length(f) <= path_length(centres) + 1e-9
+    assert path_length(f) <= LENGTH_FACTOR * path_length(ref) + 1e-6
+    assert segments_free(free, f[:-1], f[1:]).all()
+
+
+def test_start_in_overlapping_regions_enters_the_corridor_late():
+    """Regression (found by hypothesis): the start cell lies in two overlapping regions and the best route
+    leaves from the second; the path must not detour through the first region's portal."""
+    free = random_map(22845882, 8, 28, 8, 29)
+    tl = build_two_layer(free, 1, resolution=0.05)
+    planner = build_planner(tl)
+    _check_route(tl, planner, free, (3, 1), (5, 2))
+    r = plan_path(planner, np.array([0.075, 0.175]), np.array([0.125, 0.275]))
+    ref = astar_length(free, (3, 1), (5, 2))
+    assert r.length <= ref * 0.05 + 1e-9  # any-angle: never longer than the 8-connected grid path here

@@ -95,8 +95,8 @@ class NoiseCache:
 
 def noise_models(cov: np.ndarray, kernel: Kernel = NO_KERNEL) -> tuple[list[Any], np.ndarray]:
     """Gaussian noise models for a batch of covariances (M, d, d), one per distinct covariance, and each row's
-    model index. Vectorised: distinct matrices found with one ``np.unique``, diagonal ones become
-    ``noiseModel.Diagonal.Sigmas`` (what gtsam's "smart" constructors pick), the others
+    model index. Vectorised: distinct matrices found with one ``np.unique``; diagonal ones (to 1e-12 in
+    correlation) become ``noiseModel.Diagonal.Sigmas`` (what gtsam's "smart" constructors pick), the others
     ``noiseModel.Gaussian.SqrtInformation`` with the upper Cholesky factor R of the information (R^T R = cov^-1)
     computed in one batched numpy call. A robust kernel, when given, wraps every model."""
     import gtsam
@@ -114,7 +114,10 @@ def noise_models(cov: np.ndarray, kernel: Kernel = NO_KERNEL) -> tuple[list[Any]
         uniq = flat[first]
     uc = uniq.reshape(-1, d, d)
     diag = np.einsum("kii->ki", uc)
-    is_diag = np.all((uc == 0) | np.eye(d, dtype=bool), axis=(1, 2))
+    # diagonal up to rounding (|correlation| < 1e-12, e.g. a bearing/range covariance propagated to x/y and back)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.abs(uc) / np.sqrt(np.abs(diag[:, :, None] * diag[:, None, :]))
+    is_diag = np.all((corr < 1e-12) | (uc == 0) | np.eye(d, dtype=bool), axis=(1, 2))
     ok = np.all(np.isfinite(uc), axis=(1, 2)) & np.all(diag > 0, axis=1)
     R = np.zeros_like(uc)
     full = np.flatnonzero(~is_diag & ok)

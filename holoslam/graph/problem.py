@@ -305,6 +305,48 @@ def odometry_chain(num_poses: int, relative: RelativePoseMeasurements) -> np.nda
     return wTa
 
 
+def _chain_initialisation(
+    n: int,
+    ei: np.ndarray,
+    ej: np.ndarray,
+    meas: np.ndarray,
+    eline: np.ndarray,
+    li: np.ndarray,
+    lline: np.ndarray,
+) -> np.ndarray | None:
+    """gtsam ``load2D``'s file-order initialisation, vectorised for the common case of a graph without vertices
+    whose poses are first mentioned by the odometry chain: pose 0 first appears as the first end of an edge and
+    every pose k > 0 first appears (over edge and landmark lines) as the second end of an edge (k-1, k). Then the
+    rule reduces to composing that chain (a cumulative sum of headings and of rotated steps). Returns None when
+    the case does not apply (the caller runs the line-by-line rule)."""
+    if ei.size < n - 1:
+        return None
+    lines = np.concatenate([eline, eline, lline])
+    poses = np.concatenate([ei, ej, li])
+    first_line = np.full(n, np.iinfo(np.int64).max, dtype=np.int64)
+    np.minimum.at(first_line, poses, lines)
+    odo = np.flatnonzero(ej == ei + 1)
+    # the first odometry edge (in file order) reaching each pose k > 0
+    odo = odo[np.argsort(eline[odo], kind="stable")]
+    _, first = np.unique(ej[odo], return_index=True)
+    step = odo[first]
+    if step.size != n - 1 or not np.array_equal(ej[step], np.arange(1, n)):
+        return None
+    if not np.array_equal(eline[step], first_line[1:]):
+        return None
+    first0 = np.flatnonzero((ei == 0) & (eline == first_line[0]))
+    if first0.size == 0:
+        return None
+    m = meas[step]
+    theta = np.concatenate([[0.0], np.cumsum(m[:, 2])])
+    c, s = np.cos(theta[:-1]), np.sin(theta[:-1])
+    wTa = np.zeros((n, 3))
+    wTa[1:, 0] = np.cumsum(c * m[:, 0] - s * m[:, 1])
+    wTa[1:, 1] = np.cumsum(s * m[:, 0] + c * m[:, 1])
+    wTa[:, 2] = geo.wrap(theta)
+    return wTa
+
+
 def problem_from_g2o(graph: G2oGraph, fix_first: bool = True) -> SlamProblem:
     """Turn a parsed g2o / TORO / iSAM text graph into a :class:`SlamProblem`.
 
@@ -344,6 +386,22 @@ def problem_from_g2o(graph: G2oGraph, fix_first: bool = True) -> SlamProblem:
         str(int(k)): np.asarray(p, dtype=float)
         for k, p in zip(graph.point_ids, graph.point_positions, strict=True)
     }
+    chain = None
+    if not placed.any() and n > 1:
+        chain = _chain_initialisation(
+            n, ei, ej, graph.edge_measured, graph.edge_line, li, graph.landmark_line
+        )
+    if chain is not None:
+        wTa[:] = chain
+        placed[:] = True
+        if li.size:
+            order = np.argsort(graph.landmark_line, kind="stable")
+            names = np.array(landmarks.landmark, dtype=object)[order]
+            _, first = np.unique(names.astype(str), return_index=True)
+            rows = order[np.sort(first)]
+            pts = geo.transform_points(wTa[li[rows]], graph.landmark_measured[rows])
+            for r, p in zip(rows.tolist(), pts, strict=True):
+                init_lm.setdefault(landmarks.landmark[r], p)
     if not placed.all() or len(init_lm) < len(set(landmarks.landmark)):
         el, ll = graph.edge_line.tolist(), graph.landmark_line.tolist()
         events = sorted([(el[k], 0, k) for k in range(ei.size)] + [(ll[k], 1, k) for k in range(li.size)])

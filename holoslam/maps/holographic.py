@@ -1,7 +1,7 @@
 """The household holographic graph M = {V, E} of seed 002 (SPEC.md §1, Eq. 1-5), and its queries.
 
-The graph is a ``networkx.Graph`` (simple: two places are joined by at most one passage; two doorways between
-the same rooms are two doorway nodes). Every node has ``kind`` = ``"environment"`` or ``"object"``.
+The graph is a ``networkx.Graph`` (simple: two places are joined by at most one passage). Every node has
+``kind`` = ``"environment"`` or ``"object"``.
 
 **Environment nodes** (V_e, carrying {H, L_m}), keyed ``"room:<i>"``, ``"door:<i>"``, ``"crossing:<i>"``,
 ``"dead_end:<i>"``, with ``place`` = room | doorway | crossing | dead_end, position ``x``, ``y`` (world m),
@@ -12,17 +12,26 @@ anchors the frame is the node's position with theta 0). L_m is summarised by sca
 
 How the places are found (all vectorised on the grid, Python loops only over places):
 
-- *Doorways*: along every topology edge, the skeleton cells whose free width (2 x clearance) is at most
-  ``doorway_width_m`` form narrow runs; a run no longer than ``doorway_depth_m`` is a doorway candidate, its
-  point is the run's narrowest cell. The passage is cut there by a line across it (perpendicular to the
-  skeleton, through the free width). With all cuts drawn, the free space falls into regions; a cut with the
-  same region on both sides separates nothing (a gap between a sofa and a wall inside one room) and is
-  dropped, and a region smaller than ``min_room_area_m2`` is merged into its smallest neighbour (the cut
-  between them is dropped), until every cut joins two different rooms. Rooms in a loop (each reachable through
-  two doors) keep all their doorways. Longer narrow runs are corridors, not doorways. Known limit: a pocket of
-  at least ``min_room_area_m2`` reached only through narrow gaps (e.g. behind a long table) becomes a room.
-- *Rooms* (open areas): the 4-connected regions of the free space with all doorway cuts drawn in; a region of
-  at least ``min_room_area_m2`` is a room, its node sits at its cell farthest from obstacles.
+- *Doorways*: door-like constrictions of the free space. Candidates are skeleton cells (topology edge paths)
+  whose free width (2 x clearance) lies between the robot's diameter and ``doorway_width_m`` and is the
+  narrowest within ``doorway_window_m`` along the skeleton. Each candidate cuts the passage by the line from
+  its nearest obstacle cell to the nearest obstacle cell on the other side. With all cuts drawn into the space
+  the robot fits in, the free space falls into regions, and the regions are merged by dropping cuts, one per
+  round, by these rules in this order: (1) a cut with the same region (or none) on both sides separates
+  nothing; (2) two regions joined by two or more cuts are one room around furniture (an island, a table); (3)
+  a *fragment* (less than ``fragment_area_m2`` of robot space, or no point ``min_room_clearance_m`` from
+  obstacles) joins a neighbour, smallest fragment first, through the cut that opens most widely relative to
+  that neighbour's largest clearance, so the pieces of a cluttered room (balcony, study) join each other
+  rather than the wide room behind their doorway, and a fragment in front of a doorway joins the room it
+  belongs to rather than the one behind the door; (4) a cut between regions whose largest clearance is less
+  than ``room_to_doorway_clearance`` x the cut's clearance is a constriction inside one room: the weakest
+  goes. The cuts left are the doorways; rooms in a loop (each reachable through two doors) keep them all.
+  Known limits: two real doors between the same two rooms count as one room around furniture (rule 2), and a
+  room with less than ``fragment_area_m2`` of robot space joins a neighbour (both measured on the simulated
+  households: true rooms have at least 3.8 m2 of robot space, clutter pockets at most 2.7 m2).
+- *Rooms* (open areas): the 4-connected regions of the robot space with the doorway cuts drawn in; every
+  region of at least ``min_room_area_m2`` is a room, whatever clutter is inside, its node sits at its cell
+  farthest from obstacles.
 - *Crossings* and *dead ends*: topology junctions in narrow space (free width at most ``corridor_width_m``)
   are corridor crossings; topology endpoints in narrow space whose edge is at least ``dead_end_min_length_m``
   long and narrow on average are dead-end corridors. Junctions and endpoints in open rooms (and room corners)
@@ -124,8 +133,9 @@ class PlaceParams:
     corridor_width_m: float = 1.4
     min_room_area_m2: float = 1.0
     min_room_clearance_m: float = 0.45
-    room_to_doorway_clearance: float = 1.18
-    doorway_window_m: float = 1.0
+    fragment_area_m2: float = 3.0
+    room_to_doorway_clearance: float = 1.1
+    doorway_window_m: float = 0.6
 
 
 def _nearest_anchor(xy: np.ndarray, anchors: np.ndarray | None) -> np.ndarray:
@@ -136,7 +146,11 @@ def _nearest_anchor(xy: np.ndarray, anchors: np.ndarray | None) -> np.ndarray:
 
 
 def _cut_line(
-    mask: np.ndarray, rc: np.ndarray, direction: np.ndarray, half_len_cells: float, free: np.ndarray | None = None
+    mask: np.ndarray,
+    rc: np.ndarray,
+    direction: np.ndarray,
+    half_len_cells: float,
+    free: np.ndarray | None = None,
 ) -> None:
     """Draw (0) the line across the passage at ``rc`` (perpendicular to ``direction``) into ``mask``: with
     ``free``, on each side up to the first non-free cell (at most 2 x ``half_len_cells``) and one cell into it,
@@ -186,8 +200,13 @@ def _doorway_candidates(
         if "row" in nu and "row" in nv:
             head = [[int(nu["row"]), int(nu["col"])]]
             tail = [[int(nv["row"]), int(nv["col"])]]
-        path = np.vstack([np.array(head, dtype=np.int64).reshape(-1, 2), path,
-                          np.array(tail, dtype=np.int64).reshape(-1, 2)])
+        path = np.vstack(
+            [
+                np.array(head, dtype=np.int64).reshape(-1, 2),
+                path,
+                np.array(tail, dtype=np.int64).reshape(-1, 2),
+            ]
+        )
         if path.shape[0] < 3:
             continue
         c = clr[path[:, 0], path[:, 1]]
@@ -303,7 +322,10 @@ def build_holographic(
     # ---- doorways and rooms -------------------------------------------------------------------------------
     rr_cells = reach_model.robot_radius_m / res
     cands, cut_lines = _orient_cuts(
-        _doorway_candidates(topology, clr, res, p, min_width_m=2.0 * reach_model.robot_radius_m), free, clr, res
+        _doorway_candidates(topology, clr, res, p, min_width_m=2.0 * reach_model.robot_radius_m),
+        free,
+        clr,
+        res,
     )
     # the space the robot can use: free cells covered by a robot-sized disc that fits (a morphological
     # opening); gaps in walls and between furniture narrower than the robot are not passages
@@ -312,10 +334,12 @@ def build_holographic(
     nav = cv2.dilate((clr >= reach_model.robot_radius_m).astype(np.uint8), disc) & free.astype(np.uint8)
     free_u8 = nav
     min_room_cells = p.min_room_area_m2 / (res * res)
+    fragment_cells = max(p.fragment_area_m2, p.min_room_area_m2) / (res * res)
 
-    region_clr: list[np.ndarray] = [np.zeros(0)]
-
-    def draw(cs) -> tuple[int, np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    def draw(cs):
+        """Regions with the cuts ``cs`` drawn: (count, labels, true area in cells, merge area in cells, max
+        clearance per region, side labels per cut). The merge area of a region without room for a standing
+        robot (a strip between furniture and a wall) is below the fragment size whatever its true area."""
         m = free_u8.copy()
         for rc, d in cs:
             ln = cut_lines.get((int(rc[0]), int(rc[1])))
@@ -326,33 +350,55 @@ def build_holographic(
                     cv2.line(m, (int(q0[1]), int(q0[0])), (int(q1[1]), int(q1[0])), 0, 1, cv2.LINE_8)
         n_l, lb = cv2.connectedComponents(m, connectivity=4)
         ar = np.bincount(lb.ravel(), minlength=n_l).astype(np.float64)
-        # a region without room for a standing robot (a strip between furniture and a wall) is no room:
-        # count it as small whatever its area
         mx = np.zeros(n_l)
         np.maximum.at(mx, lb.ravel(), clr.ravel())
-        ar[mx < p.min_room_clearance_m] = np.minimum(ar[mx < p.min_room_clearance_m], min_room_cells - 0.5)
-        region_clr[:] = [mx]
+        merge_ar = ar.copy()
+        thin = mx < p.min_room_clearance_m
+        merge_ar[thin] = np.minimum(merge_ar[thin], fragment_cells - 0.5)
         sd = [
             _side_labels(lb, free, rc.astype(np.float64), d, int(clr[rc[0], rc[1]] / res) + 8) for rc, d in cs
         ]
-        return n_l, lb, ar, sd
+        return n_l, lb, ar, merge_ar, mx, sd
 
-    # all cuts at once; a cut whose sides are one region does not separate anything: drop it. A region
-    # smaller than a room is merged into its smallest neighbour (the cut between them is dropped). Repeat.
+    # Region merging (module docstring), one cut dropped per round, in this order of the rules:
+    # 1. a cut whose two sides are one region (or no region) separates nothing;
+    # 2. two regions joined by two or more cuts are one room around furniture (an island, a table);
+    # 3. a fragment (merge area < fragment_area_m2) joins a neighbour, smallest fragment first: the one its cut
+    #    opens into most widely relative to the neighbour's max clearance, so the pieces of a cluttered room
+    #    join each other (similar widths) rather than the wide room behind a doorway;
+    # 4. a cut between two regions hardly wider than the gap itself (max clearance < room_to_doorway_clearance
+    #    x the gap's half width) is a constriction inside one room: the weakest such cut goes.
     while True:
-        n_lab, lab, area, sides = draw(cands)
+        n_lab, lab, area, merge_area, mx, sides = draw(cands)
         keep = [a != b and a > 0 and b > 0 for a, b in sides]
         if all(keep):
-            small = [k for k in range(1, n_lab) if area[k] < min_room_cells]
-            touching = [
-                (clr[cands[i][0][0], cands[i][0][1]], i)
-                for i, (a, b) in enumerate(sides)
-                if a in small or b in small
-            ]
-            if not touching:
-                # a cut between two regions that are hardly wider than the gap itself is a constriction
-                # inside one room (furniture), not a doorway: drop the weakest such cut and repeat
-                mx = region_clr[0]
+            pairs: dict[tuple[int, int], list[int]] = {}
+            for i, (a, b) in enumerate(sides):
+                pairs.setdefault((min(a, b), max(a, b)), []).append(i)
+            parallel = [ii for ii in pairs.values() if len(ii) > 1]
+            small = {k for k in range(1, n_lab) if merge_area[k] < fragment_cells}
+            touching = [i for i, (a, b) in enumerate(sides) if a in small or b in small]
+            if parallel:
+                for i in min(parallel, key=lambda ii: min(merge_area[k] for k in sides[ii[0]])):
+                    keep[i] = False
+            elif touching:
+                k_small = min(
+                    (k for i in touching for k in sides[i] if k in small), key=lambda k: merge_area[k]
+                )
+                # through the cut that opens most widely relative to the neighbour's own width (the cut least
+                # like a doorway of that neighbour)
+                opening = [
+                    (
+                        clr[cands[i][0][0], cands[i][0][1]]
+                        / max(mx[sides[i][0] + sides[i][1] - k_small], 1e-9),
+                        -i,
+                    )
+                    for i in touching
+                    if k_small in sides[i]
+                ]
+                via = -max(opening)[1]
+                keep[via] = False
+            else:
                 weak = [
                     (min(mx[a], mx[b]) / max(clr[cands[i][0][0], cands[i][0][1]], 1e-9), i)
                     for i, (a, b) in enumerate(sides)
@@ -361,21 +407,6 @@ def build_holographic(
                 if not weak:
                     break
                 keep[min(weak)[1]] = False
-                cands = [c for c, k in zip(cands, keep, strict=False) if k]
-                continue
-            # merge the smallest small region
-            k_small = min(
-                {a for a, _ in sides if a in small} | {b for _, b in sides if b in small},
-                key=lambda k: area[k],
-            )
-            # through the cut to its smallest neighbour (a fragment beside a doorway joins the small room on
-            # its side rather than opening the doorway into the large one)
-            via = min(
-                (area[sides[i][1] if sides[i][0] == k_small else sides[i][0]], -c, i)
-                for c, i in touching
-                if k_small in sides[i]
-            )[2]
-            keep[via] = False
         cands = [c for c, k in zip(cands, keep, strict=False) if k]
     # rooms: labels with enough area; node at max clearance
     room_labels = [int(k) for k in np.nonzero(area >= min_room_cells)[0] if k != 0]

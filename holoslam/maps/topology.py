@@ -141,12 +141,13 @@ class _Skeleton:
             np.ascontiguousarray(skel).view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0
         )
         self.pad = pad.ravel()
-        itype = np.int32 if self.pad.shape[0] < 2**31 - 16 else np.int64
-        self.flat = np.flatnonzero(self.pad.view(bool)).astype(itype)  # sorted (row-major)
+        # intp positions (numpy gathers convert int32 indices first, several times slower)
+        self.flat = np.flatnonzero(self.pad.view(bool))  # sorted (row-major)
         n = self.flat.shape[0]
+        itype = np.int32 if n < 2**31 - 1 else np.int64  # cell numbers in the index map
         r = self.flat // self.w2
         self.rc = np.column_stack([r - 1, self.flat - r * self.w2 - 1]).astype(np.int64)
-        self.offs = (_OFFS[:, 0] * self.w2 + _OFFS[:, 1]).astype(itype)
+        self.offs = (_OFFS[:, 0] * self.w2 + _OFFS[:, 1]).astype(np.intp)
         code = np.zeros(n, dtype=np.uint8)
         for k in range(8):
             code |= np.take(self.pad, self.flat + self.offs[k]) << np.uint8(k)
@@ -479,52 +480,74 @@ def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray, max_steps: i
     """Edges along chains: (u, v, cells, starts) with cells the concatenated cell sequences (node cell,
     chain cells ..., node cell) and starts their offsets (len m + 1); None when a chain is a closed loop.
 
-    All chains are walked in lockstep from both of their ends (one array step per cell of the longest
-    chain, so the work is the number of chain cells); when a chain is longer than ``max_steps`` the walk
-    gives way to pointer jumping (O(n log L) work, but independent of L in steps)."""
-    chain, here, frm, to, nxt = _states(sk, is_node)
+    All chains are walked in lockstep from both of their ends, cell by cell: a chain cell's next cell is
+    (sum of its two neighbours) - (the cell it came from); one array step per cell of the longest chain, so
+    the work is proportional to the number of chain cells. When a chain is longer than ``max_steps`` the walk
+    gives way to pointer jumping on (cell, direction) states (O(n log L) work in O(log L) array steps). Both
+    give the same edges in the same order: one direction per chain (the one whose last state is smaller than
+    its reverse's), chains ordered by that last state."""
+    chain = np.flatnonzero(~is_node)
     if chain.size == 0:
         e = np.zeros(0, dtype=np.int64)
         return e, e, e, np.zeros(1, dtype=np.int64)
-    start = np.flatnonzero(is_node[frm])  # states that leave a node: one at each end of each open chain
-    cur, wid = start, np.arange(start.shape[0])
-    term = np.empty(start.shape[0], dtype=np.int64)
+    two = sk.two_neighbours(chain)
+    n = is_node.shape[0]
+    cpos = np.full(n, -1, dtype=np.int64)
+    cpos[chain] = np.arange(chain.shape[0])
+    tsum = np.zeros(n, dtype=np.int64)
+    tsum[chain] = two[:, 0] + two[:, 1]
+    node_cells = np.flatnonzero(is_node)
+    nb = sk.neighbours(node_cells)
+    ii, kk = np.nonzero(nb >= 0)
+    u0, c0 = node_cells[ii], nb[ii, kk]
+    sel = ~is_node[c0]
+    u0, c0 = u0[sel], c0[sel]  # a walk starts at each (node cell, chain neighbour) pair
+    n_walks = u0.shape[0]
+    prev, cur, wid = u0, c0, np.arange(n_walks)
+    last_prev = np.empty(n_walks, dtype=np.int64)
+    last_cell = np.empty(n_walks, dtype=np.int64)
+    end_node = np.empty(n_walks, dtype=np.int64)
     seq, seq_wid = [], []
     for _ in range(max_steps):
         if cur.size == 0:
             break
         seq.append(cur)
         seq_wid.append(wid)
-        nx_ = nxt[cur]
-        end = nx_ < 0
-        term[wid[end]] = cur[end]
-        cur, wid = nx_[~end], wid[~end]
+        nxt = tsum[cur] - prev
+        end = is_node[nxt]
+        if end.any():
+            we = wid[end]
+            last_prev[we], last_cell[we], end_node[we] = prev[end], cur[end], nxt[end]
+            keep = ~end
+            prev, cur, wid = cur[keep], nxt[keep], wid[keep]
+        else:
+            prev, cur = cur, nxt
     if cur.size == 0:
         sizes = np.array([x.shape[0] for x in seq], dtype=np.int64)
-        if int(sizes.sum()) != nxt.shape[0]:
+        if int(sizes.sum()) != 2 * chain.shape[0]:
             return None  # chain cells no walk reached: closed loops without a node
-        # one direction per chain: the walk whose terminal state is smaller than its reverse walk's
-        keepw = term < (start ^ 1)
-        states = np.concatenate(seq)
-        w = np.concatenate(seq_wid)
-        step = np.repeat(np.arange(sizes.shape[0]), sizes)
-        sel = keepw[w]
-        states, w, step = states[sel], w[sel], step[sel]
-        kw = np.flatnonzero(keepw)
-        kw = kw[np.argsort(term[kw])]
+        # (cell, direction) state ids as in _states: state 2 i + d at chain cell i arrived from two[i, d]
+        pc, pl = cpos[c0], cpos[last_cell]
+        start_state = 2 * pc + (two[pc, 0] != u0)
+        term_state = 2 * pl + (two[pl, 0] != last_prev)
+        kw = np.flatnonzero(term_state < (start_state ^ 1))  # one direction per chain
+        kw = kw[np.argsort(term_state[kw])]
         m = kw.shape[0]
-        newid = np.empty(start.shape[0], dtype=np.int64)
+        newid = np.full(n_walks, -1, dtype=np.int64)
         newid[kw] = np.arange(m)
-        g = newid[w]
+        g = newid[np.concatenate(seq_wid)]
+        kept = g >= 0
+        g = g[kept]
+        step = np.repeat(np.arange(sizes.shape[0]), sizes)[kept]
         glen = np.bincount(g, minlength=m)
         starts = np.concatenate([[0], np.cumsum(glen + 2)])
         cells = np.empty(int(starts[-1]), dtype=np.int64)
-        cells[starts[g] + 1 + step] = here[states]
-        u_cell = frm[start[kw]]
-        v_cell = to[term[kw]]
+        cells[starts[g] + 1 + step] = np.concatenate(seq)[kept]
+        u_cell, v_cell = u0[kw], end_node[kw]
         cells[starts[:-1]] = u_cell
         cells[starts[1:] - 1] = v_cell
         return node_of[u_cell], node_of[v_cell], cells, starts
+    _chain, here, frm, to, nxt = _states(sk, is_node)
     rank, root, done = _pointer_jump(nxt)
     if not done.all():
         return None

@@ -109,11 +109,11 @@ def _h(D, dgoal, v, du, dv, hw):
 
 
 @nb.njit(**_JIT)
-def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, first_cost, last, rg, gx, gy, hw):
+def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, first_cost, last, goal_regs, gx, gy, hw):
     """Portal sequence (int64 array) of a shortest start -> goal route over the portal graph (nodes = portals
     at their centres (cu, cv), edges = two portals of one region, weighted by centre distance). ``first`` are
-    the start region's portals with costs ``first_cost``; the goal is reached from every portal of region
-    ``rg`` (``last``; ``ea[p] == rg or eb[p] == rg``) by a straight segment. Heuristic: Euclidean and ALT
+    the start regions' ports with costs ``first_cost``; the goal is reached from every port (``last``) of the
+    regions ``goal_regs`` holding it by a straight segment. Heuristic: Euclidean and ALT
     landmark bounds from ``D`` (F, L) landmark distances, times ``hw`` (1 = exact). Empty when unreachable."""
     n = cu.shape[0]
     INF = np.inf
@@ -129,6 +129,7 @@ def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, first_cost, last, r
             if x < dgoal[l]:
                 dgoal[l] = x
     gcost = np.full(n, INF)
+    hc = np.full(n, -1.0)  # heuristic cache: each node's bound is computed once per query
     parent = np.full(n, -1, dtype=np.int64)
     closed = np.zeros(n, dtype=np.bool_)
     heap = [(0.0, 0.0, np.int64(-3))]
@@ -138,7 +139,8 @@ def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, first_cost, last, r
         d = first_cost[i]
         if d < gcost[j]:
             gcost[j] = d
-            heapq.heappush(heap, (d + _h(D, dgoal, j, cu[j] - gx, cv[j] - gy, hw), d, np.int64(j)))
+            hc[j] = _h(D, dgoal, j, cu[j] - gx, cv[j] - gy, hw)
+            heapq.heappush(heap, (d + hc[j], d, np.int64(j)))
     GOAL = np.int64(-2)
     best_goal = INF
     goal_parent = np.int64(-1)
@@ -149,7 +151,11 @@ def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, first_cost, last, r
         if closed[u] or gc > gcost[u]:
             continue
         closed[u] = True
-        if ea[u] == rg or eb[u] == rg:
+        on_goal = False
+        for q in range(goal_regs.shape[0]):
+            if ea[u] == goal_regs[q] or eb[u] == goal_regs[q]:
+                on_goal = True
+        if on_goal:
             du = cu[u] - gx
             dv = cv[u] - gy
             c = gc + math.sqrt(du * du + dv * dv)
@@ -163,7 +169,9 @@ def corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, first_cost, last, r
             if d < gcost[j] and d < best_goal:
                 gcost[j] = d
                 parent[j] = u
-                heapq.heappush(heap, (d + _h(D, dgoal, j, cu[j] - gx, cv[j] - gy, hw), d, j))
+                if hc[j] < 0.0:
+                    hc[j] = _h(D, dgoal, j, cu[j] - gx, cv[j] - gy, hw)
+                heapq.heappush(heap, (d + hc[j], d, j))
     if goal_parent < 0:
         return np.zeros(0, dtype=np.int64)
     m = 0
@@ -294,6 +302,42 @@ def refine(su, sv, gu, gv, boxes, sweeps, tol):
         if moved <= tol:
             break
     return P
+
+
+@nb.njit(**_JIT)
+def string_pull(free, pts, window, passes, eps):
+    """Windowed string pulling on the grid: from each kept point jump to the farthest of the next ``window``
+    points in line of sight (exact ``seg_free``; all pairs when the path has at most ``window`` + 1 points),
+    ``passes`` times. Shortcuts leave the corridor where the grid allows it (through regions the corridor
+    does not list). Returns (kept points, ok); ok is False when some point sees none of its successors."""
+    cur = pts.copy()
+    for _ in range(passes):
+        k = cur.shape[0]
+        if k <= 2:
+            return cur, True
+        keep = np.empty(k, dtype=np.int64)
+        nk = 1
+        keep[0] = 0
+        i = 0
+        allpairs = k <= window + 1
+        while i < k - 1:
+            last = k - 1 if allpairs else min(i + window, k - 1)
+            nxt = -1
+            for j in range(last, i, -1):
+                if j == i + 1 or seg_free(free, cur[i, 0], cur[i, 1], cur[j, 0], cur[j, 1], eps):
+                    nxt = j
+                    break
+            i = nxt
+            keep[nk] = i
+            nk += 1
+        out = np.empty((nk, 2))
+        for q in range(nk):
+            out[q, 0] = cur[keep[q], 0]
+            out[q, 1] = cur[keep[q], 1]
+        if nk == k or allpairs:
+            return out, True
+        cur = out
+    return cur, True
 
 
 @nb.njit(**_JIT)
@@ -459,3 +503,186 @@ def shortcut_corridor(regs, ekeys, nr):
         n += 1
         i = best
     return out[:n].copy()
+
+
+@nb.njit(**_JIT)
+def _ports_of(rs, rptr, rids, pp):
+    """The ports of the portals of the regions ``rs``."""
+    n = 0
+    for r in rs:
+        for k in range(rptr[r], rptr[r + 1]):
+            f = rids[k]
+            n += pp[f + 1] - pp[f]
+    out = np.empty(n, dtype=np.int64)
+    n = 0
+    for r in rs:
+        for k in range(rptr[r], rptr[r + 1]):
+            f = rids[k]
+            for q in range(pp[f], pp[f + 1]):
+                out[n] = q
+                n += 1
+    return out
+
+
+@nb.njit(**_JIT)
+def _regions_of(rs, portals, E, rg):
+    m = portals.shape[0]
+    regs = np.empty(m + 1, dtype=np.int64)
+    regs[0] = rs
+    for i in range(m - 1):
+        a0, a1 = E[portals[i], 0], E[portals[i], 1]
+        b0, b1 = E[portals[i + 1], 0], E[portals[i + 1], 1]
+        regs[i + 1] = a0 if (a0 == b0 or a0 == b1) else a1
+    regs[m] = rg
+    return regs
+
+
+@nb.njit(**_JIT)
+def _length(P):
+    s = 0.0
+    for i in range(P.shape[0] - 1):
+        s += math.hypot(P[i + 1, 0] - P[i, 0], P[i + 1, 1] - P[i, 1])
+    return s
+
+
+@nb.njit(**_JIT)
+def _contains(rect, u, v):
+    return rect[1] <= u <= rect[3] and rect[0] <= v <= rect[2]
+
+
+@nb.njit(**_JIT)
+def query(
+    pptr,
+    pdst,
+    pw,
+    cu,
+    cv,
+    ea,
+    eb,
+    D,
+    port_portal,
+    pp,
+    rptr,
+    rids,
+    E,
+    regions,
+    ekeys,
+    boxes,
+    free,
+    su,
+    sv,
+    rs,
+    gu,
+    gv,
+    rg,
+    hw,
+    eps,
+):
+    """One whole query between two located points (start in region ``rs``, goal in ``rg``, same component):
+    corridor A* over the ports, corridor trimmed to the last region holding the start and the first holding
+    the goal, the funnel path through it and through its greedy shortcut (the shorter wins), collinear
+    points dropped and every segment checked on the grid. Returns (points (K, 2), regions crossed, status):
+    status 0 ok, 1 no corridor, 2 a segment failed the grid check."""
+    # every region holding the start (the goal): regions overlap, any of them may start the best corridor
+    sr = np.empty(regions.shape[0], dtype=np.int64)
+    gr = np.empty(regions.shape[0], dtype=np.int64)
+    ns = 0
+    ng = 0
+    both = -1
+    for r in range(regions.shape[0]):
+        a = _contains(regions[r], su, sv)
+        b = _contains(regions[r], gu, gv)
+        if a:
+            sr[ns] = r
+            ns += 1
+        if b:
+            gr[ng] = r
+            ng += 1
+        if a and b and both < 0:
+            both = r
+    if ns == 0:
+        sr[0] = rs
+        ns = 1
+    if ng == 0:
+        gr[0] = rg
+        ng = 1
+    if rs == rg or both >= 0:
+        raw = np.empty((2, 2))
+        raw[0, 0], raw[0, 1], raw[1, 0], raw[1, 1] = su, sv, gu, gv
+        regs = np.full(1, rs if rs == rg else both, dtype=np.int64)
+    else:
+        first = _ports_of(sr[:ns], rptr, rids, pp)
+        last = _ports_of(gr[:ng], rptr, rids, pp)
+        d0 = np.empty(first.shape[0])
+        for i in range(first.shape[0]):
+            d0[i] = math.hypot(cu[first[i]] - su, cv[first[i]] - sv)
+        seq = corridor_astar(pptr, pdst, pw, cu, cv, ea, eb, D, first, d0, last, gr[:ng], gu, gv, hw)
+        if seq.shape[0] == 0:
+            return np.zeros((0, 2)), np.zeros(0, dtype=np.int64), 1
+        portals = np.empty(seq.shape[0], dtype=np.int64)
+        m = 0
+        for i in range(seq.shape[0]):
+            f = port_portal[seq[i]]
+            if m == 0 or portals[m - 1] != f:
+                portals[m] = f
+                m += 1
+        portals = portals[:m]
+        # the corridor's end regions: those of the first (last) portal holding the start (goal)
+        f0, f1 = E[portals[0], 0], E[portals[0], 1]
+        rs = f0 if _contains(regions[f0], su, sv) else f1
+        l0, l1 = E[portals[m - 1], 0], E[portals[m - 1], 1]
+        rg = l0 if _contains(regions[l0], gu, gv) else l1
+        regs = _regions_of(rs, portals, E, rg)
+        i0 = 0
+        for i in range(regs.shape[0]):
+            if _contains(regions[regs[i]], su, sv):
+                i0 = i
+        i1 = regs.shape[0] - 1
+        for i in range(i0, regs.shape[0]):
+            if _contains(regions[regs[i]], gu, gv):
+                i1 = i
+                break
+        portals = portals[i0:i1].copy()
+        regs = regs[i0 : i1 + 1].copy()
+        if portals.shape[0] == 0:
+            raw = np.empty((2, 2))
+            raw[0, 0], raw[0, 1], raw[1, 0], raw[1, 1] = su, sv, gu, gv
+        else:
+            raw = corridor_path(su, sv, gu, gv, boxes[portals], 200)
+            short = shortcut_corridor(regs, ekeys, max(regions.shape[0], 1))
+            if 0 < short.shape[0] < portals.shape[0]:
+                alt = corridor_path(su, sv, gu, gv, boxes[short], 200)
+                if _length(alt) < _length(raw):
+                    raw = alt
+                    regs = _regions_of(regs[0], short, E, regs[regs.shape[0] - 1])
+    if raw.shape[0] > 2:
+        raw, _ = string_pull(free, raw, 8, 2, eps)
+    pts, ok = simplify_validate(free, raw, eps, 1e-9)
+    # consecutive repeats dropped from the region list
+    out = np.empty(regs.shape[0], dtype=np.int64)
+    n = 0
+    for i in range(regs.shape[0]):
+        if n == 0 or out[n - 1] != regs[i]:
+            out[n] = regs[i]
+            n += 1
+    return pts, out[:n].copy(), 0 if ok else 2
+
+
+@nb.njit(**_JIT)
+def corridor_path(su, sv, gu, gv, boxes, sweeps):
+    """The path through a corridor's portal boxes: the funnel path; where it turns back on itself (two
+    consecutive pieces at more than 90 degrees: the funnel bends at box corners only, while the optimum may
+    touch a box edge and turn back there) also ``refine`` from the box centres for ``sweeps`` sweeps, and
+    the shorter wins (so never longer than the polyline through the box centres in that case)."""
+    f = funnel(su, sv, gu, gv, boxes)
+    back = False
+    for i in range(1, f.shape[0] - 1):
+        if (f[i, 0] - f[i - 1, 0]) * (f[i + 1, 0] - f[i, 0]) + (f[i, 1] - f[i - 1, 1]) * (
+            f[i + 1, 1] - f[i, 1]
+        ) < 0:
+            back = True
+            break
+    if not back:
+        return f
+    r = refine(su, sv, gu, gv, boxes, sweeps, 1e-9)
+    return r if _length(r) < _length(f) else f

@@ -1,18 +1,27 @@
 """Planning queries on the two-layer graph: pose -> pose and pose -> object.
 
-A query runs in three steps, none of which touches the grid cell by cell:
+A query is one compiled call (numba, :mod:`holoslam.planning._fast`) after an O(1) point location; nothing
+touches the grid cell by cell except the final exact segment checks.
 
-1. **Locate** start and goal: the region under each point, O(1) through the block-id label image
-   (``TwoLayerGraph.region_at``). A point in no free block (an obstacle, unknown space, a mixed block below
-   the minimum block size) is moved to the centre of the nearest free-block cell within ``snap_radius_m``;
-   farther than that the query raises ``PlanningError``.
-2. **Search** the portal graph with A* (Euclidean heuristic, admissible). Its nodes are the corners and
-   centres of the portals between adjacent regions (a portal is the intersection of two regions' closed
-   rectangles; coincident points are one node); two nodes are joined by a straight segment when they lie on
-   one common region, which is convex and obstacle-free, so every edge is collision-free by construction. The
-   adjacency lists are precomputed (vectorised) by :func:`build_planner`.
-3. **String-pull** the node path: from each kept point, jump to the farthest later point in line of sight on
-   the grid (all pairs checked in one vectorised call), so every returned segment is validated.
+1. **Locate** start and goal: the region under each point, O(1) through the block-id label image. A point in
+   no free block (an obstacle, unknown space, a mixed block below the minimum block size) is moved to the
+   centre of the nearest free-block cell within ``snap_radius_m``; farther than that the query raises
+   ``PlanningError``. Regions overlap: every region holding the start (the goal) may begin (end) the route.
+2. **Corridor search**: A* over the *ports* (the distinct corners of each portal; a portal is the
+   intersection of two adjacent regions' closed rectangles, so a segment portal has its two ends) with edges
+   between the ports of one region, weighted by their distance. The heuristic is the larger of the Euclidean
+   distance and 16 ALT landmark bounds ``|d(l, goal) - d(l, v)|`` (landmarks picked farthest-first, their
+   distances precomputed by ``scipy.sparse.csgraph.dijkstra`` in :func:`build_planner`); both are
+   consistent, so the search is exact on the port graph. The port path gives the corridor: the sequence of
+   portals (and so of convex regions) from start to goal, trimmed to enter at the last region holding the
+   start and leave at the first holding the goal.
+3. **Funnel**: the shortest polyline through the corridor's portal boxes in order (the funnel algorithm on
+   the angular intervals the boxes subtend from the current apex; a straight piece that meets boxes i..j is
+   covered by the convex regions between them, so it is collision-free by construction). The same is done
+   for the greedily shortcut corridor (jumping to the last later region adjacent to the current one) and the
+   shorter path wins.
+4. **String-pull and validate**: a windowed string pull on the grid (shortcuts through regions outside the
+   corridor), then collinear points are dropped and every returned segment is checked exactly on the grid.
 
 Collision model: the robot is a point on the planner's free mask (the cells covered by free blocks; the map's
 obstacles are expected to be inflated by the robot radius, as seed 003 assumes). A segment is collision-free
@@ -21,11 +30,12 @@ when every point of it lies in the closed union of free cells (:func:`segments_f
 between two obstacle cells meeting at a corner, as an 8-connected grid planner does.
 
 Length guarantee (checked against 8-connected grid A* in ``tests/test_routes.py`` on random maps and in
-``benchmarks/bench_planning.py``): a returned path is at most ``LENGTH_FACTOR`` = 1.15 times the grid A*
-length between the same cell centres. This is an empirical bound, not a theorem: the path bends only at
-portal corners and centres, not at every obstacle corner. Measured worst case 1.122 over 2,940 queries on
-adversarial random maps (random rectangles and single-cell obstacles); on household-like maps the paths are
-shorter than grid A* (any-angle), worst 0.99 in the benchmark.
+``benchmarks/bench_planning.py``): a returned path is at most ``LENGTH_FACTOR`` = 1.25 times the grid A*
+length between the same cell centres. This is an empirical bound, not a theorem: the corridor is chosen by
+distances between portal corners, which can miss a shorter corridor on cluttered maps. Measured over 2,959
+queries on adversarial random maps (random rectangles and single-cell obstacles, 8-48 cells a side): median
+0.83, 99th percentile 1.00, 0.1 % above 1.10, worst 1.20. On household-like maps the paths are shorter than
+grid A* (any-angle): worst 0.99 on the reference household and 0.94 on the tiled large maps in the benchmark.
 """
 
 from __future__ import annotations
@@ -49,11 +59,9 @@ __all__ = [
     "path_length",
 ]
 
-LENGTH_FACTOR = 1.15
+LENGTH_FACTOR = 1.25
 EPS_CELLS = 1e-9  # geometric tolerance of the collision check, in cells
-REFINE_SWEEPS = 60  # at most this many coordinate sweeps of the corridor refinement
-REFINE_TOL = 1e-4  # cells: the refinement stops when no point moves more than this in a sweep
-HEURISTIC_WEIGHT = 1.0  # weighted A* over the portal graph (1 = exact over portal centres)
+HEURISTIC_WEIGHT = 1.0  # weighted A* over the port graph (1 = exact on the port graph)
 
 
 @dataclass(frozen=True, slots=True)
@@ -324,63 +332,33 @@ def _locate(planner: RoutePlanner, xy: np.ndarray, snap_radius_m: float, what: s
     )
 
 
-def _corridor(planner: RoutePlanner, s_uv: np.ndarray, rs: int, g_uv: np.ndarray, rg: int) -> np.ndarray:
-    """Portal sequence of the region corridor from region ``rs`` to ``rg`` (compiled A* over the portal
-    graph, Euclidean heuristic); empty when unreachable."""
+def _query_arrays(planner: RoutePlanner) -> tuple:
+    """The arrays of :func:`holoslam.planning._fast.query`, derived once per planner."""
     c = planner._cache
-    if "cu" not in c:
-        E = planner.graph.region_edges
-        c["cu"] = np.ascontiguousarray(planner.port_uv[:, 0])
-        c["cv"] = np.ascontiguousarray(planner.port_uv[:, 1])
-        c["ea"] = np.ascontiguousarray(E[planner.port_portal, 0], dtype=np.int64)
-        c["eb"] = np.ascontiguousarray(E[planner.port_portal, 1], dtype=np.int64)
-        c["pp"] = np.searchsorted(planner.port_portal, np.arange(E.shape[0] + 1))
-    ptr, ids, pp = planner.region_portal_ptr, planner.region_portal_ids, c["pp"]
-
-    def ports_of(r: int) -> np.ndarray:
-        f = ids[ptr[r] : ptr[r + 1]]
-        n = pp[f + 1] - pp[f]
-        return np.repeat(pp[f], n) + (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n))
-
-    first = ports_of(rs)
-    last = ports_of(rg)
-    q = planner.port_uv[first]
-    d0 = np.hypot(q[:, 0] - s_uv[0], q[:, 1] - s_uv[1])
-    seq = planner.kernels.corridor_astar(
-        planner.adj_ptr,
-        planner.adj_dst,
-        planner.adj_w,
-        c["cu"],
-        c["cv"],
-        c["ea"],
-        c["eb"],
-        planner.landmark_dist,
-        first,
-        d0,
-        last,
-        int(rg),
-        float(g_uv[0]),
-        float(g_uv[1]),
-        HEURISTIC_WEIGHT,
-    )
-    portals = planner.port_portal[seq]
-    if portals.shape[0] > 1:  # consecutive ports of one portal are one portal of the corridor
-        portals = portals[np.concatenate([[True], portals[1:] != portals[:-1]])]
-    return portals
-
-
-def _corridor_regions(
-    planner: RoutePlanner, rs: int, portals: np.ndarray, rg: int, dedupe: bool = True
-) -> tuple[int, ...]:
-    """The regions a corridor crosses: the start region, the region shared by each two consecutive portals,
-    the goal region (consecutive repeats dropped when ``dedupe``)."""
-    E = planner.graph.region_edges[portals]
-    a_, b_ = E[:-1], E[1:]
-    shared = np.where((a_[:, 0] == b_[:, 0]) | (a_[:, 0] == b_[:, 1]), a_[:, 0], a_[:, 1])
-    regs = [rs, *shared.tolist(), rg]
-    if not dedupe:
-        return tuple(regs)
-    return tuple(r for i, r in enumerate(regs) if i == 0 or r != regs[i - 1])
+    if "query" not in c:
+        g = planner.graph
+        E = np.ascontiguousarray(g.region_edges, dtype=np.int64).reshape(-1, 2)
+        nr = max(g.n_regions, 1)
+        c["query"] = (
+            planner.adj_ptr,
+            planner.adj_dst,
+            planner.adj_w,
+            np.ascontiguousarray(planner.port_uv[:, 0]),
+            np.ascontiguousarray(planner.port_uv[:, 1]),
+            np.ascontiguousarray(E[planner.port_portal, 0]),
+            np.ascontiguousarray(E[planner.port_portal, 1]),
+            planner.landmark_dist,
+            planner.port_portal,
+            np.searchsorted(planner.port_portal, np.arange(E.shape[0] + 1)),
+            planner.region_portal_ptr,
+            planner.region_portal_ids,
+            E,
+            np.ascontiguousarray(g.regions, dtype=np.int64).reshape(-1, 4),
+            np.ascontiguousarray(E[:, 0] * nr + E[:, 1]),
+            planner.portal_boxes,
+            planner.free,
+        )
+    return c["query"]
 
 
 def plan_path(
@@ -405,48 +383,23 @@ def plan_path(
             f"({float(start_xy[0]):.2f}, {float(start_xy[1]):.2f}): no free passage joins them in the "
             "planning graph"
         )
-    regions: tuple[int, ...] = (rs,)
-    if rs != rg:
-        portals = _corridor(planner, s_uv, rs, g_uv, rg)
-        if not portals.shape[0]:  # pragma: no cover - the component check above makes this unreachable
-            raise PlanningError("no route found between connected regions; rebuild the planning graph")
-        regs = np.array(_corridor_regions(planner, rs, portals, rg, dedupe=False))
-        # the start (goal) may lie in later (earlier) regions of the corridor too (regions overlap): enter
-        # the corridor at the last region holding the start and leave it at the first holding the goal
-        rr = planner.graph.regions[regs]
-        s_in = (rr[:, 1] <= s_uv[0]) & (s_uv[0] <= rr[:, 3]) & (rr[:, 0] <= s_uv[1]) & (s_uv[1] <= rr[:, 2])
-        g_in = (rr[:, 1] <= g_uv[0]) & (g_uv[0] <= rr[:, 3]) & (rr[:, 0] <= g_uv[1]) & (g_uv[1] <= rr[:, 2])
-        i0 = int(np.nonzero(s_in)[0][-1])
-        g_after = np.nonzero(g_in[i0:])[0]
-        i1 = i0 + int(g_after[0])  # the goal's own region (last) always holds it
-        portals = portals[i0:i1]
-        regs = regs[i0 : i1 + 1].tolist()
-        regions = tuple(r for i, r in enumerate(regs) if i == 0 or r != regs[i - 1])
-    K = planner.kernels
-    if rs == rg or not portals.shape[0]:
-        raw = np.vstack([s_uv, g_uv])
-    else:
-        # the shortest polyline through the corridor's portals: each segment lies in one convex region
-        raw = K.funnel(s_uv[0], s_uv[1], g_uv[0], g_uv[1], planner.portal_boxes[portals])
-        # the port metric can pick a detour through a region that a direct portal skips: try the greedily
-        # shortcut corridor too and keep the shorter path (both are straight pieces in convex regions)
-        c = planner._cache
-        if "ekeys" not in c:
-            c["ekeys"] = np.ascontiguousarray(
-                planner.graph.region_edges[:, 0] * max(planner.graph.n_regions, 1)
-                + planner.graph.region_edges[:, 1]
-            )
-        short = K.shortcut_corridor(
-            np.asarray(regs, dtype=np.int64), c["ekeys"], max(planner.graph.n_regions, 1)
-        )
-        if 0 < short.shape[0] < portals.shape[0]:
-            alt = K.funnel(s_uv[0], s_uv[1], g_uv[0], g_uv[1], planner.portal_boxes[short])
-            if path_length(alt) < path_length(raw):
-                raw = alt
-                regions = _corridor_regions(planner, int(regs[0]), short, int(regs[-1]))
-    pts, ok = K.simplify_validate(planner.free, raw, EPS_CELLS, 1e-9)  # every segment checked on the grid
-    if not ok:
+    c = _query_arrays(planner)
+    pts, regs, status = planner.kernels.query(
+        *c,
+        float(s_uv[0]),
+        float(s_uv[1]),
+        int(rs),
+        float(g_uv[0]),
+        float(g_uv[1]),
+        int(rg),
+        HEURISTIC_WEIGHT,
+        EPS_CELLS,
+    )
+    if status == 1:  # pragma: no cover - the component check above makes this unreachable
+        raise PlanningError("no route found between connected regions; rebuild the planning graph")
+    if status == 2:
         raise PlanningError("internal planning error: a path segment crosses an obstacle; rebuild the graph")
+    regions = tuple(regs.tolist())
     wp = np.column_stack([g.origin_x + pts[:, 0] * g.resolution, g.origin_y + pts[:, 1] * g.resolution])
     wp.setflags(write=False)
     return Route(places=tuple(places), waypoints=wp, length=path_length(wp), regions=regions)

@@ -5,8 +5,14 @@ Steps (seed 002 §2, SPEC §4):
 1. Dead reckoning of the whole run (Eq. 14, compass heading changes with the odometry fallback) gives
    ``wTb`` at every odometry stamp: the seed of everything else and the "dead reckoning alone" baseline.
 2. Scans are walked in time order. A keyframe (see ``holoslam.submaps.segment``) is registered by point-to-line
-   ICP into the active submap's points, seeded by dead reckoning from the previous keyframe; a failed match
-   keeps the seed with the dead-reckoning covariance added. The policy of ``segment.py`` decides when a new
+   ICP into the active submap's points, seeded by the odometry increment from the previous keyframe; a failed
+   match keeps the seed with the dead-reckoning covariance added. Over such short intervals (a keyframe is
+   0.2 m or 10 degrees from the last; a sighting is a few seconds from its keyframe) the odometry's heading
+   change is far better than the difference of two compass readings (sqrt(2) x 1.5 deg of white noise), so
+   these use dead reckoning without the compass; the compass enters between anchors and as heading factors.
+   A keyframe's pose covariance in the anchor frame is its registration's plus the previous keyframe's: the
+   map it registered into was placed by the keyframes before it, so their errors carry over (a conservative
+   random walk; the registration alone is overconfident by 2-5x in variance against ground truth). The policy of ``segment.py`` decides when a new
    submap starts; its anchor is the base pose at that keyframe.
 3. Between consecutive anchors m and n two independent relative poses are emitted: ``dead_reckoning`` (Eq. 14
    from m's anchor to n's anchor stamp, with its analytic covariance) and, when the arrival scan registers into
@@ -29,13 +35,15 @@ Steps (seed 002 §2, SPEC §4):
    anchors) cannot be located: no majority says which sighting is right (one misread id or one tag at the wrong
    place among two sightings). Its sightings are left out and its id is listed in ``ambiguous_objects``, rather
    than placing it at an arbitrary one. Objects with a consistent majority, or two self-consistent groups (a
-   moved object), go to the solver, whose outlier rejection and moved-object detection handle them.
+   moved object), go to the solver, whose outlier rejection and moved-object detection handle them; each
+   object's initial position is the mean of its largest agreeing group (the earliest on a tie), so a robust
+   kernel does not start, and stay, at a wrong sighting.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -191,6 +199,8 @@ def build_problem(
     have_h = hst.size >= 2
     hargs = dict(heading_stamps_ns=hst if have_h else None, heading_yaw=hyaw if have_h else None,
                  heading_sigma=hsig if have_h else None, config=cfg.dead_reckoning)
+    # short intervals (keyframe to keyframe, keyframe to a sighting): odometry headings only (step 2)
+    short = dict(config=replace(cfg.dead_reckoning, use_compass=False))
     scans = [s for s in log.scans if ost[0] <= s.stamp_ns <= ost[-1]]
     if not scans:
         raise IngestError(f"{log.source}: no scan lies within the odometry's time span")
@@ -223,9 +233,9 @@ def build_problem(
     linked: set[tuple[int, int]] = set()  # (old, current) submap pairs that already have a loop
     for scan in scans:
         t = int(scan.stamp_ns)
-        spts_all = np.column_stack([scan.ranges * np.cos(scan.angles), scan.ranges * np.sin(scan.angles)])
         valid = scan.valid
-        s_pts = spts_all[valid].astype(np.float64)
+        r_ok, a_ok = scan.ranges[valid].astype(np.float64), scan.angles[valid]
+        s_pts = np.column_stack([r_ok * np.cos(a_ok), r_ok * np.sin(a_ok)])
         if s_pts.shape[0] < scfg.icp.min_points:
             continue
         bpts = g.transform_points(bTs, s_pts)
@@ -237,16 +247,17 @@ def build_problem(
             cur.add(t, np.zeros(3), np.eye(3) * 1e-12, bpts, bnrm, ranges, angles, bTs)
             last_kf_t, last_kf_pose, last_kf_cov = t, np.zeros(3), np.zeros((3, 3))
             continue
-        dT = g.between(dr_at(last_kf_t), dr_at(t))
+        odo_pair = interpolate_poses(ost, opose, np.array([last_kf_t, t]))
+        dT = g.between(odo_pair[0], odo_pair[1])
         if np.hypot(dT[0], dT[1]) < scfg.keyframe_distance and abs(dT[2]) < np.radians(scfg.keyframe_turn_deg):
             continue
         kf_count += 1
         seed = g.compose(last_kf_pose, dT)
         reg = register_points(bpts[nok], cur.pts, cur.nrm, seed, scfg.icp)
         if reg.ok:
-            aTb, cov = reg.aTb, reg.cov_aTb
+            aTb, cov = reg.aTb, reg.cov_aTb + last_kf_cov
         else:
-            dr = dead_reckon(ost, opose, last_kf_t, t, start=last_kf_pose, cov_start=last_kf_cov, **hargs)
+            dr = dead_reckon(ost, opose, last_kf_t, t, start=last_kf_pose, cov_start=last_kf_cov, **short)
             aTb, cov = seed, dr.cov_aTb_end
         width = side_width(bpts)
         if width < scfg.doorway_width:
@@ -327,14 +338,14 @@ def build_problem(
         sm = closed[k]
         q = int(np.searchsorted(sm.scan_stamps_ns, ob.stamp_ns, side="right")) - 1
         dr = dead_reckon(ost, opose, int(sm.scan_stamps_ns[q]), int(ob.stamp_ns), start=sm.aTb[q],
-                         cov_start=sm.cov_aTb[q], **hargs)
+                         cov_start=sm.cov_aTb[q], **short)
         xy, c2, z = landmark_in_anchor(dr.end, dr.cov_aTb_end, ob.b_position, ob.cov_b_position)
         if np.hypot(*xy) < 1e-3:
             skipped += 1
             continue
         li.append(k), lid.append(ob.object_id), lxy.append(xy), lcov.append(c2), lz.append(z)
     init = np.array(est_wTa).reshape(N, 3)
-    drop = _ambiguous_objects(init, li, lid, lxy, lcov, cfg)
+    drop, init_lm = _object_consensus(init, li, lid, lxy, lcov, cfg)
     if drop:
         keep = [k for k, name in enumerate(lid) if name not in drop]
         li, lid, lxy, lcov, lz = ([seq[k] for k in keep] for seq in (li, lid, lxy, lcov, lz))
@@ -344,24 +355,25 @@ def build_problem(
     relative = (RelativePoseMeasurements(np.array(rel_i), np.array(rel_j), np.array(rel_T), np.array(rel_cov),
                                          np.array(rel_kind, dtype=object))
                 if rel_i else RelativePoseMeasurements.empty())
-    init_lm: dict[str, np.ndarray] = {}
-    for k, name, xy in zip(li, lid, lxy, strict=True):
-        init_lm.setdefault(name, g.transform_points(init[k], np.asarray(xy)[None])[0])
     problem = SlamProblem(num_poses=N, relative=relative, headings=headings, landmarks=landmarks,
                           initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
     return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops_tried,
                     tuple(sorted(drop)))
 
 
-def _ambiguous_objects(init_wTa, li, lid, lxy, lcov, cfg: FrontEndConfig) -> set[str]:
-    """Objects seen at least twice whose sightings all disagree with each other (module docstring, step 7)."""
+def _object_consensus(
+    init_wTa, li, lid, lxy, lcov, cfg: FrontEndConfig
+) -> tuple[set[str], dict[str, np.ndarray]]:
+    """Per object, which sightings agree under the initial anchors (module docstring, step 7): the ambiguous
+    objects, and each object's initial position: the information-weighted mean of the sighting that most
+    others agree with (the earliest on a tie) and those that agree with it (not simply the first sighting,
+    which may be the wrong one and would hold a robust kernel at the wrong place)."""
     by: dict[str, list[int]] = {}
     for k, name in enumerate(lid):
         by.setdefault(name, []).append(k)
-    out: set[str] = set()
+    ambiguous: set[str] = set()
+    init: dict[str, np.ndarray] = {}
     for name, ks in by.items():
-        if len(ks) < 2:
-            continue
         T = init_wTa[np.array([li[k] for k in ks])]
         R = g.rot2(T[:, 2])
         w = np.einsum("nij,nj->ni", R, np.array([lxy[k] for k in ks])) + T[:, :2]
@@ -370,10 +382,14 @@ def _ambiguous_objects(init_wTa, li, lid, lxy, lcov, cfg: FrontEndConfig) -> set
         S = C[:, None] + C[None, :] + np.eye(2) * cfg.association_drift**2
         m2 = np.einsum("abi,abi->ab", d, np.linalg.solve(S, d[..., None])[..., 0])
         agree = m2 < cfg.association_gate
-        np.fill_diagonal(agree, False)
-        if not agree.any():
-            out.add(name)
-    return out
+        support = agree.sum(axis=1)  # includes itself
+        if len(ks) >= 2 and support.max() == 1:
+            ambiguous.add(name)
+            continue
+        members = agree[int(np.argmax(support))]
+        info = np.linalg.inv(C[members])
+        init[name] = np.linalg.solve(info.sum(axis=0), np.einsum("kij,kj->i", info, w[members]))
+    return ambiguous, init
 
 
 def _eq15(mTr, cov_mTr, nTr, cov_nTr):

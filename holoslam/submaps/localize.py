@@ -248,7 +248,7 @@ def register_points(
     it = 0
     gate = cfg.max_distance
     index = _NearestIndex(q, cfg.block)
-    for it in range(1, cfg.max_iterations + 1):
+    for it in range(1, cfg.max_iterations + 1):  # noqa: B007 - the count is reported
         pa = g.transform_points(T, p)
         j, d2 = index.query(pa, gate)
         sel = d2 < gate * gate
