@@ -656,7 +656,7 @@ def query(
                     raw = alt
                     regs = _regions_of(regs[0], short, E, regs[regs.shape[0] - 1])
     if raw.shape[0] > 2:
-        raw, _ = string_pull(free, raw, 8, 2, eps)
+        raw, _ = string_pull(free, raw, 2, 2, eps)
     pts, ok = simplify_validate(free, raw, eps, 1e-9)
     # consecutive repeats dropped from the region list
     out = np.empty(regs.shape[0], dtype=np.int64)
