@@ -214,7 +214,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, type=Path, help="optimised graph (.g2o)")
     s.add_argument("--tum", type=Path, help="also write the optimised poses as TUM text")
     s.add_argument("--method", choices=["lm", "isam2"], default="lm")
-    s.add_argument("--init", choices=["file", "odometry", "lago", "incremental"], default="file")
+    s.add_argument(
+        "--init",
+        choices=["file", "odometry", "lago", "incremental", "auto"],
+        default="file",
+        help="initial guess; auto tries each and keeps the lowest final error",
+    )
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_solve)
 

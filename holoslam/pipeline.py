@@ -838,6 +838,7 @@ def solve_graph_file(
         "odometry": Initialisation.ODOMETRY,
         "lago": Initialisation.LAGO,
         "incremental": Initialisation.INCREMENTAL,
+        "auto": Initialisation.AUTO,
     }
     if method not in methods or init not in inits:
         raise ConfigError(f"method must be one of {sorted(methods)} and init one of {sorted(inits)}")

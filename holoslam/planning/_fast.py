@@ -1,16 +1,18 @@
 """Compiled query kernels of the two-layer planner (numba, ``cache=True``).
 
-Imported lazily by :mod:`holoslam.planning.routes` (importing numba costs about half a second and the first
-call of each kernel compiles it, or loads it from numba's on-disk cache). Every kernel is a plain function of
-numpy arrays; the Python fallbacks in ``routes`` give the same answers when numba is missing.
+Imported lazily by :func:`holoslam.planning.routes.build_planner` (importing numba costs about half a second
+and the first call of each kernel compiles it, about 10 s once per machine, then loads it from numba's
+on-disk cache next to this file). Every kernel is a plain function of numpy arrays.
 
-* :func:`astar` -- A* over the portal-point graph in CSR form (Euclidean heuristic, admissible and
-  consistent because edge weights are Euclidean lengths), several start nodes with initial costs, and a
-  virtual goal reached from every node lying on the goal region.
-* :func:`seg_free` / :func:`string_pull` -- the exact segment test of ``routes.segments_free`` (the same
-  cut-at-grid-lines, midpoint-in-a-free-cell rule, with the same ``eps``) and the windowed string pulling of
-  ``routes._string_pull``.
-* :func:`path_regions` -- the lowest-numbered region shared by each pair of consecutive path nodes.
+* :func:`query` -- one whole planning query between two located points (see ``routes`` for the steps):
+  :func:`corridor_astar` (A* over the port graph with Euclidean + ALT landmark heuristic), corridor trimming,
+  :func:`corridor_path` (:func:`funnel`, polished by :func:`refine` where the funnel path turns back) on the
+  corridor and on its greedy shortcut (:func:`shortcut_corridor`), :func:`string_pull` on the grid and
+  :func:`simplify_validate` (collinear points dropped, every segment checked exactly by :func:`seg_free`).
+* :func:`seg_free` -- the exact segment test of ``routes.segments_free`` (the same cut-at-grid-lines,
+  midpoint-in-a-free-cell rule with the same ``eps``), without allocation.
+* :func:`refine` -- exact coordinate descent for the shortest polyline through boxes; also the reference the
+  tests compare the funnel with.
 """
 
 from __future__ import annotations
@@ -655,8 +657,12 @@ def query(
                 if _length(alt) < _length(raw):
                     raw = alt
                     regs = _regions_of(regs[0], short, E, regs[regs.shape[0] - 1])
-    if raw.shape[0] > 2:
-        raw, _ = string_pull(free, raw, 2, 2, eps)
+    # string pull on the grid: all pairs on short paths (where a shortcut through regions off the corridor
+    # matters most), only the next-but-one point on long ones (each check costs the segment's length)
+    if 2 < raw.shape[0] <= 9:
+        raw, _ = string_pull(free, raw, 8, 1, eps)
+    elif raw.shape[0] > 9:
+        raw, _ = string_pull(free, raw, 2, 1, eps)
     pts, ok = simplify_validate(free, raw, eps, 1e-9)
     # consecutive repeats dropped from the region list
     out = np.empty(regs.shape[0], dtype=np.int64)
