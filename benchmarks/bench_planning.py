@@ -52,11 +52,10 @@ def query_pairs(free: np.ndarray, n: int, seed: int = 0) -> list[tuple[tuple[int
 def run(name: str, free: np.ndarray, n_queries: int, res: float = 0.05, repeats: int = 3) -> dict:
     import pyastar2d
 
+    import holoslam.planning._fast  # noqa: F401  (numba import and kernel cache load: once per process)
     from holoslam.maps.grid import OccupancyGrid
     from holoslam.planning.routes import build_planner, path_length, plan_path
     from holoslam.planning.twolayer import build_two_layer
-
-    import holoslam.planning._fast  # noqa: F401  (numba import and kernel cache load: once per process)
 
     grid = OccupancyGrid.from_free_mask(free, res)
     builds, pbuilds = [], []
