@@ -10,6 +10,8 @@ from hypothesis.extra.numpy import arrays
 
 from holoslam.errors import MapError
 from holoslam.maps.thinning import (
+    _thin_mask,
+    _thin_numpy,
     count_removable,
     neighbour_codes,
     preprocess_free,
@@ -148,3 +150,72 @@ def test_preprocess_erodes_and_opens():
         preprocess_free(m, erode_cells=-1)
     with pytest.raises(MapError):
         thin(np.zeros(5, bool))
+
+
+# the compiled kernels (holoslam.maps._thin_fast) against the numpy active-set implementation, cell for cell,
+# in every mode (guarded / bare rule, with / without the one-cell-thin passes)
+MODES = [(True, True), (True, False), (False, True), (False, False)]
+
+
+def blobs(rng: np.random.Generator, h: int, w: int) -> np.ndarray:
+    """Rooms-like mask: free space with random rectangular obstacles (wide regions: many subiterations)."""
+    m = np.ones((h, w), bool)
+    for _ in range(int(rng.integers(0, 12))):
+        r, c = rng.integers(0, max(h, 1), 2)
+        m[r : r + rng.integers(1, 10), c : c + rng.integers(1, 12)] = False
+    return m
+
+
+@settings(max_examples=100, deadline=None)
+@given(arrays(bool, st.tuples(st.integers(1, 24), st.integers(1, 24)), elements=st.booleans()))
+def test_compiled_equals_numpy_on_random_masks(m):
+    for guard, one_cell in MODES:
+        assert np.array_equal(
+            _thin_mask(m, guard=guard, one_cell=one_cell), _thin_numpy(m, guard=guard, one_cell=one_cell)
+        )
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 70), st.integers(1, 70))
+def test_compiled_equals_numpy_on_room_masks(seed, h, w):
+    m = blobs(np.random.default_rng(seed), h, w)
+    for guard, one_cell in MODES:
+        assert np.array_equal(
+            _thin_mask(m, guard=guard, one_cell=one_cell), _thin_numpy(m, guard=guard, one_cell=one_cell)
+        )
+
+
+def test_compiled_equals_numpy_past_255_subiterations():
+    # a 300-cell-wide square: > 255 subiterations, so the uint8 stamps of the kernel wrap and are cleared
+    m = np.zeros((310, 306), bool)
+    m[3:303, 2:302] = True
+    m[150, 100] = False  # a one-cell hole: the skeleton must keep a cycle round it
+    for guard, one_cell in MODES:
+        assert np.array_equal(
+            _thin_mask(m, guard=guard, one_cell=one_cell), _thin_numpy(m, guard=guard, one_cell=one_cell)
+        )
+    assert topology(thin(m)) == (1, 1)
+
+
+def test_compiled_equals_numpy_and_reference_on_the_bare_rule():
+    rng = np.random.default_rng(7)
+    m = blobs(rng, 50, 64)
+    assert np.array_equal(_thin_mask(m, guard=False, one_cell=False), thin_reference(m))
+    t = _thin_mask(m, guard=True, one_cell=True)
+    assert topology(t) == topology(m) and count_removable(t) == 0
+
+
+@pytest.mark.slow
+def test_compiled_equals_numpy_on_benchmark_maps():
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_thinning.py"
+    spec = importlib.util.spec_from_file_location("bench_thinning", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    grid = bench.household_grid()[0]
+    household = grid.free
+    maps = [household, np.tile(household, (3, 3))[:1000, :1000], bench.apartment(1000)]
+    for m in maps:
+        assert np.array_equal(thin(m), _thin_numpy(m, guard=True, one_cell=True))
