@@ -285,7 +285,7 @@ def _stage(progress: Progress, timings: dict[str, float], name: str):
 def run(log_path: str | Path, config: RunConfig | None = None, progress: Progress | None = None) -> RunResult:
     """The main job on one log: ingest, locate objects, build and optimise the graph, build the maps and
     graphs. Raises ``IngestError`` when the log lacks what a run needs (odometry and laser scans)."""
-    from holoslam.io.mcap import read_log, report_to_dict
+    from holoslam.io.mcap import read_log
     from holoslam.maps.holographic import PlaceParams, ReachModel, build_holographic
     from holoslam.maps.occupancy import build_grid
     from holoslam.maps.topology import topology_from_grid
@@ -409,22 +409,21 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
 
     timings["total"] = round(time.perf_counter() - t_start, 4)
     report = _report(
-        log,
-        ingest_report,
-        report_to_dict,
-        vision_report,
-        fe,
-        sol,
-        objects,
-        grid,
-        topology,
-        holo,
-        planning,
-        timings,
-        absent,
-        stamps,
-        wTb,
-        dr,
+        log=log,
+        ingest_report=ingest_report,
+        vision_report=vision_report,
+        fe=fe,
+        sol=sol,
+        objects=objects,
+        grid=grid,
+        topology=topology,
+        holo=holo,
+        planning=planning,
+        timings=timings,
+        absent=absent,
+        stamps=stamps,
+        wTb=wTb,
+        dr=dr,
     )
     return RunResult(
         source=str(log_path),
@@ -528,9 +527,9 @@ def _num_or_none(v: float | None, digits: int = 3) -> float | None:
 
 
 def _report(
+    *,
     log,
     ingest_report,
-    report_to_dict,
     vision_report,
     fe,
     sol,
@@ -545,6 +544,9 @@ def _report(
     wTb,
     dr,
 ) -> dict[str, Any]:
+    """The run report (JSON-able) from every stage's output."""
+    from holoslam.io.mcap import report_to_dict
+
     p = fe.problem
     kinds: dict[str, int] = {}
     for k in p.relative.kind:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from holoslam.io.ros2defs import MSG_TYPES, msgdef
 from holoslam.types import (
     CameraInfo,
     GroundTruthPose,
@@ -30,107 +31,8 @@ from holoslam.types import (
 
 __all__ = ["MSGDEFS", "msgdef", "ros2_message", "write_ros2_log", "DEFAULT_TOPICS", "example_records"]
 
-_SEP = "=" * 80
-
-_BASE: dict[str, str] = {
-    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n",
-    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
-    "std_msgs/String": "string data\n",
-    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
-    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n",
-    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
-    "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
-    "geometry_msgs/PoseWithCovariance": "Pose pose\nfloat64[36] covariance\n",
-    "geometry_msgs/Twist": "Vector3 linear\nVector3 angular\n",
-    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
-    "geometry_msgs/Transform": "Vector3 translation\nQuaternion rotation\n",
-    "geometry_msgs/TransformStamped": "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
-    "geometry_msgs/PoseStamped": "std_msgs/Header header\nPose pose\n",
-    "geometry_msgs/PoseWithCovarianceStamped": "std_msgs/Header header\nPoseWithCovariance pose\n",
-    "nav_msgs/Odometry": (
-        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\n"
-        "geometry_msgs/TwistWithCovariance twist\n"
-    ),
-    "sensor_msgs/Imu": (
-        "std_msgs/Header header\ngeometry_msgs/Quaternion orientation\nfloat64[9] orientation_covariance\n"
-        "geometry_msgs/Vector3 angular_velocity\nfloat64[9] angular_velocity_covariance\n"
-        "geometry_msgs/Vector3 linear_acceleration\nfloat64[9] linear_acceleration_covariance\n"
-    ),
-    "sensor_msgs/MagneticField": (
-        "std_msgs/Header header\ngeometry_msgs/Vector3 magnetic_field\nfloat64[9] magnetic_field_covariance\n"
-    ),
-    "sensor_msgs/LaserScan": (
-        "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n"
-        "float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n"
-        "float32[] ranges\nfloat32[] intensities\n"
-    ),
-    "sensor_msgs/CompressedImage": "std_msgs/Header header\nstring format\nuint8[] data\n",
-    "sensor_msgs/Image": (
-        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n"
-        "uint32 step\nuint8[] data\n"
-    ),
-    "sensor_msgs/RegionOfInterest": "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n",
-    "sensor_msgs/CameraInfo": (
-        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\n"
-        "float64[9] k\nfloat64[9] r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\n"
-        "sensor_msgs/RegionOfInterest roi\n"
-    ),
-    "tf2_msgs/TFMessage": "geometry_msgs/TransformStamped[] transforms\n",
-    "holoslam_msgs/TagDetection": "string payload\nfloat64[8] corners\n",
-    "holoslam_msgs/TagDetectionArray": "std_msgs/Header header\nholoslam_msgs/TagDetection[] detections\n",
-}
-
-_DEPS: dict[str, tuple[str, ...]] = {
-    "std_msgs/Header": ("builtin_interfaces/Time",),
-    "geometry_msgs/Pose": ("geometry_msgs/Point", "geometry_msgs/Quaternion"),
-    "geometry_msgs/PoseWithCovariance": ("geometry_msgs/Pose",),
-    "geometry_msgs/Twist": ("geometry_msgs/Vector3",),
-    "geometry_msgs/TwistWithCovariance": ("geometry_msgs/Twist",),
-    "geometry_msgs/Transform": ("geometry_msgs/Vector3", "geometry_msgs/Quaternion"),
-    "geometry_msgs/TransformStamped": ("std_msgs/Header", "geometry_msgs/Transform"),
-    "geometry_msgs/PoseStamped": ("std_msgs/Header", "geometry_msgs/Pose"),
-    "geometry_msgs/PoseWithCovarianceStamped": ("std_msgs/Header", "geometry_msgs/PoseWithCovariance"),
-    "nav_msgs/Odometry": (
-        "std_msgs/Header",
-        "geometry_msgs/PoseWithCovariance",
-        "geometry_msgs/TwistWithCovariance",
-    ),
-    "sensor_msgs/Imu": ("std_msgs/Header", "geometry_msgs/Quaternion", "geometry_msgs/Vector3"),
-    "sensor_msgs/MagneticField": ("std_msgs/Header", "geometry_msgs/Vector3"),
-    "sensor_msgs/LaserScan": ("std_msgs/Header",),
-    "sensor_msgs/CompressedImage": ("std_msgs/Header",),
-    "sensor_msgs/Image": ("std_msgs/Header",),
-    "sensor_msgs/CameraInfo": ("std_msgs/Header", "sensor_msgs/RegionOfInterest"),
-    "tf2_msgs/TFMessage": ("geometry_msgs/TransformStamped",),
-    "holoslam_msgs/TagDetectionArray": ("std_msgs/Header", "holoslam_msgs/TagDetection"),
-}
-
-
-def _closure(name: str) -> list[str]:
-    out: list[str] = []
-
-    def visit(n: str) -> None:
-        for d in _DEPS.get(n, ()):
-            if d not in out:
-                out.append(d)
-                visit(d)
-
-    visit(name)
-    return out
-
-
-def msgdef(name: str) -> str:
-    """The full ``ros2msg`` text of ``pkg/Type`` (or ``pkg/msg/Type``) with its dependencies appended."""
-    parts = name.split("/")
-    key = f"{parts[0]}/{parts[-1]}"
-    text = _BASE[key]
-    for dep in _closure(key):
-        pkg, typ = dep.split("/")
-        text += f"{_SEP}\nMSG: {pkg}/msg/{typ}\n{_BASE[dep]}"
-    return text
-
-
-MSGDEFS: dict[str, str] = {f"{k.split('/')[0]}/msg/{k.split('/')[1]}": msgdef(k) for k in _BASE}
+# the full ros2msg text of every type holoslam writes, keyed pkg/msg/Type
+MSGDEFS: dict[str, str] = {name: msgdef(name) for name in MSG_TYPES}
 
 DEFAULT_TOPICS: dict[type, tuple[str, str]] = {
     Odometry: ("/odom", "nav_msgs/msg/Odometry"),
