@@ -235,3 +235,34 @@ def test_start_in_overlapping_regions_enters_the_corridor_late():
     r = plan_path(planner, np.array([0.075, 0.175]), np.array([0.125, 0.275]))
     ref = astar_length(free, (3, 1), (5, 2))
     assert r.length <= ref * 0.05 + 1e-9  # any-angle: never longer than the 8-connected grid path here
+
+
+def test_shortcut_through_the_adjacency_equals_the_search_over_later_regions():
+    """``shortcut_corridor_adj`` (used by the query) returns the same portals as ``shortcut_corridor`` on
+    random walks over the region graph (walks revisit regions, like trimmed corridors may not, a harder case)."""
+    from holoslam.planning import _fast
+
+    tl = build_two_layer(OccupancyGrid.from_free_mask(apartment_free(), 0.05), 1)
+    planner = build_planner(tl)
+    E = np.ascontiguousarray(tl.region_edges, dtype=np.int64)
+    nr = tl.n_regions
+    ekeys = E[:, 0] * nr + E[:, 1]
+    rptr, rids = planner.region_portal_ptr, planner.region_portal_ids
+    rng = np.random.default_rng(3)
+    checked = 0
+    for _ in range(300):
+        r = int(rng.integers(nr))
+        walk = [r]
+        for _ in range(int(rng.integers(1, 40))):
+            nbr = rids[rptr[r] : rptr[r + 1]]
+            if nbr.shape[0] == 0:
+                break
+            f = int(nbr[rng.integers(nbr.shape[0])])
+            r = int(E[f, 0] + E[f, 1] - r)
+            walk.append(r)
+        regs = np.array(walk, dtype=np.int64)
+        want = _fast.shortcut_corridor(regs, ekeys, nr)
+        got = _fast.shortcut_corridor_adj(regs, rptr, rids, E, nr)
+        assert np.array_equal(got, want), walk
+        checked += regs.shape[0] > 2
+    assert checked > 100

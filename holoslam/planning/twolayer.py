@@ -19,13 +19,16 @@ y = origin_y + row * resolution.
 2. **Layer 1** (S2). A node per free block: id, centre, size, corners. Two blocks are adjacent when one
    dilated by one cell overlaps the other (so blocks touching at a side or only at a corner are adjacent:
    the 8-neighbourhood of the grid); the edge weight is the distance between centres in metres. Adjacency is
-   an interval join of the blocks along shared grid lines (sorted keys, no pairwise loops, no cell pass).
+   read off the block label image along each block's right and top boundary lines in one compiled pass
+   (``_fast.block_edges``; :func:`layer1_edges_join` is the numpy interval join giving the same pairs).
 3. **Layer 2** (S3). Free blocks are visited largest first; an uncovered block seeds a rectangle that grows
    in all four directions over the cells of free blocks (round robin; a direction's step doubles while the
    strip it adds is free and halves when it is not; a direction stops when even a one-cell strip would leave
    the grid or hold a cell outside the free blocks). The result is a maximal obstacle-free rectangle
-   containing the seed: a convex safe region. Growth is vectorised over a batch of seeds; acceptance in seed
-   order stays sequential, so the result is that of the one-at-a-time procedure. Every still-uncovered free
+   containing the seed: a convex safe region. One compiled sequential pass (``_fast.grow_regions``: strip
+   tests O(1) from the integral image, containment read off the label image);
+   :func:`grow_regions_batched` is the numpy version (growth vectorised over batches of seeds) with the same
+   result. Every still-uncovered free
    block lying wholly inside an accepted region is marked covered by it; ``TwoLayerGraph.blocks_of(region)``
    lists those blocks and ``TwoLayerGraph.region_of_block`` gives each block its (single, first) region.
    Regions may overlap. Two regions are adjacent when a layer-1 edge joins blocks of the two regions; their
@@ -52,6 +55,8 @@ __all__ = [
     "layer1_edges",
     "unique_int",
     "grow_regions",
+    "grow_regions_batched",
+    "layer1_edges_join",
 ]
 
 
@@ -135,23 +140,14 @@ def decompose(free: np.ndarray, min_block_cells: int = 1, S: np.ndarray | None =
 
 
 def block_label_image(blocks: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """(H, W) int32 image holding each cell's block id, -1 outside every block. Vectorised: the blocks are
-    disjoint, so a 2-D difference image of (id + 1) at their corners integrates to the labels."""
+    """(H, W) int32 image holding each cell's block id, -1 outside every block (one compiled pass writing each
+    block's cells; the blocks are disjoint)."""
+    from holoslam.planning import _fast
+
     h, w = shape
-    dt = np.int32 if blocks.shape[0] < 2**31 - 2 else np.int64
-    v = np.arange(1, blocks.shape[0] + 1, dtype=dt)
-    r0, c0, r1, c1 = (blocks[:, i] for i in range(4))
-    W1 = w + 1
-    D = np.zeros((h + 1) * W1, dtype=dt)
-    # each corner type is unique per block (blocks are disjoint), so plain fancy-index adds are exact
-    D[r0 * W1 + c0] += v
-    D[r0 * W1 + c1] -= v
-    D[r1 * W1 + c0] -= v
-    D[r1 * W1 + c1] += v
-    D = D.reshape(h + 1, W1)
-    np.cumsum(D, axis=0, out=D)
-    np.cumsum(D, axis=1, out=D)
-    return (D[:h, :w] - 1).astype(np.int32, copy=False)
+    if blocks.shape[0] >= 2**31 - 2:
+        raise MapError(f"{blocks.shape[0]} blocks do not fit int32 block ids; use a coarser grid")
+    return _fast.label_image(np.ascontiguousarray(blocks, dtype=np.int64), int(h), int(w))
 
 
 def unique_int(keys: np.ndarray) -> np.ndarray:
@@ -198,9 +194,25 @@ def layer1_edges(blocks: np.ndarray, labels: np.ndarray | None = None) -> np.nda
     """Adjacent block pairs (E, 2) int64 (each pair once, i < j in a row), by the one-cell dilation rule.
 
     Two disjoint blocks touch exactly when they share a grid line: a column line (one's ``col1`` is the
-    other's ``col0``) with row intervals meeting after a one-cell dilation, or a row line likewise. Both
-    joins are interval joins on sorted keys (O(N log N), no pairwise loops, no pass over the cells).
-    ``labels`` is not needed (kept for callers of the first version)."""
+    other's ``col0``) with row intervals meeting after a one-cell dilation, or a row line likewise. Read off
+    the block label image (``labels``, computed when not given) along each block's right and top boundary
+    lines in one compiled pass (O(total block perimeter)); :func:`layer1_edges_join` is the pure-numpy interval
+    join on sorted keys giving the same set."""
+    n = blocks.shape[0]
+    if n == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    from holoslam.planning import _fast
+
+    b = np.ascontiguousarray(blocks, dtype=np.int64)
+    if labels is None:
+        h, w = int(b[:, 2].max()), int(b[:, 3].max())
+        labels = block_label_image(b, (h, w))
+    return _fast.block_edges(b, np.ascontiguousarray(labels))
+
+
+def layer1_edges_join(blocks: np.ndarray) -> np.ndarray:
+    """The pure-numpy layer-1 adjacency (same pairs as :func:`layer1_edges`, another order): interval joins on
+    sorted keys (O(N log N), no pairwise loops, no pass over the cells)."""
     n = blocks.shape[0]
     if n == 0:
         return np.zeros((0, 2), dtype=np.int64)
@@ -263,9 +275,47 @@ def _grow_rectangles(S: np.ndarray, rects: np.ndarray, h: int, w: int) -> np.nda
 
 
 def grow_regions(
-    blocks: np.ndarray, free: np.ndarray, S: np.ndarray | None = None, bucket: int = 32
+    blocks: np.ndarray,
+    free: np.ndarray,
+    S: np.ndarray | None = None,
+    bucket: int = 32,
+    labels: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Layer 2 (S31): convex safe regions grown from uncovered blocks, largest block first.
+
+    Returns ``(regions (R, 4) int64 half-open, region_of_block (N,) int64, region_block_ptr (R+1,),
+    region_block_ids (N,))`` where ``region_block_ids[ptr[k]:ptr[k+1]]`` are the blocks region k covers.
+    One compiled sequential pass (``_fast.grow_regions``); ``labels`` is the blocks' label image (computed
+    when not given); ``bucket`` is unused (kept for callers of the numpy version,
+    :func:`grow_regions_batched`, which gives the same result).
+    """
+    from holoslam.planning import _fast
+
+    free = np.asarray(free, dtype=bool)
+    h, w = free.shape
+    if S is None:
+        S = integral_image(free)
+    n = blocks.shape[0]
+    if n == 0:
+        return (
+            np.zeros((0, 4), np.int64),
+            np.full(0, -1, np.int64),
+            np.zeros(1, np.int64),
+            np.zeros(0, np.int64),
+        )
+    b = np.ascontiguousarray(blocks, dtype=np.int64)
+    if labels is None:
+        labels = block_label_image(b, (h, w))
+    areas = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    seeds = np.argsort(-areas, kind="stable")  # largest first, ties by block id
+    return _fast.grow_regions(np.ascontiguousarray(S), b, np.ascontiguousarray(labels), seeds)
+
+
+def grow_regions_batched(
+    blocks: np.ndarray, free: np.ndarray, S: np.ndarray | None = None, bucket: int = 32
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The numpy version of :func:`grow_regions` (growth vectorised over batches of seeds, acceptance in seed
+    order), kept as the reference the compiled pass is tested against.
 
     Returns ``(regions (R, 4) int64 half-open, region_of_block (N,) int64, region_block_ptr (R+1,),
     region_block_ids (N,))`` where ``region_block_ids[ptr[k]:ptr[k+1]]`` are the blocks region k covers.
@@ -448,7 +498,7 @@ def build_two_layer(
     S = integral_image(free)
     blocks = decompose(free, min_block_cells, S)
     labels = block_label_image(blocks, free.shape)
-    edges = layer1_edges(blocks)
+    edges = layer1_edges(blocks, labels)
     cen = np.column_stack([(blocks[:, 1] + blocks[:, 3]) * 0.5, (blocks[:, 0] + blocks[:, 2]) * 0.5]) * res
     if edges.shape[0]:
         d = cen[edges[:, 0]] - cen[edges[:, 1]]
@@ -458,7 +508,7 @@ def build_two_layer(
     # regions grow in the free space as layer 1 sees it (mixed blocks below the minimum size are occupied)
     eff = labels >= 0
     S_eff = S if min_block_cells == 1 else integral_image(eff)
-    regions, region_of_block, ptr, ids = grow_regions(blocks, eff, S_eff)
+    regions, region_of_block, ptr, ids = grow_regions(blocks, eff, S_eff, labels=labels)
     # region adjacency from layer-1 edges joining blocks of different regions
     if edges.shape[0]:
         ra, rb = region_of_block[edges[:, 0]], region_of_block[edges[:, 1]]
