@@ -104,7 +104,15 @@ def cmd_run(a: argparse.Namespace) -> int:
 def cmd_solve(a: argparse.Namespace) -> int:
     from holoslam.pipeline import solve_graph_file
 
-    summary = solve_graph_file(a.input, a.output, tum=a.tum, method=a.method, init=a.init)
+    summary = solve_graph_file(
+        a.input,
+        a.output,
+        tum=a.tum,
+        method=a.method,
+        init=a.init,
+        kernel=a.kernel,
+        kernel_parameter=a.kernel_parameter,
+    )
     print(json.dumps(summary, indent=2) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
     return EXIT_OK
 
@@ -219,6 +227,18 @@ def build_parser() -> argparse.ArgumentParser:
         choices=["file", "odometry", "lago", "incremental", "auto"],
         default="file",
         help="initial guess; auto tries each and keeps the lowest final error",
+    )
+    s.add_argument(
+        "--kernel",
+        choices=["none", "huber", "cauchy", "dcs", "geman_mcclure"],
+        default="none",
+        help="robust kernel on every edge (default none: plain least squares, as gtsam and g2o)",
+    )
+    s.add_argument(
+        "--kernel-parameter",
+        type=float,
+        default=1.0,
+        help="the kernel's width in whitened units (residual / sigma; default 1.0)",
     )
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_solve)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -828,11 +829,17 @@ def solve_graph_file(
     tum: str | Path | None = None,
     method: str = "lm",
     init: str = "file",
+    kernel: str = "none",
+    kernel_parameter: float = 1.0,
 ) -> dict[str, Any]:
     """Optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result (g2o, and TUM).
-    ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices), odometry, lago
-    or incremental."""
-    from holoslam.solve import Initialisation, Method, solve_g2o_file
+    ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices), odometry, lago,
+    incremental or auto. ``kernel`` (none, huber, cauchy, dcs, geman_mcclure; parameter in whitened units) puts a
+    robust kernel on every edge and landmark measurement, as g2o's ``-robustKernel`` does: a few wrong loop
+    closures then no longer bend the graph, at the price of a non-convex cost (start from a good guess)."""
+    from holoslam.graph.build import BuildOptions
+    from holoslam.graph.factors import NO_KERNEL, Kernel, RobustKernel
+    from holoslam.solve import Initialisation, Method, SolveOptions, solve_g2o_file
 
     methods = {"lm": Method.BATCH, "isam2": Method.ISAM2}
     inits = {
@@ -844,9 +851,27 @@ def solve_graph_file(
     }
     if method not in methods or init not in inits:
         raise ConfigError(f"method must be one of {sorted(methods)} and init one of {sorted(inits)}")
+    kernels = [k.value for k in RobustKernel]
+    if kernel not in kernels:
+        raise ConfigError(f"kernel {kernel!r} is not one of {kernels}")
+    if not (math.isfinite(kernel_parameter) and kernel_parameter > 0):
+        raise ConfigError(f"the kernel parameter must be a finite number > 0, got {kernel_parameter}")
     if not Path(input_path).is_file():
         raise IngestError(f"graph file {input_path} does not exist")
-    summary, solution = solve_g2o_file(input_path, output, method=methods[method], initialisation=inits[init])
+    robust = Kernel(RobustKernel(kernel), float(kernel_parameter))
+    # with a kernel: step (1) of solve's outlier scheme only (kernels, no chi2 rejection rounds)
+    options = SolveOptions(
+        method=methods[method],
+        initialisation=inits[init],
+        reject_outliers=robust.kind is not RobustKernel.NONE,
+        max_rounds=0,
+        detect_moved=False,
+        final_gaussian=False,
+        build=BuildOptions(
+            loop_kernel=robust, landmark_kernel=robust, heading_kernel=NO_KERNEL, robust_kinds=("g2o",)
+        ),
+    )
+    summary, solution = solve_g2o_file(input_path, output, options=options)
     out = dataclasses.asdict(summary) if dataclasses.is_dataclass(summary) else dict(summary)
     if tum is not None:
         from holoslam.io.trajectory import write_tum

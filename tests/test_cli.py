@@ -180,3 +180,46 @@ def test_simulate_writes_a_log_that_inspect_reads(tmp_path, capsys):
     assert {"/odom", "/scan", "/compass", "/ground_truth/pose", "/tf_static"} <= topics
     assert main(["simulate", "-o", str(tmp_path / "no" / "dir.mcap")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def _g2o_square_with_a_wrong_loop(path: Path) -> np.ndarray:
+    """Two laps of a 4 m square (40 poses, exact odometry, true loop closures between the laps) plus one loop
+    closure that claims pose 30 is where pose 5 is: a misassociated scan match. Returns the true poses."""
+    from holoslam import geometry as geo
+
+    steps = np.tile(np.array([[1.0, 0.0, 0.0]] * 3 + [[1.0, 0.0, np.pi / 2]]), (10, 1))
+    wTa = np.zeros((40, 3))
+    for k in range(1, 40):
+        wTa[k] = geo.compose(wTa[k - 1], steps[k - 1])
+    info = "100 0 0 100 0 400"
+    lines = [f"VERTEX_SE2 {k} {x:.6f} {y:.6f} {t:.6f}" for k, (x, y, t) in enumerate(wTa)]
+    edges = [(k, k + 1) for k in range(39)] + [(k, k + 16) for k in range(0, 24, 3)] + [(5, 30)]
+    for i, j in edges:
+        z = geo.between(wTa[i], wTa[j]) if (i, j) != (5, 30) else np.array([0.3, 0.0, 0.0])
+        lines.append(f"EDGE_SE2 {i} {j} {z[0]:.6f} {z[1]:.6f} {z[2]:.6f} {info}")
+    path.write_text("\n".join(lines) + "\n")
+    return wTa
+
+
+def test_solve_with_a_robust_kernel_ignores_a_wrong_loop_closure(tmp_path, capsys):
+    from holoslam.io.g2o import read_g2o
+
+    src = tmp_path / "square.g2o"
+    truth = _g2o_square_with_a_wrong_loop(src)
+    worst = {}
+    for kernel in ("none", "cauchy"):
+        out = tmp_path / f"{kernel}.g2o"
+        assert main(["solve", str(src), "-o", str(out), "--kernel", kernel, "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["num_poses"] == 40
+        est = read_g2o(out).vertex_poses
+        worst[kernel] = float(np.max(np.linalg.norm(est[:, :2] - truth[:, :2], axis=1)))
+    assert worst["none"] > 0.3  # least squares bends the square towards the false closure
+    assert worst["cauchy"] < 0.01  # the robust kernel leaves the truth where it is
+
+
+def test_solve_rejects_a_nonsense_kernel_parameter(tmp_path, capsys):
+    src = tmp_path / "square.g2o"
+    _g2o_square_with_a_wrong_loop(src)
+    assert main(["solve", str(src), "-o", str(tmp_path / "o.g2o"), "--kernel-parameter", "-2"]) == 2
+    err = capsys.readouterr().err
+    assert "kernel parameter" in err and "Traceback" not in err
