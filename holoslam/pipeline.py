@@ -333,8 +333,9 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             with _stage(progress, timings, "object features (Eq. 13)"):
                 features = object_features_from_log(log, observations)
 
-    with _stage(progress, timings, "front end (submaps, Eq. 12/14/15/16)"):
-        fe = build_problem(log, observations, cfg.frontend)
+    fe_stage = "front end (submaps, Eq. 12/14/15/16)"
+    with _stage(progress, timings, fe_stage):
+        fe = build_problem(log, observations, cfg.frontend, lambda done, total: progress(fe_stage, done, total))
 
     with _stage(progress, timings, "optimise"):
         options = SolveOptions(

@@ -85,6 +85,9 @@ def test_eq16_by_hand():
     np.testing.assert_allclose(cov, [[4e-4 + 0.04, 0.0], [0.0, 1e-4]], atol=1e-12)
 
 
+PROGRESS_CALLS: list[tuple[int, int]] = []  # what the fixture's front end reported
+
+
 @pytest.fixture(scope="module")
 def frontend_run():
     log, obs, t, wTb = make_log()
@@ -92,8 +95,19 @@ def frontend_run():
     # 0.002 rad wheel-heading noise per step)
     dr = DeadReckoningConfig(sigma_s_per_m=0.03, sigma_s_floor=0.002, odo_sigma_dtheta_per_rad=0.02,
                              odo_sigma_dtheta_per_m=0.0, odo_sigma_dtheta_floor=0.002)
-    fe = build_problem(log, obs, FrontEndConfig(dead_reckoning=dr))
+    PROGRESS_CALLS.clear()
+    fe = build_problem(
+        log, obs, FrontEndConfig(dead_reckoning=dr), progress=lambda d, n: PROGRESS_CALLS.append((d, n))
+    )
     return fe, log, obs, t, wTb
+
+
+def test_progress_reports_the_scans_walked(frontend_run):
+    _, log, *_ = frontend_run
+    done = np.array([d for d, _ in PROGRESS_CALLS])
+    totals = {n for _, n in PROGRESS_CALLS}
+    assert len(totals) == 1 and 0 < totals.pop() <= len(log.scans)
+    assert done[0] == 0 and np.all(np.diff(done) > 0) and 20 <= len(done) <= 50
 
 
 def test_submaps_and_measurements(frontend_run):

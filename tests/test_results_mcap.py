@@ -28,7 +28,7 @@ def test_results_log_decodes_with_stock_foxglove_decoders(tmp_path):
     with path.open("rb") as f:
         msgs = list(make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages())
     by_topic = {}
-    for schema, channel, message, decoded in msgs:
+    for schema, channel, _message, decoded in msgs:
         by_topic.setdefault(channel.topic, []).append((schema.name, decoded))
     assert len(by_topic["/holoslam/pose"]) == 10
     ((name, traj),) = by_topic["/holoslam/trajectory"]

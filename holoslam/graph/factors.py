@@ -11,8 +11,11 @@ with its parameter in whitened (sigma) units.
 
 from __future__ import annotations
 
+from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 from enum import Enum
+from itertools import repeat
 from typing import Any
 
 import numpy as np
@@ -93,42 +96,60 @@ class NoiseCache:
         return model
 
 
-def noise_models(cov: np.ndarray, kernel: Kernel = NO_KERNEL) -> tuple[list[Any], np.ndarray]:
-    """Gaussian noise models for a batch of covariances (M, d, d), one per distinct covariance, and each row's
-    model index. Vectorised: distinct matrices found with one ``np.unique``; diagonal ones (to 1e-12 in
-    correlation) become ``noiseModel.Diagonal.Sigmas`` (what gtsam's "smart" constructors pick), the others
-    ``noiseModel.Gaussian.SqrtInformation`` with the upper Cholesky factor R of the information (R^T R = cov^-1)
-    computed in one batched numpy call. A robust kernel, when given, wraps every model."""
-    import gtsam
+_FINGERPRINT = np.random.default_rng(20240601).uniform(0.5, 1.5, 9)
 
+
+@dataclass(frozen=True, eq=False)
+class _NoisePlan:
+    """The distinct covariances of a batch (in order of first appearance) and what each becomes: ``is_diag``
+    ones ``noiseModel.Diagonal.Sigmas(sigmas[k])``, the others ``noiseModel.Gaussian.SqrtInformation(R[k])``;
+    ``which[r]`` is row r's distinct covariance."""
+
+    is_diag: np.ndarray  # (K,) bool
+    sigmas: np.ndarray  # (K, d)
+    R: np.ndarray  # (K, d, d) upper Cholesky factor of the information (zero for diagonal ones)
+    which: np.ndarray  # (M,) int64
+
+
+def _noise_plan(cov: np.ndarray) -> _NoisePlan:
+    """Vectorised part of :func:`noise_models`: distinct matrices, diagonal test, batched Cholesky, checks."""
     cov = np.ascontiguousarray(cov, dtype=np.float64)
     m, d = cov.shape[0], cov.shape[1]
-    if m == 0:
-        return [], np.zeros(0, np.int64)
     flat = cov.reshape(m, d * d)
-    if m > 1 and np.array_equal(flat.min(axis=0), flat.max(axis=0)):
+    # a random projection of each matrix: distinct fingerprints prove distinct matrices (the usual case of
+    # scan-matched edges) and equal ones everywhere flag a single shared covariance, both without sorting rows
+    fp = np.sort(flat @ _FINGERPRINT[: d * d]) if m > 1 else np.zeros(m)
+    if m <= 1 or np.all(fp[1:] != fp[:-1]):
+        uniq, inverse = flat, np.arange(m)
+    elif fp[0] == fp[-1] and np.array_equal(flat, np.broadcast_to(flat[0], flat.shape)):
         uniq, inverse = flat[:1], np.zeros(m, np.int64)
     else:
         void = flat.view(np.dtype((np.void, flat.dtype.itemsize * d * d))).ravel()
         _, first, inverse = np.unique(void, return_index=True, return_inverse=True)
-        uniq = flat[first]
+        # number the distinct matrices in order of first appearance, so that the models are allocated in the
+        # order of the factors that use them (np.unique's byte order scatters them in memory, and the solver's
+        # linearisation, which walks the factors in order, pays ~3% for the cache misses)
+        by_first = np.argsort(first, kind="stable")
+        rank = np.empty_like(by_first)
+        rank[by_first] = np.arange(by_first.size)
+        uniq, inverse = flat[first[by_first]], rank[inverse.reshape(-1)]
     uc = uniq.reshape(-1, d, d)
-    diag = np.einsum("kii->ki", uc)
-    # diagonal up to rounding (|correlation| < 1e-12, e.g. a bearing/range covariance propagated to x/y and back)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = np.abs(uc) / np.sqrt(np.abs(diag[:, :, None] * diag[:, None, :]))
-    is_diag = np.all((corr < 1e-12) | (uc == 0) | np.eye(d, dtype=bool), axis=(1, 2))
-    ok = np.all(np.isfinite(uc), axis=(1, 2)) & np.all(diag > 0, axis=1)
+    k_ = np.arange(d)
+    diag = uniq[:, k_ * (d + 1)]
+    # diagonal up to rounding: every off-diagonal entry c_ij is 0 or |c_ij| < 1e-12 sqrt(c_ii c_jj) (e.g. a
+    # bearing/range covariance propagated to x/y and back)
+    oi, oj = np.nonzero(~np.eye(d, dtype=bool))
+    off = uniq[:, oi * d + oj]
+    with np.errstate(invalid="ignore", over="ignore"):
+        is_diag = np.all((off == 0) | (off * off < 1e-24 * np.abs(diag[:, oi] * diag[:, oj])), axis=1)
+    ok = np.all(np.isfinite(uniq), axis=1) & np.all(diag > 0, axis=1)
     R = np.zeros_like(uc)
-    full = np.flatnonzero(~is_diag & ok)
-    if full.size:
+    full = ~is_diag & ok
+    if full.any():
         from holoslam.graph.linalg import chol_upper, inv_sym
 
-        sub = uc[full]
-        R[full] = chol_upper(inv_sym(sub))
+        R[full] = chol_upper(inv_sym(uc[full]))
     sigmas = np.sqrt(np.where(diag > 0, diag, 1.0))
-    est = kernel.make()
-    models: list[Any] = []
     ok &= is_diag | np.all(np.isfinite(R), axis=(1, 2))
     if not ok.all():
         k = int(np.argmin(ok))
@@ -136,36 +157,76 @@ def noise_models(cov: np.ndarray, kernel: Kernel = NO_KERNEL) -> tuple[list[Any]
             f"covariance {uc[k].tolist()} is not usable as noise (not positive definite); "
             "give every measurement a finite, non-zero uncertainty"
         )
+    return _NoisePlan(is_diag, sigmas, R, inverse.astype(np.int64))
+
+
+def _plan_models(plan: _NoisePlan, est: Any) -> list[Any]:
+    """One gtsam noise model per distinct covariance of ``plan``, wrapped in ``est`` (an m-estimator) if any."""
+    import gtsam
+
     diag_model, full_model = gtsam.noiseModel.Diagonal.Sigmas, gtsam.noiseModel.Gaussian.SqrtInformation
-    for d_k, s_k, r_k in zip(is_diag.tolist(), sigmas, R, strict=True):
-        model = diag_model(s_k) if d_k else full_model(r_k, False)
-        if est is not None:
-            model = gtsam.noiseModel.Robust.Create(est, model)
-        models.append(model)
-    return models, inverse.reshape(-1).astype(np.int64)
+    if plan.is_diag.all():
+        models = list(map(diag_model, plan.sigmas))
+    elif not plan.is_diag.any():
+        models = list(map(full_model, plan.R, repeat(False)))
+    else:
+        models = [
+            diag_model(s_k) if d_k else full_model(r_k, False)
+            for d_k, s_k, r_k in zip(plan.is_diag.tolist(), plan.sigmas, plan.R, strict=True)
+        ]
+    if est is not None:
+        robust = gtsam.noiseModel.Robust.Create
+        models = [robust(est, model) for model in models]
+    return models
+
+
+def _row_models(plan: _NoisePlan, kernel: Kernel) -> Iterator[Any]:
+    """Each row's noise model, in row order. When every row has its own Gaussian model (no kernel, all diagonal
+    or all full), the models are made lazily, each just before the factor that takes it, so factor and model
+    sit side by side in memory (as in gtsam's own readers); otherwise the distinct models are shared."""
+    import gtsam
+
+    est = kernel.make()
+    if plan.which.size == plan.is_diag.size and est is None:
+        if plan.is_diag.all():
+            return map(gtsam.noiseModel.Diagonal.Sigmas, plan.sigmas)
+        if not plan.is_diag.any():
+            return map(gtsam.noiseModel.Gaussian.SqrtInformation, plan.R, repeat(False))
+    return map(_plan_models(plan, est).__getitem__, plan.which.tolist())
+
+
+def noise_models(cov: np.ndarray, kernel: Kernel = NO_KERNEL) -> tuple[list[Any], np.ndarray]:
+    """Gaussian noise models for a batch of covariances (M, d, d), one per distinct covariance (in order of first
+    appearance), and each row's model index. Vectorised: distinct matrices found with one ``np.unique``;
+    diagonal ones (to 1e-12 in correlation) become ``noiseModel.Diagonal.Sigmas`` (what gtsam's "smart"
+    constructors pick), the others ``noiseModel.Gaussian.SqrtInformation`` with the upper Cholesky factor R of
+    the information (R^T R = cov^-1) computed in one batched numpy call. A robust kernel, when given, wraps
+    every model."""
+    plan = _noise_plan(cov)
+    if plan.which.size == 0:
+        return [], plan.which
+    return _plan_models(plan, kernel.make()), plan.which
 
 
 def between_factors(
     keys_i: np.ndarray, keys_j: np.ndarray, iTj: np.ndarray, cov_iTj: np.ndarray, kernel: Kernel = NO_KERNEL
 ) -> Any:
     """BetweenFactorPose2(key_i, key_j, iTj) for each row, noise from ``cov_iTj`` (see :func:`noise_models`);
-    the Python loop does only the unavoidable per-factor constructor calls."""
+    only the unavoidable per-factor constructor calls run per row, chained through ``map`` (no Python loop
+    body)."""
     import gtsam
 
     graph = gtsam.NonlinearFactorGraph()
-    models, which = noise_models(np.reshape(cov_iTj, (-1, 3, 3)), kernel)
-    Pose2, Between, add = gtsam.Pose2, gtsam.BetweenFactorPose2, graph.add
     m = np.reshape(iTj, (-1, 3))
-    for ki, kj, x, y, t, w in zip(
-        np.asarray(keys_i).tolist(),
-        np.asarray(keys_j).tolist(),
-        m[:, 0].tolist(),
-        m[:, 1].tolist(),
-        m[:, 2].tolist(),
-        which.tolist(),
-        strict=True,
-    ):
-        add(Between(ki, kj, Pose2(x, y, t), models[w]))
+    ki, kj = np.asarray(keys_i).tolist(), np.asarray(keys_j).tolist()
+    if not len(ki) == len(kj) == m.shape[0] == np.shape(cov_iTj)[0]:
+        raise GraphError(
+            f"between_factors: {len(ki)} / {len(kj)} keys, {m.shape[0]} measurements and "
+            f"{np.shape(cov_iTj)[0]} covariances; give one of each per factor"
+        )
+    models = _row_models(_noise_plan(np.reshape(cov_iTj, (-1, 3, 3))), kernel)
+    poses = map(gtsam.Pose2, m[:, 0].tolist(), m[:, 1].tolist(), m[:, 2].tolist())
+    deque(map(graph.add, map(gtsam.BetweenFactorPose2, ki, kj, poses, models)), maxlen=0)
     return graph
 
 

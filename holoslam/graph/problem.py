@@ -12,6 +12,7 @@ This module depends on numpy alone; ``holoslam.graph.build`` turns a :class:`Sla
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import TYPE_CHECKING
@@ -64,24 +65,29 @@ def _check_cov(cov: np.ndarray, dim: int, what: str) -> None:
     """Covariances must be finite, symmetric and positive definite (vectorised over the batch)."""
     if cov.ndim != 3 or cov.shape[1:] != (dim, dim):
         raise GraphError(f"{what}: expected shape (M, {dim}, {dim}), got {cov.shape}")
-    if cov.shape[0] == 0:
+    m = cov.shape[0]
+    if m == 0:
         return
-    if not np.all(np.isfinite(cov)):
-        bad = int(np.argwhere(~np.isfinite(cov).all(axis=(1, 2)))[0, 0])
+    flat = cov.reshape(m, dim * dim)
+    finite = np.isfinite(flat).all(axis=1)
+    if not finite.all():
+        bad = int(np.argmin(finite))
         raise GraphError(f"{what}[{bad}] has non-finite entries: {cov[bad].tolist()}; fix the measurement")
-    asym = np.abs(cov - np.swapaxes(cov, 1, 2)).max(axis=(1, 2))
-    scale = np.abs(cov).max(axis=(1, 2))
-    if np.any(asym > 1e-9 * np.maximum(scale, 1e-300)):
-        bad = int(np.argmax(asym > 1e-9 * np.maximum(scale, 1e-300)))
+    iu, ju = np.triu_indices(dim, 1)
+    asym = np.abs(flat[:, iu * dim + ju] - flat[:, ju * dim + iu]).max(axis=1)
+    scale = np.abs(flat).max(axis=1)
+    unsym = asym > 1e-9 * np.maximum(scale, 1e-300)
+    if unsym.any():
+        bad = int(np.argmax(unsym))
         raise GraphError(f"{what}[{bad}] is not symmetric: {cov[bad].tolist()}")
     from holoslam.io.g2o import positive_definite
 
-    pd = positive_definite(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+    pd = positive_definite(cov if not asym.any() else 0.5 * (cov + np.swapaxes(cov, 1, 2)))
     if not pd.all():
         bad = int(np.argmax(~pd))
         eig = np.linalg.eigvalsh(cov[bad : bad + 1])
         raise GraphError(
-            f"{what}[{bad}] is not positive definite (eigenvalues {eig[bad].tolist()}); "
+            f"{what}[{bad}] is not positive definite (eigenvalues {eig[0].tolist()}); "
             "give every measurement a non-zero uncertainty"
         )
 
@@ -347,6 +353,30 @@ def _chain_initialisation(
     return wTa
 
 
+def _pose_index(*id_arrays: np.ndarray) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
+    """The sorted distinct pose ids of a file (vertex ids and the poses its edges name) and a function mapping ids
+    to their anchor index. Ids are non-negative integers (the reader checks); dense ids (the usual 0..N-1) are
+    found with a presence mask and mapped by a lookup table, O(N) with no sort."""
+    ids = [np.asarray(a, dtype=np.int64).reshape(-1) for a in id_arrays]
+    total = sum(a.size for a in ids)
+    top = max((int(a.max()) for a in ids if a.size), default=-1)
+    if total == 0:
+        return np.zeros(0, np.int64), lambda x: np.zeros(0, np.int64)
+    if top < 4 * total + 1024:
+        present = np.zeros(top + 1, dtype=bool)
+        for a in ids:
+            present[a] = True
+        pose_ids = np.flatnonzero(present).astype(np.int64)
+        if pose_ids.size == top + 1:  # ids 0..N-1: the id is the index
+            return pose_ids, lambda x: np.asarray(x, dtype=np.int64).reshape(-1).copy()
+        lut = np.cumsum(present, dtype=np.int64) - 1
+        return pose_ids, lambda x: lut[np.asarray(x, dtype=np.int64).reshape(-1)]
+    pose_ids = np.unique(np.concatenate(ids))
+    return pose_ids, lambda x: np.searchsorted(pose_ids, np.asarray(x, dtype=np.int64).reshape(-1)).astype(
+        np.int64
+    )
+
+
 def problem_from_g2o(graph: G2oGraph, fix_first: bool = True) -> SlamProblem:
     """Turn a parsed g2o / TORO / iSAM text graph into a :class:`SlamProblem`.
 
@@ -355,15 +385,10 @@ def problem_from_g2o(graph: G2oGraph, fix_first: bool = True) -> SlamProblem:
     composing each edge onto its first pose). With ``fix_first`` the lowest-id pose (or the one marked FIX) gets a
     tight prior at its initial value.
     """
-    ids_edges = np.concatenate([graph.edge_i, graph.edge_j, graph.landmark_pose]).astype(np.int64)
-    pose_ids = np.unique(np.concatenate([graph.vertex_ids.astype(np.int64), ids_edges]))
+    pose_ids, to_index = _pose_index(graph.vertex_ids, graph.edge_i, graph.edge_j, graph.landmark_pose)
     n = pose_ids.size
     if n == 0:
         raise GraphError(f"{graph.source}: the graph has no poses")
-    index_of = {int(v): k for k, v in enumerate(pose_ids.tolist())}
-
-    def to_index(ids: np.ndarray) -> np.ndarray:
-        return np.searchsorted(pose_ids, np.asarray(ids, dtype=np.int64)).astype(np.int64)
 
     ei = to_index(graph.edge_i) if graph.edge_i.size else np.zeros(0, np.int64)
     ej = to_index(graph.edge_j) if graph.edge_j.size else np.zeros(0, np.int64)
@@ -423,6 +448,7 @@ def problem_from_g2o(graph: G2oGraph, fix_first: bool = True) -> SlamProblem:
                     init_lm[name] = geo.transform_points(wTa[i], graph.landmark_measured[k][None])[0]
     priors: tuple[PosePrior, ...] = ()
     if graph.fixed_ids.size:
+        index_of = {int(v): k for k, v in enumerate(pose_ids.tolist())}
         priors = tuple(
             default_prior(index_of[int(f)], wTa[index_of[int(f)]])
             for f in graph.fixed_ids

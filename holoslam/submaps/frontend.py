@@ -42,7 +42,7 @@ Steps (seed 002 §2, SPEC §4):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -176,10 +176,13 @@ class _Open:
 
 
 def build_problem(
-    log: LogData, observations: Sequence[ObjectObservation] = (), config: FrontEndConfig | None = None
+    log: LogData,
+    observations: Sequence[ObjectObservation] = (),
+    config: FrontEndConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> FrontEnd:
     """Run the front end over a log (see the module docstring). Raises IngestError when the log lacks
-    odometry or scans."""
+    odometry or scans. ``progress(done, total)`` is called with the scans walked, about every 2% of them."""
     from holoslam.graph.problem import (
         HeadingMeasurements,
         LandmarkMeasurements,
@@ -231,7 +234,10 @@ def build_problem(
     kf_count = 0
     loops_tried = 0
     linked: set[tuple[int, int]] = set()  # (old, current) submap pairs that already have a loop
-    for scan in scans:
+    every = max(1, -(-len(scans) // 50))  # at most 50 calls
+    for k_scan, scan in enumerate(scans):
+        if progress is not None and k_scan % every == 0:
+            progress(k_scan, len(scans))
         t = int(scan.stamp_ns)
         valid = scan.valid
         r_ok, a_ok = scan.ranges[valid].astype(np.float64), scan.angles[valid]
