@@ -6,7 +6,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from holoslam.errors import G2oFormatError
+from holoslam.errors import G2oFormatError, GraphError
 from holoslam.graph.problem import problem_from_g2o
 from holoslam.io.g2o import G2oGraph, TextNoise, parse_g2o, read_g2o, write_g2o
 from holoslam.solve import solve_g2o_file
@@ -239,3 +239,108 @@ def test_closed_form_small_matrix_algebra_matches_numpy():
     for k in (0, 7, 200):
         assert np.allclose(models[which[k]].covariance(), C3[k], rtol=1e-8)
     assert np.allclose(models[which[-1]].sigmas(), [1.0, 2.0, 3.0])
+
+
+def test_noise_models_are_shared_in_first_appearance_order():
+    from holoslam.graph.factors import noise_models
+
+    A = np.array([[2.0, 0.3, 0.1], [0.3, 1.0, 0.2], [0.1, 0.2, 0.5]])
+    B, C = np.diag([1.0, 4.0, 9.0]), 2.0 * A
+    models, which = noise_models(np.stack([B, A, B, C, A]))
+    assert which.tolist() == [0, 1, 0, 2, 1] and len(models) == 3
+    assert np.allclose(models[0].sigmas(), [1, 2, 3]) and isinstance(models[0], gtsam.noiseModel.Diagonal)
+    assert np.allclose(models[1].covariance(), A) and np.allclose(models[2].covariance(), C)
+    models, which = noise_models(np.stack([C, C, C]))
+    assert len(models) == 1 and which.tolist() == [0, 0, 0]
+    # -0.0 and 0.0 have equal fingerprints but are different bytes: still one model each, still correct
+    D = B.copy()
+    D[0, 1] = D[1, 0] = -0.0
+    models, which = noise_models(np.stack([B, D, A]))
+    assert which.tolist() == [0, 1, 2] and all(np.allclose(models[k].sigmas(), [1, 2, 3]) for k in (0, 1))
+
+
+@pytest.mark.parametrize("mode", ["distinct", "diagonal", "mixed", "shared"])
+def test_between_factors_keep_row_order_keys_and_noise(mode):
+    from holoslam.graph.factors import between_factors
+
+    rng = np.random.default_rng(3)
+    m = 7
+    A = rng.normal(size=(m, 3, 3))
+    cov = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(3)  # "distinct": one lazily made model per row
+    if mode == "diagonal":
+        cov = cov * np.eye(3)
+    if mode == "mixed":
+        cov[2] = np.diag([0.5, 0.25, 0.01])
+    if mode == "shared":
+        cov[5] = cov[1]
+    iTj = rng.normal(size=(m, 3))
+    g = between_factors(np.arange(m), np.arange(m) + 10, iTj, cov)
+    assert g.size() == m
+    for k in range(m):
+        f = g.at(k)
+        assert list(f.keys()) == [k, k + 10]
+        p, t = f.measured(), iTj[k, 2]
+        assert np.allclose(
+            [p.x(), p.y(), p.theta()], [iTj[k, 0], iTj[k, 1], np.arctan2(np.sin(t), np.cos(t))]
+        )
+        assert np.allclose(f.noiseModel().covariance(), cov[k], rtol=1e-9)
+        assert isinstance(f.noiseModel(), gtsam.noiseModel.Diagonal) == (
+            mode == "diagonal" or k == 2 and mode == "mixed"
+        )
+    if mode == "shared":
+        assert g.at(5).noiseModel().equals(g.at(1).noiseModel(), 0.0)
+    with pytest.raises(GraphError, match="keys"):
+        between_factors(np.arange(m), np.arange(m - 1), iTj, cov)
+
+
+def test_problem_from_g2o_sparse_and_huge_ids():
+    text = (
+        "VERTEX_SE2 10 0 0 0\nVERTEX_SE2 3 1 0 0\nVERTEX_SE2 7 2 0 0\nFIX 7\n"
+        "EDGE_SE2 10 3 1 0 0 1 0 0 1 0 1\nEDGE_SE2 3 7 1 0 0 1 0 0 1 0 1\n"
+    )
+    p = problem_from_g2o(parse_g2o(text))
+    assert p.pose_ids.tolist() == [3, 7, 10]
+    assert p.relative.i.tolist() == [2, 0] and p.relative.j.tolist() == [0, 1]
+    assert np.allclose(p.initial_wTa[:, 0], [1, 2, 0]) and [q.i for q in p.priors] == [1]
+    big = 10**12
+    p = problem_from_g2o(
+        parse_g2o(f"EDGE_SE2 {big} 5 1 0 0 1 0 0 1 0 1\nEDGE_SE2 5 {big + 1} 1 0 0 1 0 0 1 0 1\n")
+    )
+    assert p.pose_ids.tolist() == [5, big, big + 1]
+    assert p.relative.i.tolist() == [1, 0] and p.relative.j.tolist() == [0, 2]
+    g = G2oGraph(
+        edge_i=[-4, 2], edge_j=[2, 9], edge_measured=np.zeros((2, 3)), edge_cov=np.tile(np.eye(3), (2, 1, 1))
+    )
+    p = problem_from_g2o(g)  # a graph built in memory may use negative ids
+    assert (
+        p.pose_ids.tolist() == [-4, 2, 9]
+        and p.relative.i.tolist() == [0, 1]
+        and p.relative.j.tolist() == [1, 2]
+    )
+
+
+def test_covariance_checks_name_the_bad_row():
+    from holoslam.graph.problem import RelativePoseMeasurements
+
+    cov = np.tile(np.eye(3), (4, 1, 1))
+    cov[2] = np.diag([1.0, -1.0, 1.0])
+    with pytest.raises(GraphError, match=r"cov_iTj\[2\] is not positive definite"):
+        RelativePoseMeasurements(np.arange(4), np.arange(4) + 1, np.zeros((4, 3)), cov, "g2o")
+    cov[2] = np.eye(3)
+    cov[3, 0, 1] = 0.5
+    with pytest.raises(GraphError, match=r"cov_iTj\[3\] is not symmetric"):
+        RelativePoseMeasurements(np.arange(4), np.arange(4) + 1, np.zeros((4, 3)), cov, "g2o")
+    cov[3] = np.eye(3)
+    cov[1, 2, 2] = np.nan
+    with pytest.raises(GraphError, match=r"cov_iTj\[1\] has non-finite"):
+        RelativePoseMeasurements(np.arange(4), np.arange(4) + 1, np.zeros((4, 3)), cov, "g2o")
+
+
+def test_kind_mask():
+    from holoslam.graph.build import kind_mask
+
+    kind = np.array(["odometry", "loop", "scan_match", "loop"], dtype=object)
+    assert kind_mask(kind, ("loop",)).tolist() == [False, True, False, True]
+    assert kind_mask(kind, ("none",)).tolist() == [False] * 4
+    assert kind_mask(kind, ("loop", "odometry", "scan_match")).all()
+    assert kind_mask(np.zeros(0, object), ("loop",)).shape == (0,)

@@ -17,7 +17,7 @@ from holoslam.graph import factors as fac
 from holoslam.graph.keys import MAGNETIC_KEY, anchor_keys, landmark_key
 from holoslam.graph.problem import MeasurementFamily, SlamProblem
 
-__all__ = ["BuildOptions", "BuiltGraph", "build_graph", "initial_values", "FAMILY_CODES"]
+__all__ = ["BuildOptions", "BuiltGraph", "build_graph", "initial_values", "kind_mask", "FAMILY_CODES"]
 
 FAMILY_CODES: dict[MeasurementFamily, int] = {
     MeasurementFamily.RELATIVE: 0,
@@ -58,6 +58,20 @@ class BuiltGraph:
     sighting_variable: np.ndarray = field(
         default_factory=lambda: np.zeros(0, np.int64)
     )  # per active sighting
+
+
+def kind_mask(kind: np.ndarray, kinds: tuple[str, ...]) -> np.ndarray:
+    """Which measurements have one of ``kinds`` (an object array of kind names; the names present are looked up
+    once, not string-converted row by row)."""
+    if kind.size == 0:
+        return np.zeros(0, bool)
+    present = {str(k) for k in set(kind.tolist())}
+    wanted = present & {str(k) for k in kinds}
+    if not wanted:
+        return np.zeros(kind.size, bool)
+    if wanted == present:
+        return np.ones(kind.size, bool)
+    return np.isin(kind.astype(str), sorted(wanted))
 
 
 def build_graph(
@@ -107,7 +121,7 @@ def build_graph(
             pi,
         )
     # relative poses: Gaussian ones and robust ones
-    robust = np.isin(rel.kind.astype(str), list(options.robust_kinds)) if len(rel) else np.zeros(0, bool)
+    robust = kind_mask(rel.kind, options.robust_kinds)
     for sel, kernel in ((rmask & ~robust, fac.NO_KERNEL), (rmask & robust, options.loop_kernel)):
         rows = np.flatnonzero(sel)
         if rows.size:
@@ -196,9 +210,12 @@ def initial_values(
     keys = anchor_keys(np.arange(problem.num_poses))
     # the keyword picks gtsam's Pose2 overload of Values.insert directly (1.2 µs less per pose than letting
     # pybind11 try the vector / matrix / point overloads first)
-    insert, Pose2 = values.insert, gtsam.Pose2
-    for k, p in zip(keys.tolist(), wTa.tolist(), strict=True):
-        insert(k, pose2=Pose2(p[0], p[1], p[2]))
+    insert = values.insert
+    if wTa.shape != (problem.num_poses, 3):
+        raise GraphError(f"initial poses: expected shape ({problem.num_poses}, 3), got {wTa.shape}")
+    poses = map(gtsam.Pose2, wTa[:, 0].tolist(), wTa[:, 1].tolist(), wTa[:, 2].tolist())
+    for k, p in zip(keys.tolist(), poses, strict=True):
+        insert(k, pose2=p)
     known = dict(problem.initial_landmarks)
     if w_landmarks:
         known.update(w_landmarks)

@@ -26,21 +26,20 @@ def inv_sym(M: np.ndarray) -> np.ndarray:
         return out
     if d != 3:
         return np.linalg.inv(M)
-    S = 0.5 * (M + np.swapaxes(M, 1, 2))
-    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 0, 2]
-    e, f, i = S[:, 1, 1], S[:, 1, 2], S[:, 2, 2]
+    # the six distinct entries as contiguous rows (the off-diagonal ones averaged over both triangles)
+    F = M.reshape(-1, 9).T
+    a, e, i = F[0], F[4], F[8]
+    b, c, f = 0.5 * (F[1] + F[3]), 0.5 * (F[2] + F[6]), 0.5 * (F[5] + F[7])
     A = e * i - f * f
     B = c * f - b * i
     C = b * f - c * e
     det = a * A + b * B + c * C
-    out = np.empty_like(S)
-    out[:, 0, 0] = A / det
-    out[:, 0, 1] = out[:, 1, 0] = B / det
-    out[:, 0, 2] = out[:, 2, 0] = C / det
-    out[:, 1, 1] = (a * i - c * c) / det
-    out[:, 1, 2] = out[:, 2, 1] = (b * c - a * f) / det
-    out[:, 2, 2] = (a * e - b * b) / det
-    return out
+    out = np.empty((9, F.shape[1]))
+    out[0], out[4], out[8] = A / det, (a * i - c * c) / det, (a * e - b * b) / det
+    out[1] = out[3] = B / det
+    out[2] = out[6] = C / det
+    out[5] = out[7] = (b * c - a * f) / det
+    return np.ascontiguousarray(out.T).reshape(M.shape)
 
 
 def chol_upper(M: np.ndarray) -> np.ndarray:

@@ -11,6 +11,7 @@ This module depends on numpy alone; ``holoslam.graph.build`` turns a :class:`Sla
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -61,6 +62,13 @@ def _readonly(a: np.ndarray, dtype: type | np.dtype = np.float64) -> np.ndarray:
     return a
 
 
+@functools.cache
+def _off_diagonal(dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices of the (i, j), i < j, entries of a dim x dim matrix and of their (j, i) mirrors."""
+    i, j = np.triu_indices(dim, 1)
+    return i * dim + j, j * dim + i
+
+
 def _check_cov(cov: np.ndarray, dim: int, what: str) -> None:
     """Covariances must be finite, symmetric and positive definite (vectorised over the batch)."""
     if cov.ndim != 3 or cov.shape[1:] != (dim, dim):
@@ -73,8 +81,8 @@ def _check_cov(cov: np.ndarray, dim: int, what: str) -> None:
     if not finite.all():
         bad = int(np.argmin(finite))
         raise GraphError(f"{what}[{bad}] has non-finite entries: {cov[bad].tolist()}; fix the measurement")
-    iu, ju = np.triu_indices(dim, 1)
-    asym = np.abs(flat[:, iu * dim + ju] - flat[:, ju * dim + iu]).max(axis=1)
+    upper, lower = _off_diagonal(dim)
+    asym = np.abs(flat[:, upper] - flat[:, lower]).max(axis=1, initial=0.0)
     scale = np.abs(flat).max(axis=1)
     unsym = asym > 1e-9 * np.maximum(scale, 1e-300)
     if unsym.any():
@@ -355,14 +363,15 @@ def _chain_initialisation(
 
 def _pose_index(*id_arrays: np.ndarray) -> tuple[np.ndarray, Callable[[np.ndarray], np.ndarray]]:
     """The sorted distinct pose ids of a file (vertex ids and the poses its edges name) and a function mapping ids
-    to their anchor index. Ids are non-negative integers (the reader checks); dense ids (the usual 0..N-1) are
-    found with a presence mask and mapped by a lookup table, O(N) with no sort."""
+    to their anchor index. Dense non-negative ids (the usual 0..N-1) are found with a presence mask and mapped by
+    a lookup table, O(N) with no sort; others (huge or negative ids of a graph built in memory) by sorting."""
     ids = [np.asarray(a, dtype=np.int64).reshape(-1) for a in id_arrays]
     total = sum(a.size for a in ids)
     top = max((int(a.max()) for a in ids if a.size), default=-1)
+    low = min((int(a.min()) for a in ids if a.size), default=0)
     if total == 0:
         return np.zeros(0, np.int64), lambda x: np.zeros(0, np.int64)
-    if top < 4 * total + 1024:
+    if low >= 0 and top < 4 * total + 1024:
         present = np.zeros(top + 1, dtype=bool)
         for a in ids:
             present[a] = True

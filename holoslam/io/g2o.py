@@ -241,6 +241,8 @@ def positive_definite(M: np.ndarray) -> np.ndarray:
 
 def _edge_text_cov(v: np.ndarray, noise: TextNoise, rows: _Rows, path: str, text: list[str]) -> np.ndarray:
     m = v.shape[0]
+    if m == 0:
+        return np.zeros((0, 3, 3))
     cov = np.empty((m, 3, 3))
     if noise is TextNoise.GTSAM_AUTO:
         nz = v != 0.0
@@ -448,11 +450,25 @@ def parse_g2o(
     arrays, by_kind, skipped = _tokenise(lines, source, strict)
 
     def arr(kind: str) -> tuple[np.ndarray, _Rows]:
-        rows = by_kind.get(kind, _Rows())
         ncol = next(n for n, k in _TAGS.values() if k == kind)
+        rows = by_kind.get(kind)
+        if rows is None:
+            return np.zeros((0, ncol)), _Rows()
         if kind in arrays:
             return _check_array(arrays[kind], rows, _INT_FIELDS[kind], source, lines), rows
         return _to_array(rows, ncol, _INT_FIELDS[kind], source, lines), rows
+
+    def merge(
+        parts: list[tuple[np.ndarray, ...]], row_sets: list[_Rows]
+    ) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+        """Concatenate the per-kind arrays of one element type in file order (a single kind: as it is)."""
+        present = [k for k, r in enumerate(row_sets) if r.lines]
+        if len(present) == 1:
+            k = present[0]
+            return parts[k], np.array(row_sets[k].lines, dtype=np.int64)
+        line = np.array([n for r in row_sets for n in r.lines], dtype=np.int64)
+        order = np.argsort(line, kind="stable")
+        return tuple(np.concatenate(cols)[order] for cols in zip(*parts, strict=True)), line[order]
 
     v, _ = arr("vertex")
     p, _ = arr("point")
@@ -462,28 +478,27 @@ def parse_g2o(
     et, rt = arr("edge_text")
     cov_g = _inv_checked(_sym3_g2o(eg[:, 5:]), rg, np.ones(eg.shape[0], bool), source, lines, "information")
     cov_t = _edge_text_cov(et[:, 5:], noise, rt, source, lines)
-    e_all = np.concatenate([eg[:, :5], et[:, :5]])
-    e_cov = np.concatenate([cov_g, cov_t])
-    e_line = np.array(rg.lines + rt.lines, dtype=np.int64)
-    order = np.argsort(e_line, kind="stable")
+    (e_head, e_cov), e_line = merge([(eg[:, :5], cov_g), (et[:, :5], cov_t)], [rg, rt])
     # pose-point edges
     lg, rlg = arr("landmark_g2o")
     lt, rlt = arr("landmark_text")
     lb, rlb = arr("landmark_br")
-    Ig = np.empty((lg.shape[0], 2, 2))
-    Ig[:, 0, 0], Ig[:, 0, 1], Ig[:, 1, 0], Ig[:, 1, 1] = lg[:, 4], lg[:, 5], lg[:, 5], lg[:, 6]
-    lcov_g = _inv_checked(Ig, rlg, np.ones(lg.shape[0], bool), source, lines, "information")
-    lcov_t = _landmark_text_cov(lt[:, 4:], lt[:, 2:4], noise, rlt, source, lines)
-    b_xy = np.column_stack([lb[:, 3] * np.cos(lb[:, 2]), lb[:, 3] * np.sin(lb[:, 2])])
-    if lb.shape[0] and np.any((lb[:, 3] <= 0) | (lb[:, 4] <= 0) | (lb[:, 5] <= 0)):
-        r = int(np.argmax((lb[:, 3] <= 0) | (lb[:, 4] <= 0) | (lb[:, 5] <= 0)))
-        raise _fail(source, rlb.lines[r], lines[rlb.lines[r] - 1], "BR needs range > 0 and sigmas > 0")
-    lcov_b = xy_cov_from_bearing_range(b_xy, lb[:, 4], lb[:, 5]) if lb.shape[0] else np.zeros((0, 2, 2))
-    l_head = np.concatenate([lg[:, :2], lt[:, :2], lb[:, :2]])
-    l_xy = np.concatenate([lg[:, 2:4], lt[:, 2:4], b_xy])
-    l_cov = np.concatenate([lcov_g, lcov_t, lcov_b])
-    l_line = np.array(rlg.lines + rlt.lines + rlb.lines, dtype=np.int64)
-    lorder = np.argsort(l_line, kind="stable")
+    if lg.shape[0] + lt.shape[0] + lb.shape[0]:
+        Ig = np.empty((lg.shape[0], 2, 2))
+        Ig[:, 0, 0], Ig[:, 0, 1], Ig[:, 1, 0], Ig[:, 1, 1] = lg[:, 4], lg[:, 5], lg[:, 5], lg[:, 6]
+        lcov_g = _inv_checked(Ig, rlg, np.ones(lg.shape[0], bool), source, lines, "information")
+        lcov_t = _landmark_text_cov(lt[:, 4:], lt[:, 2:4], noise, rlt, source, lines)
+        b_xy = np.column_stack([lb[:, 3] * np.cos(lb[:, 2]), lb[:, 3] * np.sin(lb[:, 2])])
+        if lb.shape[0] and np.any((lb[:, 3] <= 0) | (lb[:, 4] <= 0) | (lb[:, 5] <= 0)):
+            r = int(np.argmax((lb[:, 3] <= 0) | (lb[:, 4] <= 0) | (lb[:, 5] <= 0)))
+            raise _fail(source, rlb.lines[r], lines[rlb.lines[r] - 1], "BR needs range > 0 and sigmas > 0")
+        lcov_b = xy_cov_from_bearing_range(b_xy, lb[:, 4], lb[:, 5]) if lb.shape[0] else np.zeros((0, 2, 2))
+        (l_head, l_xy, l_cov), l_line = merge(
+            [(lg[:, :2], lg[:, 2:4], lcov_g), (lt[:, :2], lt[:, 2:4], lcov_t), (lb[:, :2], b_xy, lcov_b)],
+            [rlg, rlt, rlb],
+        )
+    else:
+        l_head, l_xy, l_cov, l_line = np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2)), None
 
     skipped_t = tuple(
         SkippedTag(tag, cnt, first, tag in _KNOWN_IGNORED) for tag, (first, cnt) in sorted(skipped.items())
@@ -493,16 +508,16 @@ def parse_g2o(
         vertex_poses=v[:, 1:4],
         point_ids=p[:, 0].astype(np.int64),
         point_positions=p[:, 1:3],
-        edge_i=e_all[order, 0].astype(np.int64),
-        edge_j=e_all[order, 1].astype(np.int64),
-        edge_measured=e_all[order, 2:5],
-        edge_cov=e_cov[order],
-        edge_line=e_line[order],
-        landmark_pose=l_head[lorder, 0].astype(np.int64),
-        landmark_id=l_head[lorder, 1].astype(np.int64),
-        landmark_measured=l_xy[lorder],
-        landmark_cov=l_cov[lorder],
-        landmark_line=l_line[lorder],
+        edge_i=e_head[:, 0].astype(np.int64),
+        edge_j=e_head[:, 1].astype(np.int64),
+        edge_measured=e_head[:, 2:5],
+        edge_cov=e_cov,
+        edge_line=e_line if e_line.size else None,
+        landmark_pose=l_head[:, 0].astype(np.int64),
+        landmark_id=l_head[:, 1].astype(np.int64),
+        landmark_measured=l_xy,
+        landmark_cov=l_cov,
+        landmark_line=l_line,
         fixed_ids=fx[:, 0].astype(np.int64),
         skipped=skipped_t,
         source=source,
