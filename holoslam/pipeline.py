@@ -17,6 +17,7 @@ import dataclasses
 import json
 import math
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
@@ -233,11 +234,16 @@ def keyframe_poses(submaps: Sequence[Any], wTa: np.ndarray) -> tuple[np.ndarray,
 
 
 def _objects(problem: Any, solution: Any, observations: Sequence[Any], features: dict | None = None) -> tuple:
+    from holoslam.graph.problem import MeasurementFamily
     from holoslam.maps.holographic import ObjectInfo
     from holoslam.vision.label import parse_label
 
     payload = {o.object_id: o.payload for o in observations}
     lm = problem.landmarks
+    rejected = {r.index for r in solution.rejected if r.family is MeasurementFamily.LANDMARK}
+    kept = Counter(
+        name.split("@")[0] for k, name in enumerate(lm.landmark if lm is not None else ()) if k not in rejected
+    )
     objs = []
     for k, oid in enumerate(solution.landmark_ids):
         base = oid.split("@")[0]
@@ -263,7 +269,14 @@ def _objects(problem: Any, solution: Any, observations: Sequence[Any], features:
         feats = _feature_attrs(features[oid]) if features and oid in features else {}
         objs.append(
             ObjectInfo(
-                oid, kind, np.array([xy[0], xy[1], 0.0 if not np.isfinite(z) else z]), cov, attrs, text, feats
+                oid,
+                kind,
+                np.array([xy[0], xy[1], 0.0 if not np.isfinite(z) else z]),
+                cov,
+                attrs,
+                text,
+                feats,
+                sightings=kept[oid],
             )
         )
     return tuple(objs)
@@ -548,6 +561,7 @@ def _report(
 ) -> dict[str, Any]:
     """The run report (JSON-able) from every stage's output."""
     from holoslam.io.mcap import report_to_dict
+    from holoslam.maps.holographic import CONFIRMING_SIGHTINGS
 
     p = fe.problem
     kinds: dict[str, int] = {}
@@ -605,6 +619,8 @@ def _report(
                 for m in sol.moved_objects
             ],
             "without_reach_edge": sorted(set(obj_nodes) - reachable),
+            # seen fewer than CONFIRMING_SIGHTINGS times: a single misread id cannot be told from a real label
+            "unconfirmed": sorted(o.object_id for o in objects if o.sightings < CONFIRMING_SIGHTINGS),
         },
         "map": {
             "shape": list(grid.shape),
@@ -678,7 +694,8 @@ def format_run_report(report: dict[str, Any]) -> str:
     o = report["objects"]
     lines.append(
         f"  objects: {o['count']}; moved: {[m['id'] for m in o['moved']] or 'none'}; "
-        f"without a reach edge: {o['without_reach_edge'] or 'none'}"
+        f"without a reach edge: {o['without_reach_edge'] or 'none'}; "
+        f"unconfirmed (seen once): {o.get('unconfirmed') or 'none'}"
     )
     h = report["holographic"]
     lines.append(

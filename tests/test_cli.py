@@ -52,6 +52,18 @@ def test_saved_run_loads_back(household_run):
     assert np.all(np.diff(saved.stamps_ns) > 0)
     assert saved.cov_wTa.shape == (len(saved.wTa), 3, 3)
     assert len(saved.objects) == 35
+    # every object knows how many sightings placed it; the once-seen ones are the report's unconfirmed list
+    from holoslam.io.mcap import read_log
+    from holoslam.vision.observe import observations_from_log
+
+    obs, _ = observations_from_log(read_log(bundled_household_log())[0])
+    seen = {o.object_id: sum(p.object_id == o.object_id for p in obs) for o in obs}
+    report = json.loads((household_run / "report.json").read_text())
+    assert all(1 <= o.sightings <= seen[o.object_id] for o in saved.objects)
+    n_lm, n_rejected = report["factors"]["object_landmark"], report["solver"]["rejected_measurements"]
+    assert n_lm - n_rejected <= sum(o.sightings for o in saved.objects) <= n_lm
+    assert report["objects"]["unconfirmed"] == sorted(o.object_id for o in saved.objects if o.sightings < 2)
+    assert all(saved.holographic.nodes[o.object_id]["sightings"] == o.sightings for o in saved.objects)
     kinds = {d["kind"] for _, d in saved.holographic.nodes(data=True)}
     assert kinds == {"environment", "object"}
     assert all(saved.holographic.nodes[o.object_id]["kind"] == "object" for o in saved.objects)

@@ -5,7 +5,7 @@ Files (all under the folder the caller names; nothing is written elsewhere)::
     trajectory.tum          optimised base trajectory (TUM: stamp s, x y z qx qy qz qw)
     dead_reckoning.tum      dead reckoning, same stamps
     anchors.csv             submap anchors: stamp_ns, x, y, theta and the 3x3 covariance (body frame, row-major)
-    objects.csv             objects: id, type, x, y, z and the 2x2 xy covariance (world frame)
+    objects.csv             objects: id, type, x, y, z, the 2x2 xy covariance (world frame), payload, sightings
     graph.g2o               the pose graph (anchors, relative-pose edges, object points and sightings)
     map.pgm + map.yaml      occupancy grid (ROS map_server), map.png picture
     topology.graphml/.json  thinning topology
@@ -68,13 +68,13 @@ def _anchors_csv(stamps: np.ndarray, wTa: np.ndarray, cov: np.ndarray | None) ->
 def _objects_csv(objects: Sequence[Any]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["id", "type", "x", "y", "z", "cov_xx", "cov_xy", "cov_yy", "payload"])
+    w.writerow(["id", "type", "x", "y", "z", "cov_xx", "cov_xy", "cov_yy", "payload", "sightings"])
     for o in objects:
         c = o.cov_w_position
         w.writerow(
             [o.object_id, o.object_type]
             + [repr(float(v)) for v in o.w_position]
-            + [repr(float(c[0, 0])), repr(float(c[0, 1])), repr(float(c[1, 1])), o.payload]
+            + [repr(float(c[0, 0])), repr(float(c[0, 1])), repr(float(c[1, 1])), o.payload, int(o.sightings)]
         )
     return buf.getvalue()
 
@@ -302,6 +302,7 @@ def _read_objects(path: Path) -> tuple:
                     cov,
                     attrs,
                     r["payload"],
+                    sightings=int(r.get("sightings") or 0),  # absent in folders written before the column
                 )
             )
         except (KeyError, ValueError, TypeError) as e:

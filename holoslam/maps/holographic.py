@@ -45,8 +45,9 @@ of j's local frame in i's (``between(wTa_i, wTa_j)``) where (i, j) are the edge'
 attributes.
 
 **Object nodes** (V_o, {F, G_m}), keyed by the object id: ``object_type``, ``attributes`` (``k=v,...``),
-``payload``, ``x``, ``y``, ``z`` (world m), ``cov`` (3x3 position covariance, world frame) and, when vision
-gives them, scalar feature-set summaries ``feat_<name>`` (F: size, texture, colours, keypoint counts).
+``payload``, ``x``, ``y``, ``z`` (world m), ``cov`` (3x3 position covariance, world frame), ``sightings`` (how
+many sightings placed it; ``where_is`` calls it confirmed from ``CONFIRMING_SIGHTINGS``) and, when vision gives
+them, scalar feature-set summaries ``feat_<name>`` (F: size, texture, colours, keypoint counts).
 
 **Object edges** (E_o, {P_ij, k_ij}) exist only where the robot can reach the object from that room
 (:class:`ReachModel`): some free cell of the room where the base fits (clearance >= ``robot_radius_m``,
@@ -85,12 +86,17 @@ __all__ = [
     "object_reach_points",
     "environment_nodes",
     "object_nodes",
+    "CONFIRMING_SIGHTINGS",
 ]
+
+CONFIRMING_SIGHTINGS = 2  # an object seen at least this often (sightings the solver kept) is confirmed
 
 
 @dataclass(frozen=True, slots=True)
 class ObjectInfo:
-    """An object for the holographic graph: id, type, attributes, world position (3,) and its covariance."""
+    """An object for the holographic graph: id, type, attributes, world position (3,) and its covariance, and
+    ``sightings``: how many sightings the solver kept for it (0: unknown). An object seen once is unconfirmed:
+    nothing can tell a single misread id from a real label, so treat its place as a hint."""
 
     object_id: str
     object_type: str
@@ -99,6 +105,7 @@ class ObjectInfo:
     attributes: tuple[tuple[str, str], ...] = ()
     payload: str = ""
     features: Mapping[str, float] = field(default_factory=dict)
+    sightings: int = 0
 
     def __post_init__(self) -> None:
         p = np.asarray(self.w_position, dtype=np.float64).reshape(-1)
@@ -550,6 +557,7 @@ def build_holographic(
             object_type=ob.object_type,
             attributes=",".join(f"{k}={v}" for k, v in ob.attributes),
             payload=ob.payload,
+            sightings=int(ob.sightings),
             x=float(ob.w_position[0]),
             y=float(ob.w_position[1]),
             z=float(ob.w_position[2]),
@@ -731,6 +739,8 @@ def where_is(G, id_or_type: str) -> list[dict]:
                 "x": d.get("x"),
                 "y": d.get("y"),
                 "z": d.get("z"),
+                "sightings": d.get("sightings", 0),
+                "confirmed": d.get("sightings", 0) >= CONFIRMING_SIGHTINGS,
                 "places": places,
                 "reachable": bool(places),
             }
