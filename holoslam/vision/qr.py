@@ -4,11 +4,14 @@
 Decoders (``Decoder``): zxing-cpp (``zxingcpp``), zbar (``pyzbar``, needs the libzbar shared library),
 OpenCV's ``QRCodeDetector`` and ``QRCodeDetectorAruco``. Only full-size QR codes are read (Micro QR, rMQR and
 other symbologies are disabled, so clutter cannot decode as a tiny code). The default, chosen by measurement
-(``benchmarks/bench_vision.py``, 320 rendered VGA views): zxing-cpp first (labels with modules >= 3 px decoded
-under blur, noise, dim light, gradients, JPEG, tilt up to 60 deg and any rotation; 0.96 with three codes per
-image; no false decode; corner error 0.04 px median after refinement; ~2.5 ms per image), then zbar only where
-zxing-cpp found nothing (``Fallback.IF_EMPTY``): on the simulator's household log zxing-cpp alone read 102 of
-104 labels, with the zbar fallback 104 of 104, and zbar costs ~2 ms only on images without a zxing decode.
+(``benchmarks/bench_vision.py``, 320 rendered VGA views): zxing-cpp and zbar on every image, their codes
+merged (``Fallback.ALWAYS``). zxing-cpp alone reads labels with modules >= 3 px under blur, noise, dim light,
+gradients, JPEG, tilt up to 60 deg and any rotation, but missed 3 % at 4 px per module and 4 % of the codes
+in images holding three; zbar only where zxing-cpp found nothing (``Fallback.IF_EMPTY``, 2.3 ms per image)
+cannot recover those, since the image already had a decode. Both always: every label with modules >= 3 px
+decoded, three codes per image included, no false decode, corner error 0.04 px median after refinement, ~10 ms
+per VGA image (~100 images/s on one core, the goal is 30). On the simulator's household log zxing-cpp alone
+read 102 of 104 labels, both 104 of 104.
 OpenCV's detectors decoded fewer labels and were slower. Pass ``decoders=`` / ``fallback=`` to change it.
 
 Whatever decoder found a code, its corners are put in the code's order and refined the same way
@@ -70,7 +73,7 @@ class Fallback(StrEnum):
 
 
 DEFAULT_DECODERS: tuple[Decoder, ...] = (Decoder.ZXING, Decoder.ZBAR)
-DEFAULT_FALLBACK = Fallback.IF_EMPTY
+DEFAULT_FALLBACK = Fallback.ALWAYS
 
 
 @dataclass(frozen=True, slots=True)
