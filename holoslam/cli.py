@@ -112,6 +112,7 @@ def cmd_solve(a: argparse.Namespace) -> int:
         init=a.init,
         kernel=a.kernel,
         kernel_parameter=a.kernel_parameter,
+        noise=a.noise,
     )
     print(json.dumps(summary, indent=2) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
     return EXIT_OK
@@ -239,6 +240,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=1.0,
         help="the kernel's width in whitened units (residual / sigma; default 1.0)",
+    )
+    s.add_argument(
+        "--noise",
+        choices=["gtsam_auto", "covariance", "information", "toro_information", "sqrt_information"],
+        default="gtsam_auto",
+        help="how EDGE2/ODOMETRY/LANDMARK noise numbers read (EDGE_SE2 is always information); "
+        "iSAM's own files (victoriaPark.txt, cityTrees10000.txt) carry information",
     )
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_solve)

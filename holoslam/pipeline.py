@@ -849,14 +849,19 @@ def solve_graph_file(
     init: str = "file",
     kernel: str = "none",
     kernel_parameter: float = 1.0,
+    noise: str = "gtsam_auto",
 ) -> dict[str, Any]:
     """Optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result (g2o, and TUM).
     ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices), odometry, lago,
     incremental or auto. ``kernel`` (none, huber, cauchy, dcs, geman_mcclure; parameter in whitened units) puts a
     robust kernel on every edge and landmark measurement, as g2o's ``-robustKernel`` does: a few wrong loop
-    closures then no longer bend the graph, at the price of a non-convex cost (start from a good guess)."""
+    closures then no longer bend the graph, at the price of a non-convex cost (start from a good guess).
+    ``noise`` says how the noise numbers of EDGE2 / EDGE / ODOMETRY / LANDMARK lines read (g2o's EDGE_SE2 always
+    carries information): gtsam_auto (as gtsam's load2D), covariance, information (iSAM's own files such as
+    victoriaPark.txt), toro_information or sqrt_information."""
     from holoslam.graph.build import BuildOptions
     from holoslam.graph.factors import NO_KERNEL, Kernel, RobustKernel
+    from holoslam.io.g2o import TextNoise
     from holoslam.solve import Initialisation, Method, SolveOptions, solve_g2o_file
 
     methods = {"lm": Method.BATCH, "isam2": Method.ISAM2}
@@ -869,6 +874,9 @@ def solve_graph_file(
     }
     if method not in methods or init not in inits:
         raise ConfigError(f"method must be one of {sorted(methods)} and init one of {sorted(inits)}")
+    noises = [n.value for n in TextNoise]
+    if noise not in noises:
+        raise ConfigError(f"noise {noise!r} is not one of {noises}")
     kernels = [k.value for k in RobustKernel]
     if kernel not in kernels:
         raise ConfigError(f"kernel {kernel!r} is not one of {kernels}")
@@ -889,7 +897,7 @@ def solve_graph_file(
             loop_kernel=robust, landmark_kernel=robust, heading_kernel=NO_KERNEL, robust_kinds=("g2o",)
         ),
     )
-    summary, solution = solve_g2o_file(input_path, output, options=options)
+    summary, solution = solve_g2o_file(input_path, output, noise=TextNoise(noise), options=options)
     out = dataclasses.asdict(summary) if dataclasses.is_dataclass(summary) else dict(summary)
     if tum is not None:
         from holoslam.io.trajectory import write_tum

@@ -235,3 +235,24 @@ def test_solve_rejects_a_nonsense_kernel_parameter(tmp_path, capsys):
     assert main(["solve", str(src), "-o", str(tmp_path / "o.g2o"), "--kernel-parameter", "-2"]) == 2
     err = capsys.readouterr().err
     assert "kernel parameter" in err and "Traceback" not in err
+
+
+def test_solve_noise_convention_decides_which_edge_wins(tmp_path, capsys):
+    """Two disagreeing paths from pose 0 to pose 2: a chain of two EDGE2 steps with numbers 1 and a direct edge
+    with numbers 100 (g2o order). Read as information the direct edge is 100x more certain and wins; read as
+    covariance it is 100x less certain and the chain wins."""
+    from holoslam.io.g2o import read_g2o
+
+    src = tmp_path / "two_paths.txt"
+    src.write_text(
+        "EDGE2 0 1 1.0 0.0 0.0 1 0 0 1 0 1\n"
+        "EDGE2 1 2 1.0 0.0 0.0 1 0 0 1 0 1\n"
+        "EDGE2 0 2 3.0 0.0 0.0 100 0 0 100 0 100\n"
+    )
+    x2 = {}
+    for noise in ("information", "covariance"):
+        out = tmp_path / f"{noise}.g2o"
+        assert main(["solve", str(src), "-o", str(out), "--noise", noise, "--json"]) == 0
+        capsys.readouterr()
+        x2[noise] = read_g2o(out).vertex_poses[2, 0]
+    assert abs(x2["information"] - 3.0) < 0.03 and abs(x2["covariance"] - 2.0) < 0.03, x2
