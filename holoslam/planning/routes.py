@@ -6,28 +6,41 @@ touches the grid cell by cell except the final exact segment checks.
 1. **Locate** start and goal: the region under each point, O(1) through the block-id label image. A point in
    no free block (an obstacle, unknown space, a mixed block below the minimum block size) is moved to the
    centre of the nearest free-block cell within ``snap_radius_m``; farther than that the query raises
-   ``PlanningError``. Regions overlap: every region holding the start (the goal) may begin (end) the route.
-2. **Corridor search**: A* over the *ports* (the distinct corners of each portal; a portal is the
-   intersection of two adjacent regions' closed rectangles, so a segment portal has its two ends) with edges
-   between the ports of one region, weighted by their distance. The heuristic is the larger of the Euclidean
-   distance and 16 ALT landmark bounds ``|d(l, goal) - d(l, v)|`` (landmarks picked farthest-first, their
-   distances precomputed by ``scipy.sparse.csgraph.dijkstra`` in :func:`build_planner`); both are
-   consistent, and the search weights the heuristic by ``HEURISTIC_WEIGHT`` = 1.2 (weighted A*: the corridor
-   costs at most 1.2 times the port-graph optimum, and the funnel below only shortens the path; on the tiled
-   4000 x 4000 map of the benchmark it expands a median 208 ports instead of 1,804 over 40 random pairs, the
-   search taking 0.19 ms instead of 1.5 ms, with path lengths still within 10 % of grid A* there and in the
-   random-map measurement below). The search keeps a
-   per-thread workspace (generation stamps, an indexed binary heap with decrease-key), so a query touches only
-   the ports it meets. The port path gives the corridor: the sequence of
-   portals (and so of convex regions) from start to goal, trimmed to enter at the last region holding the
-   start and leave at the first holding the goal.
+   ``PlanningError``. Regions overlap: every region holding the start (the goal) may begin (end) the route;
+   they are found through a bucket index of the regions (:func:`region_buckets`), not a scan of all.
+2. **Corridor search**: A* over the *ports* (the distinct corners and the centre of each portal; a portal is
+   the intersection of two adjacent regions' closed rectangles) with edges between the ports of one region,
+   weighted by their distance. The edges are not stored: a port's neighbours are read from the port lists of
+   its two regions (coordinates inline), and the region a port was reached through is not scanned again from
+   it (convexity: its ports are no closer through it). The heuristic is the larger of the Euclidean distance
+   and 14 ALT landmark bounds ``|d(l, goal) - d(l, v)|`` (landmarks picked farthest-first, their distances
+   precomputed by ``scipy.sparse.csgraph.dijkstra`` in :func:`build_planner`; 14 so that a port's coordinates
+   and landmark distances fill one 64-byte row); both are consistent, and the search weights the heuristic
+   by ``HEURISTIC_WEIGHT`` = 1.2 (weighted A*: the corridor costs at most 1.2 times the port-graph optimum,
+   and the funnel below only shortens the path; on the tiled 4000 x 4000 map of the benchmark it expanded a
+   median 208 ports instead of 1,804 over 40 random pairs, with path lengths still within 10 % of grid A*
+   there and in the random-map measurement below). The search keeps a per-thread workspace (one 32-byte
+   record a port: generation stamp, cost, heuristic, parent, heap slot; an indexed binary heap with
+   decrease-key), so a query touches only the ports it meets, and the ports are numbered in a spatial order
+   so that those of one region share cache lines. The port path gives the corridor: the sequence of portals
+   (and so of convex regions) from start to goal, trimmed to enter at the last region holding the start and
+   leave at the first holding the goal.
 3. **Funnel**: the shortest polyline through the corridor's portal boxes in order (the funnel algorithm on
    the angular intervals the boxes subtend from the current apex; a straight piece that meets boxes i..j is
    covered by the convex regions between them, so it is collision-free by construction). The same is done
    for the greedily shortcut corridor (jumping to the last later region adjacent to the current one) and the
    shorter path wins.
 4. **String-pull and validate**: a windowed string pull on the grid (shortcuts through regions outside the
-   corridor), then collinear points are dropped and every returned segment is checked exactly on the grid.
+   corridor), then collinear points are dropped and every returned segment is checked exactly on the grid:
+   the shortcuts when the string pull accepts them, the other segments after it. The check reads the free
+   mask as 8 x 8-cell tiles of 64 bits and skips, in one step, the part of a segment inside a square of
+   fully free 4 x 4-cell blocks (the blocks' chessboard clearance), with the same answer as
+   :func:`segments_free`; a string-pull shortcut is first checked near the corner it cuts, where the taut
+   funnel path's shortcuts nearly always fail.
+
+Speed (``benchmarks/bench_planning.py``, tiled household maps, median query against pyastar2d grid A* over
+the same pairs): about 0.06 ms on 1000 x 1000 cells (over 100x faster than grid A*), 0.15 ms on 2000 x 2000
+and 0.45 ms on 4000 x 4000; most of it is the corridor search, then the two funnels and the grid checks.
 
 Collision model: the robot is a point on the planner's free mask (the cells covered by free blocks; the map's
 obstacles are expected to be inflated by the robot radius, as seed 003 assumes). A segment is collision-free
@@ -38,16 +51,20 @@ between two obstacle cells meeting at a corner, as an 8-connected grid planner d
 Length guarantee (checked against 8-connected grid A* in ``tests/test_routes.py`` on random maps and in
 ``benchmarks/bench_planning.py``): a returned path is at most ``LENGTH_FACTOR`` = 1.25 times the grid A*
 length between the same cell centres. This is an empirical bound, not a theorem: the corridor is chosen by
-distances between portal corners, which can miss a shorter corridor on cluttered maps. Measured over 2,959
-queries on adversarial random maps (random rectangles and single-cell obstacles, 8-48 cells a side) with the
-exact search: median 0.83, 99th percentile 1.00, 0.1 % above 1.10, worst 1.20; with ``HEURISTIC_WEIGHT`` =
-1.2, over 1,504 such queries: median 0.83, 99th percentile 1.00, none above 1.10, worst 1.04. On household-like maps the paths are shorter than
-grid A* (any-angle): worst 0.99 on the reference household and 0.94 on the tiled large maps in the benchmark.
+distances between portal corners and centres, which can miss a shorter corridor on cluttered maps. Measured
+over 2,959 queries on adversarial random maps (random rectangles and single-cell obstacles, 8-48 cells a
+side) with the exact search and corner ports only: median 0.83, 99th percentile 1.00, 0.1 % above 1.10,
+worst 1.20; with ``HEURISTIC_WEIGHT`` = 1.2, over 1,504 such queries: median 0.83, 99th percentile 1.00,
+none above 1.10, worst 1.04. Corner ports alone gave 1.37 on one map hypothesis found (a wide portal
+crossed near its middle); with the centre ports, over 1,500 other such queries: median 0.835, 99th
+percentile 1.00, worst 1.01. On household-like maps the paths are shorter than grid A* (any-angle): worst
+0.99 on the reference household and 0.92 on the tiled large maps in the benchmark.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -166,10 +183,10 @@ def _landmarks(aptr: np.ndarray, dst: np.ndarray, w: np.ndarray, n: int, k: int)
     return D
 
 
-def build_planner(graph: TwoLayerGraph, n_landmarks: int = 16) -> RoutePlanner:
+def build_planner(graph: TwoLayerGraph, n_landmarks: int = 14) -> RoutePlanner:
     """Precompute the portal graph of a two-layer graph (vectorised; its size is the sum over regions of the
-    square of the region's number of portals) and the distances of ``n_landmarks`` landmark portals for the
-    ALT heuristic."""
+    square of the region's number of ports), the distances of ``n_landmarks`` landmark ports for the ALT
+    heuristic and the query structures (:func:`_query_arrays`)."""
     E = graph.region_edges.astype(np.int64)
     F = E.shape[0]
     R = graph.n_regions
@@ -185,8 +202,8 @@ def build_planner(graph: TwoLayerGraph, n_landmarks: int = 16) -> RoutePlanner:
     # ports: the distinct corners and the centre of each portal (a segment portal has its two ends and its
     # centre, a corner contact one point); sorted by portal, coordinates exact in half cells
     H2, W2 = 2 * graph.shape[0] + 1, 2 * graph.shape[1] + 1
-    cu_ = np.stack([boxes[:, 0], boxes[:, 2], boxes[:, 0], boxes[:, 2]], axis=1)
-    cv_ = np.stack([boxes[:, 1], boxes[:, 1], boxes[:, 3], boxes[:, 3]], axis=1)
+    cu_ = np.stack([boxes[:, 0], boxes[:, 2], boxes[:, 0], boxes[:, 2], cen[:, 0]], axis=1)
+    cv_ = np.stack([boxes[:, 1], boxes[:, 1], boxes[:, 3], boxes[:, 3], cen[:, 1]], axis=1)
     pkey = unique_int(
         (
             (np.arange(F, dtype=np.int64)[:, None] * H2 + np.rint(2 * cv_).astype(np.int64)) * W2
@@ -221,7 +238,9 @@ def build_planner(graph: TwoLayerGraph, n_landmarks: int = 16) -> RoutePlanner:
     ro = [
         _ro(a) for a in (cen, boxes, ports, port_portal, ptr, pid, comp, aptr, dst, d.astype(np.float64), D)
     ]
-    return RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels())
+    planner = RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels())
+    _query_arrays(planner)  # derived query structures: built here, not by the first query
+    return planner
 
 
 def _ro(a: np.ndarray) -> np.ndarray:
@@ -304,90 +323,201 @@ def path_length(waypoints: np.ndarray) -> float:
     return float(np.hypot(*np.diff(w, axis=0).T).sum())
 
 
-def _locate(planner: RoutePlanner, xy: np.ndarray, snap_radius_m: float, what: str) -> tuple[np.ndarray, int]:
-    """(point in boundary coordinates, region id) for a world point, snapping to the nearest free cell."""
+def _locate(
+    planner: RoutePlanner, xy: np.ndarray, snap_radius_m: float, what: str
+) -> tuple[float, float, int]:
+    """(u, v) boundary coordinates and region id of a world point, snapping to the nearest free cell."""
     g = planner.graph
-    xy = np.asarray(xy, dtype=np.float64).reshape(2)
-    if not np.all(np.isfinite(xy)):
-        raise PlanningError(f"the {what} position {xy.tolist()} is not a finite (x, y) in metres")
-    u, v = (float(xy[0]) - g.origin_x) / g.resolution, (float(xy[1]) - g.origin_y) / g.resolution
-    uv = np.array([u, v])
+    try:
+        x, y = np.asarray(xy, dtype=np.float64).reshape(2).tolist()
+    except ValueError as e:
+        raise PlanningError(f"the {what} position {xy!r} is not an (x, y) pair in metres: {e}") from e
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise PlanningError(f"the {what} position {[x, y]} is not a finite (x, y) in metres")
+    u, v = (x - g.origin_x) / g.resolution, (y - g.origin_y) / g.resolution
     ci, ri = math.floor(u), math.floor(v)
-    if 0 <= ri < g.shape[0] and 0 <= ci < g.shape[1]:
-        b = int(g.labels[ri, ci])
+    h, w = g.shape
+    if 0 <= ri < h and 0 <= ci < w:
+        b = g.labels[ri, ci]
         if b >= 0:
-            return uv, int(g.region_of_block[b])
+            return u, v, int(g.region_of_block[b])
     # snap: nearest free-block cell in a window of the snap radius
     k = int(np.ceil(snap_radius_m / g.resolution))
-    h, w = g.shape
-    ci, ri = int(np.floor(uv[0])), int(np.floor(uv[1]))
     r0, r1, c0, c1 = max(ri - k, 0), min(ri + k + 1, h), max(ci - k, 0), min(ci + k + 1, w)
     if r0 < r1 and c0 < c1:
         win = g.labels[r0:r1, c0:c1]
         rr, cc = np.nonzero(win >= 0)
         if rr.shape[0]:
             cu, cv = cc + c0 + 0.5, rr + r0 + 0.5
-            d = np.hypot(cu - uv[0], cv - uv[1])
+            d = np.hypot(cu - u, cv - v)
             i = int(np.argmin(d))
             if d[i] * g.resolution <= snap_radius_m + 0.5 * g.resolution:
-                p = np.array([cu[i], cv[i]])
-                return p, int(g.region_of_block[g.labels[int(rr[i]) + r0, int(cc[i]) + c0]])
+                return (
+                    float(cu[i]),
+                    float(cv[i]),
+                    int(g.region_of_block[g.labels[int(rr[i]) + r0, int(cc[i]) + c0]]),
+                )
     raise PlanningError(
-        f"the {what} position ({xy[0]:.2f}, {xy[1]:.2f}) is not in free space of the planning grid "
+        f"the {what} position ({x:.2f}, {y:.2f}) is not in free space of the planning grid "
         "(nor within "
         f"{snap_radius_m} m of it); give a position in a free, known area of the map"
     )
 
 
+def region_buckets(regions: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bucket index of the regions for point location: square buckets of 2**shift cells (shift from the
+    mean region area, so a bucket meets a few regions), each listing, ascending, the regions whose closed
+    rectangle meets it. Returns (ptr, ids, [shift, buckets a row, most regions in a bucket]); the bucket of
+    a point (u, v) is ``(floor(v) >> shift) * nbx + (floor(u) >> shift)``."""
+    R = np.asarray(regions, dtype=np.int64).reshape(-1, 4)
+    h, w = shape
+    area = float(np.mean((R[:, 2] - R[:, 0]) * (R[:, 3] - R[:, 1]))) if R.shape[0] else 1.0
+    shift = int(min(max(round(math.log2(max(area, 1.0)) / 2), 2), 10))
+    nbx, nby = (w >> shift) + 1, (h >> shift) + 1
+    bu0, bu1 = R[:, 1] >> shift, R[:, 3] >> shift  # the closed rectangle reaches column line c1
+    bv0, bv1 = R[:, 0] >> shift, R[:, 2] >> shift
+    nx, ny = bu1 - bu0 + 1, bv1 - bv0 + 1
+    cnt = nx * ny
+    rid = np.repeat(np.arange(R.shape[0], dtype=np.int64), cnt)
+    k = np.arange(rid.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    bucket = (bv0[rid] + k // nx[rid]) * nbx + bu0[rid] + k % nx[rid]
+    o = np.argsort(bucket, kind="stable")  # regions stay ascending within a bucket
+    per = np.bincount(bucket, minlength=nbx * nby)
+    ptr = np.concatenate([[0], np.cumsum(per)]).astype(np.int64)
+    grid = np.array([shift, nbx, int(per.max()) if per.shape[0] else 0], dtype=np.int64)
+    return ptr, np.ascontiguousarray(rid[o]), grid
+
+
 def _query_arrays(planner: RoutePlanner) -> tuple:
-    """The arrays of :func:`holoslam.planning._fast.query`, derived once per planner."""
+    """The arrays of :func:`holoslam.planning._fast.query`, derived once per planner (by
+    :func:`build_planner`). The ports are renumbered in a spatial order (regions along a Z-order curve of
+    their centres, each region's ports numbered on first sight), so the ports of one region, which the
+    search meets together, sit together in memory; the per-port arrays are in that order and ``pslot``
+    maps the planner's port ids (the slots of ``pp``) to it. Port rows hold the coordinates and the landmark
+    distances as float32 (a row per cache line; the rounding, about 1e-7 relative, is far below the
+    heuristic weight's slack); the region bucket index and the grid tiles come with them."""
     c = planner._cache
-    if "query" not in c:
+    if "query" not in c:  # the port graph's edge list (adj_*) is not needed: edges are the regions' ports
         g = planner.graph
         E = np.ascontiguousarray(g.region_edges, dtype=np.int64).reshape(-1, 2)
-        nr = max(g.n_regions, 1)
+        bptr, bids, bgrid = region_buckets(g.regions, g.shape)
+        rp_ptr, rp_old, _ = _region_ports(planner)
+        new2old, old2new = _spatial_port_order(g.regions, rp_ptr, rp_old, planner.port_uv.shape[0])
+        # each region's ports by their new number (ascending: the search reads their records in order)
+        reg = np.repeat(np.arange(rp_ptr.shape[0] - 1), np.diff(rp_ptr))
+        rp_new = old2new[rp_old]
+        o = np.lexsort((rp_new, reg))
+        rp_new = rp_new[o]
+        uv = planner.port_uv[new2old]
+        portal_of = planner.port_portal[new2old]
         c["query"] = (
-            planner.adj_ptr,
-            planner.adj_dst,
-            planner.adj_w,
-            np.ascontiguousarray(planner.port_uv[:, 0]),
-            np.ascontiguousarray(planner.port_uv[:, 1]),
-            np.ascontiguousarray(E[planner.port_portal, 0]),
-            np.ascontiguousarray(E[planner.port_portal, 1]),
-            planner.landmark_dist,
-            planner.port_portal,
+            rp_ptr,
+            rp_new.astype(np.int32),
+            np.ascontiguousarray(uv[rp_new], dtype=np.float32),
+            np.ascontiguousarray(uv, dtype=np.float64),
+            _port_rows(uv, planner.landmark_dist[new2old]),
+            np.ascontiguousarray(E[portal_of, 0]),
+            np.ascontiguousarray(E[portal_of, 1]),
+            np.ascontiguousarray(portal_of),
             np.searchsorted(planner.port_portal, np.arange(E.shape[0] + 1)),
+            old2new,
             planner.region_portal_ptr,
             planner.region_portal_ids,
             E,
             np.ascontiguousarray(g.regions, dtype=np.int64).reshape(-1, 4),
-            np.ascontiguousarray(E[:, 0] * nr + E[:, 1]),
+            bptr,
+            bids,
+            bgrid,
             planner.portal_boxes,
-            planner.free,
+            *_tiles(planner),
+            int(g.shape[0]),
+            int(g.shape[1]),
+            np.array([g.origin_x, g.origin_y, g.resolution], dtype=np.float64),
         )
     return c["query"]
 
 
-def _workspace(planner: RoutePlanner) -> tuple:
-    """The corridor search's reusable per-thread workspace (see ``_fast.corridor_astar``): allocated once, so a
-    query touches only the ports it meets instead of clearing arrays the size of the port graph."""
-    import threading
+def _spatial_port_order(
+    regions: np.ndarray, rp_ptr: np.ndarray, rp_ids: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(new -> old, old -> new) port numbering: regions sorted along a Z-order (Morton) curve of their centre
+    cells, ports numbered in the order the regions list them, each at its first sight."""
+    R = np.asarray(regions, dtype=np.int64).reshape(-1, 4)
+    cr, cc = (R[:, 0] + R[:, 2]) // 2, (R[:, 1] + R[:, 3]) // 2
+    key = np.zeros(R.shape[0], dtype=np.int64)
+    for b in range(20):  # interleave the bits of row and column (grids up to a million cells a side)
+        key |= ((cr >> b) & 1) << (2 * b + 1) | ((cc >> b) & 1) << (2 * b)
+    order = np.argsort(key, kind="stable")
+    cnt = np.diff(rp_ptr)[order]
+    start = np.repeat(rp_ptr[:-1][order], cnt)
+    seq = rp_ids[start + np.arange(start.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
+    _, first = np.unique(seq, return_index=True)
+    new2old = seq[np.sort(first)]
+    if new2old.shape[0] < n:  # ports of no region cannot happen (a port is on a portal of two regions)
+        new2old = np.concatenate([new2old, np.setdiff1d(np.arange(n), new2old)])
+    old2new = np.empty(n, dtype=np.int64)
+    old2new[new2old] = np.arange(n)
+    return new2old, old2new
 
+
+def _region_ports(planner: RoutePlanner) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ports of each region (CSR ``ptr`` (R+1,), ``ids`` int32) with their (u, v) as float32 (half cells:
+    exact): the port graph's edges without storing them (two ports are joined when they share a region)."""
+    ptr, pids = planner.region_portal_ptr, planner.region_portal_ids
+    pp = np.searchsorted(planner.port_portal, np.arange(planner.portal_uv.shape[0] + 1))
+    per_portal = np.diff(pp)[pids]  # ports of each (region, portal) incidence
+    start = np.repeat(pp[pids], per_portal)
+    ids = start + np.arange(start.shape[0]) - np.repeat(np.cumsum(per_portal) - per_portal, per_portal)
+    rptr = np.concatenate([[0], np.cumsum(per_portal)]).astype(np.int64)[ptr]  # incidences grouped by region
+    return rptr, ids.astype(np.int32), np.ascontiguousarray(planner.port_uv[ids], dtype=np.float32)
+
+
+def _tiles(planner: RoutePlanner) -> tuple[np.ndarray, np.ndarray]:
+    """The free mask as 8 x 8-cell tiles of 64 bits (``_fast.tile_bits``) and the chessboard clearance of
+    its fully free 4 x 4-cell blocks (``_fast.block_clearance``): what the query's grid checks read
+    (``_fast.seg_free_tiles``)."""
+    bits, _ = planner.kernels.tile_bits(planner.free)
+    return _aligned(bits), planner.kernels.block_clearance(planner.free)
+
+
+def _aligned(a: np.ndarray) -> np.ndarray:
+    """A copy of the 1-D array ``a`` starting on a 64-byte boundary (a cache line)."""
+    buf = np.empty(a.shape[0] + 64 // a.itemsize, dtype=a.dtype)
+    off = (-buf.ctypes.data % 64) // a.itemsize
+    out = buf[off : off + a.shape[0]]
+    out[:] = a
+    return out
+
+
+def _port_rows(port_uv: np.ndarray, landmark_dist: np.ndarray) -> np.ndarray:
+    """(n, 16k) float32 rows, 64-byte aligned: each port's (u, v) (half cells: exact) and its landmark
+    distances, zero padded; with 14 landmarks one cache line a port."""
+    n, L = landmark_dist.shape
+    width = -(-(2 + L) // 16) * 16
+    buf = np.zeros(n * width + 16, dtype=np.float32)
+    off = (-buf.ctypes.data % 64) // 4
+    rows = buf[off : off + n * width].reshape(n, width)
+    rows[:, :2] = port_uv
+    rows[:, 2 : 2 + L] = landmark_dist
+    return rows
+
+
+def _workspace(planner: RoutePlanner) -> tuple:
+    """The query's reusable per-thread workspace (see ``_fast.corridor_astar`` and ``_fast.query``):
+    allocated once, so a query touches only the ports it meets instead of clearing arrays the size of the
+    port graph."""
     key = ("ws", threading.get_ident())
     c = planner._cache
-    if key not in c:
+    ws = c.get(key)
+    if ws is None:
         n = planner.port_uv.shape[0]
-        c[key] = (
-            np.zeros(n + 2, dtype=np.int64),  # generation stamps (last slot: the current generation)
-            np.empty(n + 1),  # path costs
-            np.empty(n + 1),  # cached heuristic
-            np.empty(n + 1, dtype=np.int64),  # parents
-            np.empty(n + 1, dtype=np.bool_),  # closed
+        ws = c[key] = (
+            np.zeros(n + 2, dtype=planner.kernels.WORKSPACE_DTYPE),  # node records (n + 1: generation)
             np.empty(n + 1, dtype=np.int64),  # heap nodes
             np.empty(n + 1),  # heap keys
-            np.empty(n + 1, dtype=np.int64),  # heap slot of each node
+            np.full(max(planner.graph.n_regions, 1), -1, dtype=np.int64),  # corridor shortcut scratch
         )
-    return c[key]
+    return ws
 
 
 def plan_path(
@@ -403,40 +533,24 @@ def plan_path(
     """
     if isinstance(planner, TwoLayerGraph):
         planner = build_planner(planner)
-    g = planner.graph
-    s_uv, rs = _locate(planner, start_xy, snap_radius_m, "start")
-    g_uv, rg = _locate(planner, goal_xy, snap_radius_m, "goal")
+    su, sv, rs = _locate(planner, start_xy, snap_radius_m, "start")
+    gu, gv, rg = _locate(planner, goal_xy, snap_radius_m, "goal")
     if planner.region_component[rs] != planner.region_component[rg]:
         raise PlanningError(
             f"the goal ({float(goal_xy[0]):.2f}, {float(goal_xy[1]):.2f}) cannot be reached from the start "
             f"({float(start_xy[0]):.2f}, {float(start_xy[1]):.2f}): no free passage joins them in the "
             "planning graph"
         )
-    c = _query_arrays(planner)
-    c_cols = planner._cache.get("rcols")
-    if c_cols is None:
-        c_cols = planner._cache["rcols"] = np.ascontiguousarray(g.regions.T, dtype=np.float64).reshape(4, -1)
-    pts, regs, status = planner.kernels.query(
-        *c,
-        float(s_uv[0]),
-        float(s_uv[1]),
-        int(rs),
-        float(g_uv[0]),
-        float(g_uv[1]),
-        int(rg),
-        HEURISTIC_WEIGHT,
-        EPS_CELLS,
-        *_workspace(planner),
-        c_cols,
+    c = planner._cache.get("query") or _query_arrays(planner)
+    wp, regs, length, status = planner.kernels.query(
+        *c, su, sv, rs, gu, gv, rg, HEURISTIC_WEIGHT, EPS_CELLS, *_workspace(planner)
     )
     if status == 1:  # pragma: no cover - the component check above makes this unreachable
         raise PlanningError("no route found between connected regions; rebuild the planning graph")
     if status == 2:
         raise PlanningError("internal planning error: a path segment crosses an obstacle; rebuild the graph")
-    regions = tuple(regs.tolist())
-    wp = np.column_stack([g.origin_x + pts[:, 0] * g.resolution, g.origin_y + pts[:, 1] * g.resolution])
     wp.setflags(write=False)
-    return Route(places=tuple(places), waypoints=wp, length=path_length(wp), regions=regions)
+    return Route(tuple(places), wp, length, tuple(regs.tolist()))
 
 
 def plan_to_object(
