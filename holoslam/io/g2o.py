@@ -173,21 +173,7 @@ def _to_array(rows: _Rows, ncol: int, nint: int, path: str, text_lines: list[str
                         path, ln, text_lines[ln - 1], f"field {k + 2} ({tok!r}) is not a number"
                     ) from None
         raise
-    if not np.all(np.isfinite(arr)):
-        r = int(np.argmax(~np.isfinite(arr).all(axis=1)))
-        raise _fail(path, rows.lines[r], text_lines[rows.lines[r] - 1], "a field is not finite (nan or inf)")
-    if nint:
-        ids = arr[:, :nint]
-        bad = (ids != np.round(ids)) | (ids < 0)
-        if bad.any():
-            r = int(np.argmax(bad.any(axis=1)))
-            raise _fail(
-                path,
-                rows.lines[r],
-                text_lines[rows.lines[r] - 1],
-                "a vertex id is not a non-negative integer",
-            )
-    return arr
+    return _check_array(arr, rows, nint, path, text_lines)
 
 
 def _sym3_g2o(v: np.ndarray) -> np.ndarray:
@@ -423,7 +409,7 @@ def _tokenise(
 
 
 def _check_array(arr: np.ndarray, rows: _Rows, nint: int, path: str, text_lines: list[str]) -> np.ndarray:
-    """The finiteness and integer-id checks of :func:`_to_array` on an already converted array."""
+    """Finiteness and integer-id checks of a converted (M, ncol) array, naming the first bad line."""
     if not np.all(np.isfinite(arr)):
         r = int(np.argmax(~np.isfinite(arr).all(axis=1)))
         raise _fail(path, rows.lines[r], text_lines[rows.lines[r] - 1], "a field is not finite (nan or inf)")

@@ -66,11 +66,7 @@ def decode_image(image: Image) -> np.ndarray:
             f"{where}: {buf.size} bytes do not decode as {kind} (corrupted or truncated data; "
             f"first bytes {bytes(image.data[:8]).hex()})"
         )
-    if img.ndim == 3 and img.shape[2] == 4:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
-    elif img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
-    return img
+    return _bgr_or_gray(img)
 
 
 def _decode_raw(image: Image, enc: str, where: str) -> np.ndarray:
@@ -127,8 +123,15 @@ def read_image_file(path: str | Path, grayscale: bool = False) -> np.ndarray:
             f"{path}: not a decodable image: its {data.size} bytes are corrupt, truncated or an unsupported "
             f"format (first bytes {data[:8].tobytes().hex()}); save it as PNG or JPEG"
         )
+    return _bgr_or_gray(img)
+
+
+def _bgr_or_gray(img: np.ndarray) -> np.ndarray:
+    """A decoded image as BGR (alpha dropped) or single-channel grey (H, W)."""
+    import cv2
+
     if img.ndim == 3 and img.shape[2] == 4:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
-    elif img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
+        return cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    if img.ndim == 3 and img.shape[2] == 1:
+        return img[:, :, 0]
     return img
