@@ -914,6 +914,7 @@ def plan_to_object(
 ) -> dict[str, Any]:
     """Route from a pose (default: the run's last pose) to an object in a saved run."""
     from holoslam.io.run_folder import load_run
+    from holoslam.maps.holographic import CONFIRMING_SIGHTINGS
     from holoslam.planning.routes import plan_to_object as _plan
 
     saved = load_run(run_dir, parts=("trajectory", "holographic", "planning", "grid"))
@@ -930,8 +931,12 @@ def plan_to_object(
         "  waypoints: " + " ".join(f"({x:.2f},{y:.2f})" for x, y in wp),
         f"  length: {route.length:.2f} m",
     ]
+    sightings = int(obj.get("sightings", 0))
+    if 0 < sightings < CONFIRMING_SIGHTINGS:
+        text.append(f"  note: {oid} was seen once (unconfirmed): its label may have been misread")
     return {
         "object": oid,
+        "sightings": sightings,
         "from": [float(start[0]), float(start[1])],
         "places": [str(p) for p in route.places],
         "goal_place": route.goal_place,

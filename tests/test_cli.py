@@ -76,6 +76,9 @@ def test_plan_to_object_and_errors(household_run, capsys):
     wp = np.array(route["waypoints"])
     assert route["object"] == "O05" and wp.shape[1] == 2 and route["length_m"] > 0
     assert np.isclose(route["length_m"], np.sum(np.hypot(*np.diff(wp, axis=0).T)), rtol=1e-3)
+    assert route["sightings"] >= 2  # O05 is seen several times: no "unconfirmed" note
+    assert main(["plan", str(household_run), "--to", "O26"]) == 0  # seen once in the bundled log
+    assert "seen once (unconfirmed)" in capsys.readouterr().out
     assert main(["plan", str(household_run), "--to", "NOPE"]) == 1
     assert "no object 'NOPE'" in capsys.readouterr().err
     assert main(["plan", str(household_run), "--to", "O22"]) == 1  # the chair out of the arm's reach
