@@ -83,7 +83,7 @@ def draw_topology(ax: Axes, topology, grid: OccupancyGrid, colour: str = "tab:cy
 
 def draw_holographic(ax: Axes, G, labels: bool = True) -> list[Any]:
     """The holographic graph: passages along their waypoints, environment nodes by place, objects as
-    stars (hollow when unreachable), object edges as dashed lines to their places."""
+    stars (hollow when unreachable, red-edged when seen only once), object edges as dashed lines to their places."""
     from matplotlib.collections import LineCollection
 
     arts: list[Any] = []
@@ -120,20 +120,25 @@ def draw_holographic(ax: Axes, G, labels: bool = True) -> list[Any]:
                             str(n), (d["x"], d["y"]), fontsize=6, xytext=(3, 3), textcoords="offset points"
                         )
                     )
-    objs = [(n, d, G.degree(n) > 0) for n, d in G.nodes(data=True) if d.get("kind") == "object"]
-    for reach, face in ((True, "gold"), (False, "none")):
-        sel = [(n, d) for n, d, r in objs if r == reach]
+    objs = [
+        (n, d, G.degree(n) > 0, 0 < int(d.get("sightings", 0)) < 2)
+        for n, d in G.nodes(data=True)
+        if d.get("kind") == "object"
+    ]
+    for reach, once in ((True, False), (False, False), (True, True), (False, True)):
+        sel = [(n, d) for n, d, r, o in objs if r == reach and o == once]
         if sel:
             xy = np.array([(d["x"], d["y"]) for _n, d in sel])
+            what = ("object" if reach else "object (unreachable)") + (", seen once" if once else "")
             arts.append(
                 ax.scatter(
                     xy[:, 0],
                     xy[:, 1],
                     s=60,
                     marker="*",
-                    facecolors=face,
-                    edgecolors="darkgoldenrod",
-                    label="object" if reach else "object (unreachable)",
+                    facecolors="gold" if reach else "none",
+                    edgecolors="red" if once else "darkgoldenrod",
+                    label=what,
                     zorder=5,
                 )
             )
