@@ -11,7 +11,8 @@ import pytest
 from holoslam import geometry as g
 from holoslam.sim.world import raycast
 from holoslam.submaps.deadreckon import DeadReckoningConfig, integrate
-from holoslam.submaps.frontend import FrontEndConfig, build_problem, landmark_in_anchor
+from holoslam.submaps.frontend import FrontEndConfig, _may_be_keyframes, build_problem, landmark_in_anchor
+from holoslam.submaps.segment import SegmentConfig
 from holoslam.types import Heading, LogData, ObjectObservation, Odometry, Pose2, Scan, Transform
 
 # two rooms 4 x 4 m side by side joined by a 1 m doorway at x = 4, y in [1.5, 2.5]; a box in each room
@@ -243,3 +244,21 @@ def test_initial_landmark_is_the_agreeing_majority_not_the_first_sighting(fronte
     # clean estimate, not 1.5 m off
     clean = fe.problem.initial_landmarks[name]
     assert np.hypot(*(init - clean)) < 0.1
+
+
+def test_keyframe_prefilter_never_rules_out_a_keyframe():
+    # scans are ruled out as keyframes by a cheap test on poses interpolated once; it may only say "maybe"
+    # where the exact test would say yes, and must rule out the scans well below both thresholds
+    rng = np.random.default_rng(5)
+    cfg = SegmentConfig()
+    kf = np.array([1.0, -2.0, 3.1])
+    step = np.column_stack([rng.uniform(-0.3, 0.3, (4000, 2)), rng.uniform(-0.3, 0.3, 4000)])
+    step[:50, :2] = step[:50, :2] / np.hypot(*step[:50, :2].T)[:, None] * cfg.keyframe_distance  # on the edge
+    odo = g.compose(np.broadcast_to(kf, step.shape), step)
+    maybe = _may_be_keyframes(kf, odo, cfg)
+    dT = g.between(np.broadcast_to(kf, odo.shape), odo)
+    dist, turn = np.hypot(dT[:, 0], dT[:, 1]), np.abs(dT[:, 2])
+    exact = (dist >= cfg.keyframe_distance) | (turn >= math.radians(cfg.keyframe_turn_deg))
+    assert maybe[exact].all() and maybe[:50].all()
+    clearly_not = (dist < cfg.keyframe_distance - 1e-3) & (turn < math.radians(cfg.keyframe_turn_deg) - 1e-3)
+    assert clearly_not.sum() > 100 and not maybe[clearly_not].any()

@@ -5,12 +5,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from holoslam import geometry as g
 from holoslam.sim.world import raycast
-from holoslam.submaps.localize import align_pairs, ransac_align, register_points, scan_normals
+from holoslam.submaps.localize import NearestIndex, align_pairs, ransac_align, register_points, scan_normals
 
 # an L-shaped room with a pillar: walls as segments (x0, y0, x1, y1)
 ROOM = np.array([
@@ -102,3 +103,58 @@ def test_icp_flags_a_bad_match():
     other = scan_points(np.array([1.0, 4.0, 2.0]))  # a scan from a different place
     reg = register_points(other, a_pts[ok], nrm[ok], np.array([2.0, 1.0, 0.3]))
     assert not reg.ok
+
+
+def test_icp_with_a_reused_index_is_the_same_registration():
+    # the front end builds one k-d tree per old submap and reuses it for every revisit registration
+    rng = np.random.default_rng(11)
+    aTs_map = np.array([2.0, 1.0, 0.3])
+    a_pts = g.transform_points(aTs_map, scan_points(aTs_map))
+    nrm, ok = scan_normals(a_pts)
+    a_pts, nrm = a_pts[ok], nrm[ok]
+    index = NearestIndex(a_pts)
+    for aTs in (np.array([2.4, 1.3, 0.45]), np.array([1.8, 0.7, 0.1]), np.array([4.5, 1.5, 2.0])):
+        b_pts = scan_points(aTs, sigma=0.01, rng=rng, beams=181)
+        seed = g.compose(aTs, np.array([0.1, -0.05, 0.03]))
+        fresh, reused = register_points(b_pts, a_pts, nrm, seed), register_points(b_pts, a_pts, nrm, seed, index=index)
+        assert fresh.ok and reused.ok and fresh.iterations == reused.iterations
+        np.testing.assert_array_equal(fresh.aTb, reused.aTb)
+        np.testing.assert_array_equal(fresh.cov_aTb, reused.cov_aTb)
+    with pytest.raises(ValueError, match="NearestIndex"):
+        register_points(b_pts, a_pts[:-5], nrm[:-5], seed, index=index)
+
+
+def test_nearest_index_answers_what_the_kd_tree_answers():
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(2)
+    for k in range(20):
+        walls = g.transform_points(rng.normal(size=3), scan_points(np.array([2.0, 1.5, 0.0]), beams=720))
+        pts = np.vstack([walls, rng.normal(0, 0.3, (40, 2)) + walls[0]])
+        if k == 19:
+            pts = np.vstack([pts, [[5e3, -2e3]]])  # a far outlier: coarser buckets
+        index, tree = NearestIndex(pts), cKDTree(pts)
+        q = np.vstack([pts[rng.integers(0, len(pts), 200)] + rng.normal(0, 0.2, (200, 2)),
+                       rng.uniform(-12, 12, (50, 2))])  # near the map and far outside it
+        for gate in (0.05, 0.1, 0.35, 0.5, 3.0, np.inf):
+            j, d = index.nearest(q[:, 0], q[:, 1], gate)
+            dt, jt = tree.query(q, k=1, distance_upper_bound=gate)
+            np.testing.assert_array_equal(d, dt)
+            np.testing.assert_array_equal(j, jt)
+
+
+def test_icp_without_the_compiled_kernels_is_the_same_registration():
+    rng = np.random.default_rng(12)
+    aTs_map = np.array([2.0, 1.0, 0.3])
+    a_pts = g.transform_points(aTs_map, scan_points(aTs_map))
+    nrm, ok = scan_normals(a_pts)
+    a_pts, nrm = a_pts[ok], nrm[ok]
+    aTs = np.array([2.4, 1.3, 0.45])
+    b_pts = scan_points(aTs, sigma=0.01, rng=rng, beams=181)
+    seed = g.compose(aTs, np.array([0.15, -0.1, 0.08]))
+    plain = NearestIndex(a_pts)
+    plain._kernel = None  # the numpy path: cKDTree look-ups and numpy terms
+    fast, slow = register_points(b_pts, a_pts, nrm, seed), register_points(b_pts, a_pts, nrm, seed, index=plain)
+    assert fast.ok and fast.iterations == slow.iterations
+    np.testing.assert_array_equal(fast.aTb, slow.aTb)
+    np.testing.assert_array_equal(fast.cov_aTb, slow.cov_aTb)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from holoslam.sim.world import raycast
-from holoslam.submaps.features import extract_features, split_runs, transform_features
+from holoslam.submaps.features import _split, _split_all, extract_features, split_runs, transform_features
 
 # a 5 x 4 m room; a 0.04 m square leg at (3.5, 1.0); a free-standing 1 m wall piece from (1, 3) to (2, 3)
 WALLS = np.array([[0, 0, 5, 0], [5, 0, 5, 4], [5, 4, 0, 4], [0, 4, 0, 0]], float)
@@ -66,3 +66,20 @@ def test_split_runs_cuts_at_gaps():
     pts = np.array([[1, 0], [1, 0.05], [1, 0.1], [2, 1], [2, 1.05]], float)
     assert split_runs(pts) == [(0, 3), (3, 5)]
     assert split_runs(np.zeros((0, 2))) == []
+
+
+def test_compiled_split_gives_the_pieces_of_the_reference_split():
+    # the compiled split of every run of a scan at once must cut exactly where the per-run numpy split cuts
+    rng = np.random.default_rng(4)
+    segs = np.vstack([WALLS, LEG, [[1, 3, 2, 3]], [[0.5, 0.5, 1.5, 1.2], [1.5, 1.2, 2.5, 0.6]]])
+    for k in range(30):
+        wTs = np.array([rng.uniform(0.5, 4.5), rng.uniform(0.5, 3.5), rng.uniform(-3, 3)])
+        pts = scan(wTs, segs, sigma=0.01 * (k % 3), seed=k, beams=int(rng.integers(90, 720)))
+        if k % 5 == 0:
+            pts = np.round(pts, 2)  # collinear and repeated points: ties in the farthest point
+        runs = split_runs(pts)
+        marked = [bool(rng.random() < 0.8) for _ in runs]
+        tol = float(rng.choice([0.01, 0.03, 0.1]))
+        got = _split_all(pts, runs, marked, tol)
+        want = {a: _split(pts[a:b], tol, 0) for (a, b), m in zip(runs, marked, strict=True) if m}
+        assert got == want

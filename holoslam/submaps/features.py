@@ -14,7 +14,8 @@
 * Points: small isolated clusters (runs shorter than ``point_max_extent``, e.g. table and chair legs), by their
   centroid.
 
-Per-point work is vectorised with numpy; the recursion runs over pieces (tens per scan), not points.
+Per-point work is vectorised with numpy; the split of all runs of a scan is one compiled call
+(``_fast.split_pieces``, the arithmetic of :func:`_split`), and each piece's line is fitted once.
 """
 
 from __future__ import annotations
@@ -84,16 +85,17 @@ def _split(pts: np.ndarray, tol: float, min_points: int) -> list[tuple[int, int]
     """Split-and-merge's split step: pieces [start, end) of one run, each within tol of its chord."""
     out: list[tuple[int, int]] = []
     stack = [(0, pts.shape[0])]
+    x, y = pts[:, 0], pts[:, 1]
     while stack:
         a, b = stack.pop()
         if b - a < 3:
             out.append((a, b))
             continue
-        p0, p1 = pts[a], pts[b - 1]
-        ch = p1 - p0
-        L = np.hypot(*ch)
-        seg = pts[a:b] - p0
-        dist = np.abs(seg[:, 0] * ch[1] - seg[:, 1] * ch[0]) / L if L > 1e-9 else np.hypot(*seg.T)
+        x0, y0 = x[a], y[a]
+        chx, chy = x[b - 1] - x0, y[b - 1] - y0
+        L = np.hypot(chx, chy)
+        sx, sy = x[a:b] - x0, y[a:b] - y0
+        dist = np.abs(sx * chy - sy * chx) / L if L > 1e-9 else np.hypot(sx, sy)
         k = int(np.argmax(dist))
         if dist[k] > tol and 0 < k < b - a - 1:
             stack.append((a + k, b))
@@ -101,6 +103,28 @@ def _split(pts: np.ndarray, tol: float, min_points: int) -> list[tuple[int, int]
         else:
             out.append((a, b))
     return sorted(out)
+
+
+def _split_all(
+    pts: np.ndarray, runs: list[tuple[int, int]], lines: list[bool], tol: float
+) -> dict[int, list[tuple[int, int]]]:
+    """:func:`_split` of every run marked in ``lines``, keyed by the run's start, pieces relative to it: one
+    compiled call for the scan (``_fast.split_pieces``, the same arithmetic), or run by run without numba."""
+    todo = [ab for ab, keep in zip(runs, lines, strict=True) if keep]
+    try:
+        from holoslam.submaps._fast import split_pieces
+    except ImportError:  # pragma: no cover - numba is a declared dependency
+        return {a: _split(pts[a:b], tol, 0) for a, b in todo}
+    out: dict[int, list[tuple[int, int]]] = {a: [] for a, _ in todo}
+    if not todo:
+        return out
+    ra = np.array([a for a, _ in todo], dtype=np.int64)
+    ps, pe = split_pieces(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), ra,
+                          np.array([b for _, b in todo], dtype=np.int64), float(tol))
+    owner = ra[np.searchsorted(ra, ps, side="right") - 1].tolist()
+    for a, p0, p1 in zip(owner, ps.tolist(), pe.tolist(), strict=True):
+        out[a].append((p0 - a, p1 - a))
+    return out
 
 
 def _line_intersections(lines_a: np.ndarray, lines_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -133,20 +157,33 @@ def extract_features(points: np.ndarray, config: FeatureConfig | None = None) ->
         pts = np.roll(pts, -(int(np.argmax(d)) + 1), axis=0)
     segs, lines, order, run_of = [], [], [], []
     blobs = []
-    for r, (a, b) in enumerate(split_runs(pts, cfg.gap, cfg.gap_per_m)):
+    fits: dict[tuple[int, int], tuple[np.ndarray, float, np.ndarray]] = {}  # each piece is fitted once
+
+    def fit(i0: int, i1: int) -> tuple[np.ndarray, float, np.ndarray]:
+        if (i0, i1) not in fits:
+            fits[i0, i1] = fit_line(pts[i0:i1])
+        return fits[i0, i1]
+
+    runs = split_runs(pts, cfg.gap, cfg.gap_per_m)
+    pieces_of: dict[int, list[tuple[int, int]]] = {}
+    if runs:  # the extent of every run at once, and the pieces of those that are not point features
+        starts = np.array([a for a, _ in runs])
+        span = np.maximum.reduceat(pts, starts, axis=0) - np.minimum.reduceat(pts, starts, axis=0)
+        extents = np.hypot(span[:, 0], span[:, 1]).tolist()
+        pieces_of = _split_all(pts, runs, [e > cfg.point_max_extent for e in extents], cfg.split_tol)
+    for r, (a, b) in enumerate(runs):
         run = pts[a:b]
-        ext = np.hypot(*(run.max(axis=0) - run.min(axis=0))) if b > a else 0.0
-        if ext <= cfg.point_max_extent:
+        if extents[r] <= cfg.point_max_extent:
             if b - a >= cfg.point_min_points:
                 blobs.append(run.mean(axis=0))
             continue
-        pieces = _split(run, cfg.split_tol, cfg.min_points)
+        pieces = pieces_of[a]
         fitted = []
         for pa, pb in pieces:
             if pb - pa < cfg.min_points:
                 fitted.append(None)
                 continue
-            n, d, seg = fit_line(run[pa:pb])
+            n, d, seg = fit(a + pa, a + pb)
             fitted.append((pa, pb, n, d, seg))
         # merge adjacent collinear pieces
         merged: list[tuple[int, int]] = []
@@ -157,7 +194,7 @@ def extract_features(points: np.ndarray, config: FeatureConfig | None = None) ->
                 continue
             if merged and merged[-1][0] >= 0:
                 pa0, pb0 = merged[-1]
-                n0, d0, _ = fit_line(run[pa0:pb0])
+                n0, d0, _ = fit(a + pa0, a + pb0)
                 if abs(n0 @ f[2]) > cos_tol and np.max(np.abs(run[f[0]:f[1]] @ n0 - d0)) < 2 * cfg.split_tol:
                     merged[-1] = (pa0, f[1])
                     continue
@@ -165,7 +202,7 @@ def extract_features(points: np.ndarray, config: FeatureConfig | None = None) ->
         for pa, pb in merged:
             if pa < 0:
                 continue
-            n, d, seg = fit_line(run[pa:pb])
+            n, d, seg = fit(a + pa, a + pb)
             if np.hypot(seg[2] - seg[0], seg[3] - seg[1]) < cfg.min_length:
                 continue
             segs.append(seg)

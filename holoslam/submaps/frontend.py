@@ -51,7 +51,7 @@ from holoslam import geometry as g
 from holoslam.errors import IngestError
 from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interpolate_poses, interpolate_yaw
 from holoslam.submaps.features import ScanFeatures, extract_features, transform_features
-from holoslam.submaps.localize import register_points, scan_normals
+from holoslam.submaps.localize import NearestIndex, register_points, scan_normals
 from holoslam.submaps.segment import (
     SegmentConfig,
     Submap,
@@ -59,7 +59,7 @@ from holoslam.submaps.segment import (
     side_width,
     split_reason,
     transform_normals,
-    voxel_downsample,
+    voxel_append,
 )
 from holoslam.types import LogData, ObjectObservation
 
@@ -146,6 +146,7 @@ class _Open:
         self.angles: list[np.ndarray] = []
         self.pts = np.zeros((0, 2))
         self.nrm = np.zeros((0, 2))
+        self.codes = np.zeros(0, dtype=np.int64)  # voxel codes of pts (segment.voxel_append)
         self.feats: list[ScanFeatures] = []
         self.narrow = False
         self.travelled0 = travelled0
@@ -159,7 +160,7 @@ class _Open:
         self.angles.append(angles)
         p = g.transform_points(aTb, bpts)
         n = transform_normals(aTb, bnrm)
-        self.pts, self.nrm = voxel_downsample(np.vstack([self.pts, p]), np.vstack([self.nrm, n]), self.cfg.voxel)
+        self.pts, self.nrm, self.codes = voxel_append(self.pts, self.nrm, self.codes, p, n, self.cfg.voxel)
         self.feats.append(transform_features(aTb, extract_features(bpts, self.cfg.features)))
 
     def close(self, bTs: np.ndarray, build_grid: bool) -> Submap:
@@ -235,15 +236,32 @@ def build_problem(
     loops_tried = 0
     linked: set[tuple[int, int]] = set()  # (old, current) submap pairs that already have a loop
     every = max(1, -(-len(scans) // 50))  # at most 50 calls
+    kf_turn = np.radians(scfg.keyframe_turn_deg)
+    # the odometry at every scan, once: a cheap test that rules out most scans as keyframes before the exact one
+    odo_at_scans = interpolate_poses(ost, opose, np.array([s.stamp_ns for s in scans], dtype=np.int64))
+    last_kf_k, win_kf, win0, win = -1, -1, 0, np.zeros(0, dtype=bool)
+    closed_kf_w: list[np.ndarray] = []  # keyframe positions of the closed submaps in the world (step 5)
+    kf_start = [0]  # where each closed submap's keyframes start in their concatenation
+    old_index: dict[int, NearestIndex] = {}  # k-d trees of the closed submaps' points, built on first revisit
     for k_scan, scan in enumerate(scans):
         if progress is not None and k_scan % every == 0:
             progress(k_scan, len(scans))
         t = int(scan.stamp_ns)
         valid = scan.valid
+        if np.count_nonzero(valid) < scfg.icp.min_points:
+            continue
+        if last_kf_t is not None:  # not a keyframe: nothing else of the scan is needed
+            if win_kf != last_kf_k or not win0 <= k_scan < win0 + win.size:
+                win_kf, win0 = last_kf_k, k_scan
+                win = _may_be_keyframes(odo_at_scans[last_kf_k], odo_at_scans[k_scan:k_scan + 64], scfg)
+            if not win[k_scan - win0]:
+                continue
+            odo_pair = interpolate_poses(ost, opose, np.array([last_kf_t, t]))
+            dT = g.between(odo_pair[0], odo_pair[1])
+            if np.hypot(dT[0], dT[1]) < scfg.keyframe_distance and abs(dT[2]) < kf_turn:
+                continue
         r_ok, a_ok = scan.ranges[valid].astype(np.float64), scan.angles[valid]
         s_pts = np.column_stack([r_ok * np.cos(a_ok), r_ok * np.sin(a_ok)])
-        if s_pts.shape[0] < scfg.icp.min_points:
-            continue
         bpts = g.transform_points(bTs, s_pts)
         snrm, nok = scan_normals(s_pts)
         bnrm = transform_normals(bTs, snrm)
@@ -251,11 +269,7 @@ def build_problem(
         angles = scan.angles
         if last_kf_t is None:  # the very first scan anchors submap 0
             cur.add(t, np.zeros(3), np.eye(3) * 1e-12, bpts, bnrm, ranges, angles, bTs)
-            last_kf_t, last_kf_pose, last_kf_cov = t, np.zeros(3), np.zeros((3, 3))
-            continue
-        odo_pair = interpolate_poses(ost, opose, np.array([last_kf_t, t]))
-        dT = g.between(odo_pair[0], odo_pair[1])
-        if np.hypot(dT[0], dT[1]) < scfg.keyframe_distance and abs(dT[2]) < np.radians(scfg.keyframe_turn_deg):
+            last_kf_k, last_kf_t, last_kf_pose, last_kf_cov = k_scan, t, np.zeros(3), np.zeros((3, 3))
             continue
         kf_count += 1
         seed = g.compose(last_kf_pose, dT)
@@ -271,7 +285,7 @@ def build_problem(
         reason = split_reason(scfg, travelled_at(t) - cur.travelled0, aTb, t - cur.stamp, cur.narrow, width)
         if reason is None:
             cur.add(t, aTb, cov, bpts, bnrm, ranges, angles, bTs)
-            last_kf_t, last_kf_pose, last_kf_cov = t, aTb, cov
+            last_kf_k, last_kf_t, last_kf_pose, last_kf_cov = k_scan, t, aTb, cov
         else:
             # 3. a new anchor at this keyframe: dead reckoning and (if it registered) scan match, Eq. 15
             m, n = cur.index, cur.index + 1
@@ -286,30 +300,33 @@ def build_problem(
             else:
                 best = dr.end
             closed.append(cur.close(bTs, cfg.build_grids))
+            closed_kf_w.append(g.transform_points(est_wTa[m], closed[-1].aTb[:, :2]))
+            kf_start.append(kf_start[-1] + closed_kf_w[-1].shape[0])
             est_wTa.append(g.compose(est_wTa[m], best))
             cur = _Open(n, t, reason, scfg, travelled_at(t))
             cur.add(t, np.zeros(3), np.eye(3) * 1e-12, bpts, bnrm, ranges, angles, bTs)
-            last_kf_t, last_kf_pose, last_kf_cov = t, np.zeros(3), np.zeros((3, 3))
+            last_kf_k, last_kf_t, last_kf_pose, last_kf_cov = k_scan, t, np.zeros(3), np.zeros((3, 3))
             aTb, cov = np.zeros(3), np.zeros((3, 3))
         # 5. revisits
         if kf_count % cfg.revisit_every == 0 and len(closed) >= 2:
             wTr = g.compose(est_wTa[cur.index], aTb)
             found: list[tuple[int, np.ndarray, np.ndarray]] = []
-            cands = []
-            for old in closed:
-                if old.index >= cur.index - 1 or (old.index, cur.index) in linked:
-                    continue
-                if np.hypot(*(est_wTa[old.index][:2] - wTr[:2])) > cfg.revisit_radius + scfg.max_distance:
-                    continue
-                kf_w = g.transform_points(est_wTa[old.index], old.aTb[:, :2])  # the old keyframes, world
-                dmin = float(np.min(np.hypot(*(kf_w - wTr[:2]).T)))
-                if dmin <= cfg.revisit_radius:
-                    cands.append((dmin, old.index))
+            # the older submaps (not the previous one, nor one linked already) whose anchor is near and that
+            # have a keyframe within revisit_radius: every closed submap at once
+            n_old = cur.index - 1
+            kf_w = np.vstack(closed_kf_w[:n_old])  # their keyframes in the world (est_wTa of closed ones is fixed)
+            dmin = np.minimum.reduceat(np.hypot(*(kf_w - wTr[:2]).T), kf_start[:n_old])
+            near_anchor = np.hypot(*(np.array(est_wTa[:n_old])[:, :2] - wTr[:2]).T) <= (cfg.revisit_radius
+                                                                                       + scfg.max_distance)
+            ok = near_anchor & (dmin <= cfg.revisit_radius)
+            cands = [(float(dmin[i]), i) for i in np.flatnonzero(ok).tolist() if (i, cur.index) not in linked]
             for _, oi in sorted(cands)[: cfg.max_loop_candidates]:
                 old = closed[oi]
                 loops_tried += 1
                 seed_m = g.between(est_wTa[old.index], wTr)
-                lr = register_points(bpts[nok], old.points, old.normals, seed_m, scfg.icp)
+                if oi not in old_index:
+                    old_index[oi] = NearestIndex(old.points, scfg.icp.block)
+                lr = register_points(bpts[nok], old.points, old.normals, seed_m, scfg.icp, old_index[oi])
                 if not lr.ok or np.hypot(*(lr.aTb[:2] - seed_m[:2])) > cfg.max_loop_correction:
                     continue
                 # plus the old map's own error where the scan matched: its nearest keyframe's pose covariance
@@ -365,6 +382,16 @@ def build_problem(
                           initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
     return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops_tried,
                     tuple(sorted(drop)))
+
+
+def _may_be_keyframes(kf_odo: np.ndarray, odo: np.ndarray, scfg: SegmentConfig, margin: float = 1e-6) -> np.ndarray:
+    """Which scans with odometry poses ``odo`` (N, 3) may be keyframes after the keyframe at ``kf_odo``: those
+    whose motion from it is not below both keyframe thresholds by more than ``margin`` (m, rad). The poses here
+    are interpolated once for all scans, which differs from the exact per-pair interpolation of
+    ``build_problem`` by rounding only (~1e-12), so a False is certain and a True gets the exact test."""
+    dT = g.between(np.broadcast_to(kf_odo, odo.shape), odo)
+    return ((np.hypot(dT[:, 0], dT[:, 1]) >= scfg.keyframe_distance - margin)
+            | (np.abs(dT[:, 2]) >= np.radians(scfg.keyframe_turn_deg) - margin))
 
 
 def _object_consensus(

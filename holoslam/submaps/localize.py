@@ -10,8 +10,10 @@ matched pairs (p_R, p_L):
   (vectorised), the largest consensus set is refined by :func:`align_pairs`.
 
 Scan registration (:func:`register_points`) is point-to-line ICP of the scan's points (robot frame) against a
-local map's points and normals (anchor frame), seeded by dead reckoning. Nearest neighbours come from a k-d tree
-(scipy's cKDTree) built once per registration, brute force on numpy blocks without scipy. Each iteration solves the
+local map's points and normals (anchor frame), seeded by dead reckoning. Nearest neighbours within the gate come
+from a :class:`NearestIndex` (a bucket grid searched by a compiled kernel, exactly cKDTree's answer), built once
+per map and reusable across registrations into it; the matched points' residuals, Jacobian rows and Huber weights
+are computed by the same kernel (``_fast.icp_terms``, numpy's arithmetic point by point). Each iteration solves the
 linearised 3x3 normal equations with Huber weights; correspondences farther than a distance that shrinks over
 the iterations are dropped. The covariance is sigma^2 (J^T W J)^-1 at convergence (sigma^2 from the residuals,
 never below ``sigma_floor``^2), multiplied by ``cov_inflation`` because ICP's residuals are correlated
@@ -209,34 +211,93 @@ def _nearest(src: np.ndarray, dst: np.ndarray, block: int) -> tuple[np.ndarray, 
     return idx, d2
 
 
-class _NearestIndex:
-    """Nearest neighbours in a fixed point set: a scipy cKDTree built once per registration (O(log M) per
-    query), or brute force on numpy blocks when scipy is unavailable."""
+class NearestIndex:
+    """Nearest neighbours in a fixed point set, built once per map and passed to :func:`register_points` to
+    reuse it across registrations into the same map (a submap's revisits). Bounded queries (ICP's gates) run on
+    a bucket grid of ``cell`` metres by a compiled kernel (``holoslam.submaps._fast``, numba), which returns what
+    scipy's cKDTree returns; unbounded ones, and every query when numba is unavailable, use the cKDTree
+    (O(log M) per query), or brute force on numpy blocks without scipy."""
 
-    def __init__(self, dst: np.ndarray, block: int) -> None:
-        self.dst, self.block = dst, block
+    def __init__(self, dst: np.ndarray, block: int = 256, cell: float = 0.1) -> None:
+        self.dst, self.block = np.asarray(dst, dtype=np.float64).reshape(-1, 2), block
+        self._x, self._y = np.ascontiguousarray(self.dst[:, 0]), np.ascontiguousarray(self.dst[:, 1])
+        self._tree: object = False  # built on first need
         try:
-            from scipy.spatial import cKDTree
+            from holoslam.submaps import _fast
 
-            self.tree = cKDTree(dst)
-        except ImportError:  # pragma: no cover - scipy ships with the environment
-            self.tree = None
+            self._kernel, self._grid = _fast, _fast.bucket_grid(self._x, self._y, float(cell), 4_000_000)
+        except ImportError:  # pragma: no cover - numba is a declared dependency
+            self._kernel, self._grid = None, None
+
+    @property
+    def tree(self):
+        """scipy's cKDTree over the points, or None without scipy."""
+        if self._tree is False:
+            try:
+                from scipy.spatial import cKDTree
+
+                self._tree = cKDTree(self.dst)
+            except ImportError:  # pragma: no cover - scipy ships with the environment
+                self._tree = None
+        return self._tree
+
+    def nearest(self, x: np.ndarray, y: np.ndarray, max_distance: float) -> tuple[np.ndarray, np.ndarray]:
+        """(index, distance) of the nearest point of each (x[i], y[i]) nearer than ``max_distance``; index M and
+        distance inf for none (cKDTree's convention)."""
+        if self._kernel is not None and np.isfinite(max_distance):
+            j = np.empty(x.shape[0], dtype=np.int64)
+            d = np.empty(x.shape[0])
+            self._kernel.grid_nearest(np.ascontiguousarray(x, dtype=np.float64),
+                                      np.ascontiguousarray(y, dtype=np.float64), self._x, self._y, *self._grid,
+                                      float(max_distance), j, d)
+            return j, d
+        if self.tree is not None:
+            d, j = self.tree.query(np.column_stack([x, y]), k=1, distance_upper_bound=max_distance)
+            return j.astype(np.int64, copy=False), d
+        j, d2 = _nearest(np.column_stack([x, y]), self.dst, self.block)
+        far = d2 >= max_distance**2
+        return np.where(far, self.dst.shape[0], j), np.where(far, np.inf, np.sqrt(d2))
 
     def query(self, src: np.ndarray, max_distance: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """(index, squared distance) of the nearest point; beyond ``max_distance`` the distance is inf."""
-        if self.tree is None:
+        src = np.asarray(src, dtype=np.float64).reshape(-1, 2)
+        if self._kernel is None and self.tree is None:
             return _nearest(src, self.dst, self.block)
-        d, j = self.tree.query(src, k=1, distance_upper_bound=max_distance)
-        j = np.minimum(j, self.dst.shape[0] - 1)
-        return j.astype(np.int64), d * d
+        j, d = self.nearest(src[:, 0], src[:, 1], max_distance)
+        return np.minimum(j, self.dst.shape[0] - 1), d * d
+
+
+_NearestIndex = NearestIndex  # the former private name
+
+
+def _wrap1(theta: float) -> float:
+    """``holoslam.geometry.wrap`` of one Python float (same arithmetic, without the array round trip)."""
+    w = (theta + np.pi) % (2.0 * np.pi) - np.pi
+    return -np.pi if w >= np.pi else w
+
+
+def _icp_terms(px, py, c0, s0, tx, ty, qx, qy, nqx, nqy, index: NearestIndex, gate: float, huber: float):
+    """numpy version of ``_fast.icp_terms``: (J (m, 3), w (m,), r (m,)) of the matched points."""
+    pax, pay = tx + c0 * px - s0 * py, ty + s0 * px + c0 * py
+    j, d = index.nearest(pax, pay, gate)
+    sel = d * d < gate * gate
+    js = j[sel]
+    sx, sy = pax[sel], pay[sel]
+    nx, ny = nqx[js], nqy[js]
+    r = nx * (sx - qx[js]) + ny * (sy - qy[js])
+    J = np.empty((r.shape[0], 3))  # left perturbation (world-frame increment)
+    J[:, 0], J[:, 1], J[:, 2] = nx, ny, nx * -sy + ny * sx
+    ar = np.abs(r)
+    return J, np.where(ar <= huber, 1.0, huber / np.maximum(ar, 1e-12)), r
 
 
 def register_points(
     b_points: np.ndarray, a_points: np.ndarray, a_normals: np.ndarray, aTb_init: np.ndarray,
-    config: IcpConfig | None = None,
+    config: IcpConfig | None = None, index: NearestIndex | None = None,
 ) -> Registration:
     """Point-to-line ICP of ``b_points`` (robot/scan frame) into a map (``a_points`` with unit ``a_normals``),
-    starting from ``aTb_init``. Returns the registration with covariance and quality."""
+    starting from ``aTb_init``. Returns the registration with covariance and quality. ``index`` is an optional
+    prebuilt :class:`NearestIndex` over ``a_points`` (it must be built on exactly those points)."""
     cfg = config or IcpConfig()
     p = np.asarray(b_points, dtype=np.float64).reshape(-1, 2)
     q = np.asarray(a_points, dtype=np.float64).reshape(-1, 2)
@@ -245,32 +306,47 @@ def register_points(
     bad = Registration(T, np.eye(3), np.inf, 0.0, 0, np.inf, False)
     if p.shape[0] < cfg.min_points or q.shape[0] < cfg.min_points:
         return bad
+    if index is None:
+        index = NearestIndex(q, cfg.block)
+    elif index.dst.shape != q.shape or not np.array_equal(index.dst, q):
+        raise ValueError(f"register_points: the index was built on other points ({index.dst.shape[0]}) than the "
+                         f"map's ({q.shape[0]}); build NearestIndex(a_points) on the map passed")
     it = 0
     gate = cfg.max_distance
-    index = _NearestIndex(q, cfg.block)
+    px, py = p[:, 0].copy(), p[:, 1].copy()
+    qx, qy = q[:, 0].copy(), q[:, 1].copy()
+    nqx, nqy = nq[:, 0].copy(), nq[:, 1].copy()
+    damp = 1e-9 * np.eye(3)
+    tx, ty, th = (float(v) for v in T)
+    fast = index._kernel  # the compiled terms of an iteration (the same arithmetic), or numpy below
+    if fast is not None:
+        jb, db = np.empty(p.shape[0], dtype=np.int64), np.empty(p.shape[0])
+        Jb, wb, rb = np.empty((p.shape[0], 3)), np.empty(p.shape[0]), np.empty(p.shape[0])
     for it in range(1, cfg.max_iterations + 1):  # noqa: B007 - the count is reported
-        pa = g.transform_points(T, p)
-        j, d2 = index.query(pa, gate)
-        sel = d2 < gate * gate
-        if sel.sum() < cfg.min_points:
-            return bad
-        n = nq[j[sel]]
-        r = np.sum(n * (pa[sel] - q[j[sel]]), axis=1)
-        perp = np.column_stack([-pa[sel, 1], pa[sel, 0]])
-        J = np.column_stack([n, np.sum(n * perp, axis=1)])  # left perturbation (world-frame increment)
-        w = np.where(np.abs(r) <= cfg.huber, 1.0, cfg.huber / np.maximum(np.abs(r), 1e-12))
+        c0, s0 = np.cos(th), np.sin(th)
+        if fast is not None:
+            m = fast.icp_terms(px, py, c0, s0, tx, ty, qx, qy, nqx, nqy, *index._grid, gate, cfg.huber,
+                               jb, db, Jb, wb, rb)
+            if m < cfg.min_points:
+                return bad
+            J, w, r = Jb[:m], wb[:m], rb[:m]
+        else:
+            J, w, r = _icp_terms(px, py, c0, s0, tx, ty, qx, qy, nqx, nqy, index, gate, cfg.huber)
+            if r.shape[0] < cfg.min_points:
+                return bad
         H = J.T @ (w[:, None] * J)
         bvec = -J.T @ (w * r)
         try:
-            dx = np.linalg.solve(H + 1e-9 * np.eye(3), bvec)
+            dx = np.linalg.solve(H + damp, bvec)
         except np.linalg.LinAlgError:
             return bad
         # left update: T <- Exp(dx) * T (small-angle first-order on translation about the origin)
         c, s = np.cos(dx[2]), np.sin(dx[2])
-        T = np.array([c * T[0] - s * T[1] + dx[0], s * T[0] + c * T[1] + dx[1], g.wrap(T[2] + dx[2])])
+        tx, ty, th = c * tx - s * ty + dx[0], s * tx + c * ty + dx[1], _wrap1(float(th + dx[2]))
         gate = max(cfg.min_distance, 0.7 * gate)
         if np.hypot(dx[0], dx[1]) < 1e-5 and abs(dx[2]) < 1e-5 and gate <= cfg.min_distance:
             break
+    T = np.array([tx, ty, th])
     # final statistics at the converged pose with the tight gate
     pa = g.transform_points(T, p)
     j, d2 = index.query(pa, cfg.min_distance)

@@ -16,7 +16,9 @@ The anchor frame of a submap is the base pose at its first scan, so the robot's 
 
 The local occupancy grid is a small vectorised ray caster of its own (``local_grid``): ``holoslam.maps.occupancy``
 did not exist when this was written. Every beam is sampled at half-cell steps; samples before the hit count as
-free, the hit as occupied (log-odds sums with np.bincount); beams with no return clear up to ``clear_range``.
+free, the hit as occupied (log-odds sums of the counts per cell); beams with no return clear up to
+``clear_range``. The free samples are counted by a compiled loop (``_fast.free_counts``) without materialising
+them; the grid's extent comes from each beam's first and last sample (samples move monotonically along a beam).
 """
 
 from __future__ import annotations
@@ -30,7 +32,9 @@ from holoslam.maps.grid import OccupancyGrid
 from holoslam.submaps.features import FeatureConfig, ScanFeatures
 from holoslam.submaps.localize import IcpConfig
 
-__all__ = ["SegmentConfig", "Submap", "side_width", "split_reason", "local_grid", "voxel_downsample"]
+__all__ = [
+    "SegmentConfig", "Submap", "side_width", "split_reason", "local_grid", "voxel_downsample", "voxel_append",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,12 +114,44 @@ def voxel_downsample(points: np.ndarray, normals: np.ndarray, voxel: float) -> t
     return points[first], normals[first]
 
 
+def _voxel_codes(points: np.ndarray, voxel: float) -> np.ndarray | None:
+    """One int64 per voxel of each point (x index * 2^32 + y index), or None when an index needs over 31 bits."""
+    keys = np.floor(points / voxel).astype(np.int64)
+    if keys.size and np.abs(keys).max() >= 2**31:
+        return None
+    return keys[:, 0] * 2**32 + keys[:, 1]
+
+
+def voxel_append(
+    points: np.ndarray, normals: np.ndarray, codes: np.ndarray, new_points: np.ndarray, new_normals: np.ndarray,
+    voxel: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``voxel_downsample(vstack([points, new_points]), ...)`` for ``points`` that already hold one point per
+    voxel, with ``codes`` the sorted voxel codes of ``points`` (empty at the start): the old points are kept as
+    they are, a new point only if its voxel is new and it is the first new point in it. Returns (points,
+    normals, codes)."""
+    new_codes = _voxel_codes(np.asarray(new_points, dtype=np.float64), voxel)
+    if new_codes is None or codes.shape[0] != points.shape[0]:  # far from the origin: the general path
+        P, N = voxel_downsample(np.vstack([points, new_points]), np.vstack([normals, new_normals]), voxel)
+        c = _voxel_codes(P, voxel)
+        return P, N, np.sort(c) if c is not None else np.full(0, -1, np.int64)
+    _, first = np.unique(new_codes, return_index=True)
+    first = np.sort(first)
+    c = new_codes[first]
+    at = np.searchsorted(codes, c)
+    fresh = codes[np.minimum(at, codes.size - 1)] != c if codes.size else np.ones(c.size, dtype=bool)
+    first, at, c = first[fresh], at[fresh], c[fresh]
+    order = np.argsort(c)
+    return (np.vstack([points, new_points[first]]), np.vstack([normals, new_normals[first]]),
+            np.insert(codes, at[order], c[order]))
+
+
 def local_grid(
     aTs: np.ndarray, ranges: list[np.ndarray], angles: list[np.ndarray], resolution: float = 0.05,
     clear_range: float = 4.0, margin: float = 0.5,
 ) -> OccupancyGrid | None:
     """A log-odds occupancy grid from sensor poses ``aTs`` (K, 3) and each scan's ranges/angles (inf = no
-    return). Vectorised: one flat array of ray samples for all beams."""
+    return). Vectorised: one flat array of ray samples for all beams (x and y kept as separate 1-D arrays)."""
     if len(ranges) == 0:
         return None
     K = len(ranges)
@@ -126,34 +162,55 @@ def local_grid(
     hit = np.isfinite(r)
     reach = np.where(hit, r, clear_range)
     T = np.asarray(aTs, dtype=np.float64).reshape(-1, 3)[pose_of]
+    tx, ty = T[:, 0], T[:, 1]
     ang = T[:, 2] + a
-    ends = T[:, :2] + np.where(hit, r, 0.0)[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
+    ca, sa = np.cos(ang), np.sin(ang)
+    rh = np.where(hit, r, 0.0)
     step = 0.5 * resolution
     ns = np.ceil(reach / step).astype(np.int64)
-    ray = np.repeat(np.arange(r.size), ns)
-    off = np.arange(ns.sum()) - np.repeat(np.cumsum(ns) - ns, ns)
-    d = off * step
-    keep = d < reach[ray] - resolution  # free samples stop a cell short of the hit
-    ray, d = ray[keep], d[keep]
-    free_xy = T[ray, :2] + d[:, None] * np.column_stack([np.cos(ang[ray]), np.sin(ang[ray])])
-    occ_xy = ends[hit]
-    allxy = np.vstack([free_xy, occ_xy, T[:, :2]])
-    lo = allxy.min(axis=0) - margin
-    hi = allxy.max(axis=0) + margin
+    # free samples d = k * step, k = 0, 1, ... while d < reach - resolution (a cell short of the hit): a prefix
+    # of each ray's ns samples; its length from a division, corrected by one where rounding put it off
+    stop = reach - resolution
+    nk = np.clip(np.ceil(stop / step).astype(np.int64), 0, ns)
+    nk -= (nk > 0) & ((nk - 1) * step >= stop)
+    nk += (nk < ns) & (nk * step < stop)
+    occ_x = (tx + rh * ca)[hit]
+    occ_y = (ty + rh * sa)[hit]
+    # a ray's samples move monotonically along it, so its first (the sensor) and last sample bound them all
+    some = nk > 0
+    d_last = (nk[some] - 1) * step
+    last_x = tx[some] + d_last * ca[some]
+    last_y = ty[some] + d_last * sa[some]
+    lo = np.array([min(last_x.min(initial=np.inf), occ_x.min(initial=np.inf), tx.min()),
+                   min(last_y.min(initial=np.inf), occ_y.min(initial=np.inf), ty.min())]) - margin
+    hi = np.array([max(last_x.max(initial=-np.inf), occ_x.max(initial=-np.inf), tx.max()),
+                   max(last_y.max(initial=-np.inf), occ_y.max(initial=-np.inf), ty.max())]) + margin
     W = int(np.ceil((hi[0] - lo[0]) / resolution))
     H = int(np.ceil((hi[1] - lo[1]) / resolution))
 
-    def flat(xy: np.ndarray) -> np.ndarray:
-        c = np.floor((xy[:, 0] - lo[0]) / resolution).astype(np.int64)
-        rr = np.floor((xy[:, 1] - lo[1]) / resolution).astype(np.int64)
+    def flat(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        c = np.floor((x - lo[0]) / resolution).astype(np.int64)
+        rr = np.floor((y - lo[1]) / resolution).astype(np.int64)
         return rr * W + c
 
-    free_n = np.bincount(flat(free_xy), minlength=H * W)
-    occ_n = np.bincount(flat(occ_xy), minlength=H * W) if occ_xy.size else np.zeros(H * W, np.int64)
+    free_n = _free_counts(tx, ty, ca, sa, nk, step, lo, resolution, W, H, flat)
+    occ_n = np.bincount(flat(occ_x, occ_y), minlength=H * W) if occ_x.size else np.zeros(H * W, np.int64)
     logodds = 0.85 * occ_n - 0.4 * free_n
     prob = 1.0 / (1.0 + np.exp(-logodds))
     occ = np.where((free_n + occ_n) > 0, np.round(prob * 100.0), -1).astype(np.int8).reshape(H, W)
     return OccupancyGrid(occ, resolution, float(lo[0]), float(lo[1]))
+
+
+def _free_counts(tx, ty, ca, sa, nk, step, lo, resolution, W, H, flat) -> np.ndarray:
+    """Free samples per cell (H * W,): compiled (``_fast.free_counts``) or, without numba, with the samples."""
+    try:
+        from holoslam.submaps._fast import free_counts
+    except ImportError:  # pragma: no cover - numba is a declared dependency
+        ray = np.repeat(np.arange(tx.size), nk)
+        d = (np.arange(ray.size) - np.repeat(np.cumsum(nk) - nk, nk)) * step
+        return np.bincount(flat(tx[ray] + d * ca[ray], ty[ray] + d * sa[ray]), minlength=H * W)
+    return free_counts(np.ascontiguousarray(tx), np.ascontiguousarray(ty), ca, sa, nk, float(step),
+                       float(lo[0]), float(lo[1]), float(resolution), W, H)
 
 
 def transform_normals(aTb: np.ndarray, normals: np.ndarray) -> np.ndarray:
