@@ -263,3 +263,44 @@ def test_lockstep_walk_equals_pointer_jumping(h, w, rects):
     if a is not None:
         for x, y in zip(a, b, strict=True):
             assert np.array_equal(x, y)
+
+
+def _graph_lists(G):
+    def nan(x):  # NaN clearances compare equal
+        return "nan" if isinstance(x, float) and x != x else x
+
+    nodes = [(v, sorted((k, nan(x)) for k, x in a.items())) for v, a in G.nodes(data=True)]
+    edges = [
+        (u, v, k, a["path"].tolist(), a["path_from"], a["length"], nan(a["min_clearance"]))
+        for u, v, k, a in G.edges(keys=True, data=True)
+    ]
+    return nodes, edges, [(v, list(G.adj[v])) for v in G]
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40), st.floats(0.2, 0.8), st.integers(0, 2**31 - 1), st.booleans())
+def test_compiled_graph_equals_the_numpy_path(h, w, density, seed, thinned):
+    """The numba kernels (_topology_fast) give the numpy path's graph: same node ids and attributes, edges in
+    the same order with the same keys, paths, lengths and clearances (random masks as skeletons: junction
+    clusters with holes, adjacent node cells, loops without nodes; and thinned random maps)."""
+    rng = np.random.default_rng(seed)
+    m = rng.random((h, w)) < density
+    sk = thin(m) if thinned else m
+    clr = clearance_map(m, 0.05) if seed % 2 else None
+    fast = skeleton_to_graph(sk, resolution=0.05, clearance=clr)
+    ref = skeleton_to_graph(sk, resolution=0.05, clearance=clr, _numba=False)
+    assert _graph_lists(fast) == _graph_lists(ref)
+
+
+def test_compiled_graph_equals_the_numpy_path_on_rings_and_long_chains():
+    """Closed loops without any node cell (promoted to 'loop' nodes) and a chain longer than the numpy path's
+    lockstep limit (2048 cells: its pointer-jumping branch)."""
+    m = np.zeros((60, 2600), bool)
+    m[5, 3:2590] = True  # a 2587-cell line
+    k = np.arange(7)
+    for r0, c0 in ((20, 20), (40, 60)):  # diamonds of diagonal steps: rings of chain cells only
+        m[r0 + k, c0 + k] = m[r0 + k, c0 - k] = m[r0 + 12 - k, c0 + k] = m[r0 + 12 - k, c0 - k] = True
+    m[57, 60:80] = True
+    G = skeleton_to_graph(m, resolution=0.1)
+    assert sorted(nx.get_node_attributes(G, "kind").values()).count("loop") == 2
+    assert _graph_lists(G) == _graph_lists(skeleton_to_graph(m, resolution=0.1, _numba=False))

@@ -17,6 +17,11 @@ no per-cell Python loops. The graph's dicts are written in bulk (``_bulk_multigr
 garbage collector paused; edge paths are views into one concatenated (sum K, 2) array. Python loops only over
 edges and nodes when the graph is built, over junction clusters with holes, and over pruned spurs.
 
+Compiled path (what runs when numba is installed, :mod:`holoslam.maps._topology_fast`): node labelling,
+chain tracing (one walk per chain), adjacent node-cell pairs and edge lengths as numba kernels returning the
+same arrays in the same order (``_graph_arrays_numba`` vs ``_graph_arrays_numpy``, tested equal); on the
+tiled 4000 x 4000 household map most of the remaining time is building the networkx dicts.
+
 Spur pruning (documented length): an edge with an endpoint node at one end and a junction at the other is
 a spur; it is removed when its length is below ``max(prune_spur_m, spur_clearance_factor * clearance of its
 junction)`` (a branch that does not leave the junction's free disc is thinning noise from a wall corner).
@@ -186,6 +191,7 @@ def skeleton_to_graph(
     anchors_wTa: np.ndarray | None = None,
     prune_spur_m: float = 0.0,
     spur_clearance_factor: float = 0.0,
+    _numba: bool = True,
 ) -> nx.MultiGraph:
     """Topology graph of an 8-connected skeleton (module docstring). ``clearance`` is an (H, W) metres map
     (``clearance_map``); without it clearances are NaN. Cell (row, col) has its centre at
@@ -205,7 +211,53 @@ def skeleton_to_graph(
         clr = clr_flat[sk.rc[:, 0] * sk.w + sk.rc[:, 1]].astype(np.float64)
     else:
         clr = np.full(n, np.nan)
+    fast = _kernels() if _numba else None
+    arrays = _graph_arrays_numba if fast is not None else _graph_arrays_numpy
+    kinds, rep, all_u, all_v, rc, starts, length, min_clr = arrays(sk, clr, float(resolution))
 
+    node_rc = sk.rc[rep]
+    xs = origin_x + (node_rc[:, 1] + 0.5) * resolution
+    ys = origin_y + (node_rc[:, 0] + 0.5) * resolution
+    submap = _nearest_anchor(np.column_stack([xs, ys]), anchors_wTa)
+    # tens of thousands of small dicts: the cyclic garbage collector would rescan them all repeatedly
+    gc_was_on = gc.isenabled()
+    gc.disable()
+    try:
+        node_attrs = [
+            {"x": x, "y": y, "row": r, "col": c, "kind": k, "clearance": cl, "submap": s}
+            for x, y, r, c, k, cl, s in zip(
+                xs.tolist(),
+                ys.tolist(),
+                node_rc[:, 0].tolist(),
+                node_rc[:, 1].tolist(),
+                kinds.tolist(),
+                clr[rep].tolist(),
+                submap.tolist(),
+                strict=True,
+            )
+        ]
+        # paths: views into one (sum K, 2) array, one per edge
+        st = starts.tolist()
+        ul = all_u.tolist()
+        edge_attrs = [
+            {"path": rc[a:b], "path_from": u, "length": ln, "min_clearance": mc}
+            for a, b, u, ln, mc in zip(st[:-1], st[1:], ul, length.tolist(), min_clr.tolist(), strict=True)
+        ]
+        G = _bulk_multigraph(node_attrs, all_u, all_v, edge_attrs)
+    finally:
+        if gc_was_on:
+            gc.enable()
+    G.graph.update(resolution=float(resolution), origin_x=float(origin_x), origin_y=float(origin_y))
+    if prune_spur_m > 0 or spur_clearance_factor > 0:
+        prune_spurs(G, prune_spur_m, spur_clearance_factor)
+    return G
+
+
+def _graph_arrays_numpy(sk: _Skeleton, clr: np.ndarray, resolution: float):
+    """The graph's arrays with numpy (the fallback without numba, and the reference the kernels are tested
+    against): (kinds, representative cell per node, edge ends u, v, concatenated (sum K, 2) path cells rc,
+    path offsets starts (m + 1), lengths, min clearances)."""
+    n = sk.flat.shape[0]
     # tips: one neighbour, or two neighbours touching each other (the end of a diagonal line; thin() keeps
     # such cells as line ends) are endpoints; junctions have >= 3 neighbours; the rest are chain cells
     tip2 = _TIP2[sk.code]
@@ -255,42 +307,51 @@ def skeleton_to_graph(
     else:
         length = min_clr = np.zeros(0)
 
-    node_rc = sk.rc[rep]
-    xs = origin_x + (node_rc[:, 1] + 0.5) * resolution
-    ys = origin_y + (node_rc[:, 0] + 0.5) * resolution
-    submap = _nearest_anchor(np.column_stack([xs, ys]), anchors_wTa)
-    # tens of thousands of small dicts: the cyclic garbage collector would rescan them all repeatedly
-    gc_was_on = gc.isenabled()
-    gc.disable()
+    return kinds, rep, all_u, all_v, rc, starts, length, min_clr
+
+
+def _graph_arrays_numba(sk: _Skeleton, clr: np.ndarray, resolution: float):
+    """``_graph_arrays_numpy`` with the compiled kernels (:mod:`holoslam.maps._topology_fast`): same arrays."""
+    from holoslam.maps import _topology_fast as kf
+
+    args = (sk.flat, sk.code, sk.index, sk.offs)
+    tip2 = _TIP2[sk.code]
+    is_node = (sk.deg != 2) | tip2
+    node_of, kind_code, rep = kf.nodes(*args, sk.deg, is_node, tip2, clr)
+    kinds = _KIND_NAMES[kind_code]
+    u_cell, v_cell, cells, starts, complete = kf.trace(*args, _BIT0, _BIT1, is_node)
+    if not complete:  # loops without any node cell: promote the smallest cell of each to a 'loop' node
+        loop_cells = _loop_breakers(sk, is_node)
+        is_node[loop_cells] = True
+        node_of[loop_cells] = np.arange(kinds.shape[0], kinds.shape[0] + loop_cells.shape[0])
+        kinds = np.concatenate([kinds, np.full(loop_cells.shape[0], "loop", dtype=kinds.dtype)])
+        rep = np.concatenate([rep, loop_cells])
+        u_cell, v_cell, cells, starts, complete = kf.trace(*args, _BIT0, _BIT1, is_node)
+        assert complete
+    di, dj = kf.node_pairs(*args, is_node, node_of, kinds.shape[0])
+    hu, hcells = _cluster_holes(sk, node_of, kinds)
+    all_u = np.concatenate([node_of[u_cell], node_of[di], hu]).astype(np.int64)
+    all_v = np.concatenate([node_of[v_cell], node_of[dj], hu]).astype(np.int64)
+    extra = [np.column_stack([di, dj]).ravel(), *hcells]
+    if di.shape[0] or hcells:
+        add = np.array([2] * di.shape[0] + [len(c) for c in hcells], dtype=np.int64)
+        starts = np.concatenate([starts, starts[-1] + np.cumsum(add)])
+        cells = np.concatenate([cells, *extra]).astype(np.int64)
+    rc = sk.rc[cells]
+    length, min_clr = kf.lengths(rc, starts, clr[cells], resolution)
+    return kinds, rep, all_u, all_v, rc, starts, length, min_clr
+
+
+_KIND_NAMES = np.array(["junction", "endpoint", "isolated"], dtype="<U8")
+
+
+def _kernels():
+    """The compiled kernels (:mod:`holoslam.maps._topology_fast`), or None when numba is missing."""
     try:
-        node_attrs = [
-            {"x": x, "y": y, "row": r, "col": c, "kind": k, "clearance": cl, "submap": s}
-            for x, y, r, c, k, cl, s in zip(
-                xs.tolist(),
-                ys.tolist(),
-                node_rc[:, 0].tolist(),
-                node_rc[:, 1].tolist(),
-                kinds.tolist(),
-                clr[rep].tolist(),
-                submap.tolist(),
-                strict=True,
-            )
-        ]
-        # paths: views into one (sum K, 2) array, one per edge
-        st = starts.tolist()
-        ul = all_u.tolist()
-        edge_attrs = [
-            {"path": rc[a:b], "path_from": u, "length": ln, "min_clearance": mc}
-            for a, b, u, ln, mc in zip(st[:-1], st[1:], ul, length.tolist(), min_clr.tolist(), strict=True)
-        ]
-        G = _bulk_multigraph(node_attrs, all_u, all_v, edge_attrs)
-    finally:
-        if gc_was_on:
-            gc.enable()
-    G.graph.update(resolution=float(resolution), origin_x=float(origin_x), origin_y=float(origin_y))
-    if prune_spur_m > 0 or spur_clearance_factor > 0:
-        prune_spurs(G, prune_spur_m, spur_clearance_factor)
-    return G
+        from holoslam.maps import _topology_fast
+    except ImportError:  # pragma: no cover - numba is a declared dependency
+        return None
+    return _topology_fast
 
 
 def _bulk_multigraph(node_attrs: list[dict], u: np.ndarray, v: np.ndarray, edge_attrs: list[dict]):
