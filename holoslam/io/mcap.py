@@ -49,7 +49,7 @@ heading is the yaw of x from magnetic north, counter-clockwise: ``yaw = -atan2(m
 
 Damaged files
 -------------
-Chunk CRCs are validated (zlib.crc32 of the decompressed records). A chunk that fails CRC or does not
+Chunk CRCs are validated (CRC-32 of the decompressed records, always). A chunk that fails CRC or does not
 decompress is dropped and its time range reported; reading continues with the next record (or, when a
 corrupt length desynchronises the stream, at the next chunk listed in the summary's chunk index). A file
 that ends early (recorder crash) keeps every complete chunk and reports the truncation and the lost range.
@@ -61,7 +61,6 @@ import json
 import math
 import re
 import struct
-import zlib
 from array import array
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -389,6 +388,11 @@ class _FileState:
         self.chunk_offsets: list[int] | None = None
 
 
+try:  # ISA-L's CRC-32 (same polynomial and values as zlib's) runs ~5x faster: 3 ms vs 16 ms per 100 MB
+    from isal.isal_zlib import crc32 as _crc32
+except ImportError:  # optional: zlib's is the reference and the fallback
+    from zlib import crc32 as _crc32
+
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_DATA_END = 0x0F
 _REC = struct.Struct("<BQ")
@@ -439,12 +443,50 @@ def _decompress(compression: str, data: bytes | memoryview, size: int) -> bytes:
     raise ValueError(f"unknown chunk compression '{compression}'")
 
 
+class _MappedReader:
+    """``read``/``seek`` over a read-only memory map of a file: ``read`` returns a memoryview slice (no copy,
+    short at the end of the file like ``BufferedReader.read``). Reading a chunk through ``f.read`` costs a
+    fresh allocation and a copy of every compressed byte before decompression; the map hands the page-cache
+    pages straight to the decompressor (bench_ingest: read + decompress of 100 MB went 41 -> 13 ms).
+
+    Views into the map never leave ``_iter_file``'s consumers: the decoders copy what they keep."""
+
+    __slots__ = ("_mv", "_pos", "_n")
+
+    def __init__(self, mm: Any) -> None:
+        self._mv = memoryview(mm)
+        self._n = len(self._mv)
+        self._pos = 0
+
+    def read(self, k: int) -> memoryview:
+        a = self._pos
+        b = min(a + k, self._n)
+        self._pos = b
+        return self._mv[a:b]
+
+    def seek(self, pos: int) -> None:
+        self._pos = pos
+
+
+def _open_mapped(fh: Any) -> Any:
+    """A ``_MappedReader`` over ``fh``'s file, or ``fh`` itself when the file cannot be memory-mapped (a pipe,
+    a file system without mmap): the same records either way, the mapped reader is only faster."""
+    import mmap
+
+    try:
+        return _MappedReader(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ))
+    except (OSError, ValueError, AttributeError):
+        return fh
+
+
 def _iter_file(st: _FileState, messages: bool = True) -> Iterator[tuple[int, Any]]:
     """Yield (opcode, payload) for schema, channel and message records of one MCAP file, in file order,
     validating chunk CRCs and salvaging what can be read. Message payload = (channel_id, log_time, data)."""
     path = st.path
-    with open(path, "rb") as f:
-        _check_magic(path, f.read(16))
+    with open(path, "rb") as fh:
+        _check_magic(path, fh.read(16))
+        # the map is not closed explicitly: it is unmapped when the last view into it is dropped
+        f = _open_mapped(fh)
         f.seek(8)
         pos = 8
         size = st.size
@@ -535,7 +577,7 @@ def _iter_chunk(st: _FileState, body: bytes, rec_pos: int, messages: bool) -> It
         st.crc_errors += 1
         st.lost.append(LostRange(str(st.path), rec_pos, start, end, f"chunk does not decompress: {exc}"))
         return
-    if crc != 0 and zlib.crc32(data) != crc:
+    if crc != 0 and (got := _crc32(data)) != crc:
         st.crc_errors += 1
         st.lost.append(
             LostRange(
@@ -543,7 +585,7 @@ def _iter_chunk(st: _FileState, body: bytes, rec_pos: int, messages: bool) -> It
                 rec_pos,
                 start,
                 end,
-                f"chunk CRC mismatch (expected {crc:08x}, got {zlib.crc32(data):08x})",
+                f"chunk CRC mismatch (expected {crc:08x}, got {got:08x})",
             )
         )
         return
@@ -1004,6 +1046,32 @@ def _cov_odom_to_body(cov_odom: np.ndarray, theta: float) -> np.ndarray:
     return rotate_cov_xy(cov_odom, -theta)
 
 
+def _cov36_to_body(c: tuple[float, ...], theta: float) -> np.ndarray | None:
+    """``_cov_odom_to_body(_cov3(c), theta)`` for a 36-tuple of floats (the fast CDR path), in scalar
+    arithmetic: the same operations in the same order, so bit-identical, without nine numpy indexings per
+    message. None when all zero (= unknown)."""
+    if len(c) != 36 or not any(c):
+        return None
+    phi = -theta
+    a, b, d = c[0], 0.5 * (c[1] + c[6]), c[7]
+    m, h = 0.5 * (a + d), 0.5 * (a - d)
+    c2, s2 = math.cos(2.0 * phi), math.sin(2.0 * phi)
+    o00 = m + h * c2 - b * s2
+    o11 = m - h * c2 + b * s2
+    o01 = h * s2 + b * c2
+    co, si = math.cos(phi), math.sin(phi)
+    x0, x1 = 0.5 * (c[5] + c[30]), 0.5 * (c[11] + c[31])
+    o02 = co * x0 - si * x1
+    o12 = si * x0 + co * x1
+    return np.array([[o00, o01, o02], [o01, o11, o12], [o02, o12, float(c[35])]], dtype=np.float64)
+
+
+def _readonly_f64(values: Any, shape: tuple[int, ...]) -> np.ndarray:
+    a = np.array(values, dtype=np.float64).reshape(shape)
+    a.setflags(write=False)
+    return a
+
+
 class _Conv:
     """Per-topic conversion state and counters (shared by the report)."""
 
@@ -1017,6 +1085,7 @@ class _Conv:
         self.skip_reason = ""
         self.fields = dict(rule.fields) if rule else {}
         self.units = dict(rule.units) if rule else {}
+        self.last_kd: tuple[Any, Any, np.ndarray, np.ndarray] | None = None  # CameraInfo K, D -> arrays
 
     def skip(self, why: str) -> None:
         self.skipped += 1
@@ -1078,6 +1147,13 @@ def _convert(c: _Conv, kind: str, msg: Any) -> tuple[int, list[Record]]:
             x, y, z = msg["position"]
             th = yaw_from_quaternion(*msg["orientation_xyzw"])
             cov, speed = msg["pose_covariance"], float(msg["linear"][0])
+            if role is Role.ODOMETRY:
+                cov3 = _cov36_to_body(cov, th)
+                if cov3 is None:
+                    c.zero_cov += 1
+                return stamp, [
+                    Odometry(stamp, Pose2(x, y, th), cov3, speed, frame or "odom", child or "base_link")
+                ]
         else:
             stamp, frame = _header_stamp(msg)
             x, y, z, th, cov = _pose_from(msg, kind)
@@ -1185,14 +1261,18 @@ def _convert(c: _Conv, kind: str, msg: Any) -> tuple[int, list[Record]]:
     if role is Role.CAMERA_INFO:
         if isinstance(msg, dict) and "stamp_ns" in msg:  # fast CDR path
             stamp = msg["stamp_ns"]
+            k, d = msg["k"], msg["d"]
+            kd = c.last_kd
+            if kd is None or kd[0] != k or kd[1] != d:  # intrinsics rarely change: share read-only arrays
+                kd = c.last_kd = (k, d, _readonly_f64(k, (3, 3)), _readonly_f64(d, (len(d),)))
             return stamp, [
                 CameraInfo(
                     stamp,
                     msg["frame_id"],
                     msg["width"],
                     msg["height"],
-                    np.array(msg["k"]),
-                    np.array(msg["d"]),
+                    kd[2],
+                    kd[3],
                     msg["distortion_model"] or "plumb_bob",
                 )
             ]
@@ -1550,8 +1630,12 @@ class LogReader:
                     if ts is None:
                         continue
                     ts.messages += 1
-                    self._start = log_time if self._start is None else min(self._start, log_time)
-                    self._end = log_time if self._end is None else max(self._end, log_time)
+                    if self._start is None:
+                        self._start = self._end = log_time
+                    elif log_time < self._start:
+                        self._start = log_time
+                    elif log_time > self._end:  # type: ignore[operator]
+                        self._end = log_time
                     if dec is None:
                         continue
                     try:
@@ -1562,7 +1646,9 @@ class LogReader:
                             ts.first_error = f"log time {log_time} ns: {type(exc).__name__}: {exc}"
                         continue
                     ts.decoded += 1
-                    yield from self._timed(ts, log_time, stamp, records)
+                    out = self._timed(ts, log_time, stamp, records)
+                    if out:
+                        yield from out
                     if self.progress is not None and st.bytes_read - last_progress > (1 << 22):
                         last_progress = st.bytes_read
                         self.progress(done_bytes + st.bytes_read, total)
@@ -1595,26 +1681,30 @@ class LogReader:
             yield from self._flush(ts)
 
     # -- time --------------------------------------------------------------------------------------------
+    # These return lists rather than being generators: nearly every call gives one record, and a list is far
+    # cheaper to build and drain per message than a generator object (measured in benchmarks/bench_ingest.py).
     def _timed(
         self, ts: _TopicState, log_time: int, stamp: int, records: list[Record]
-    ) -> Iterator[tuple[str, Record]]:
+    ) -> list[tuple[str, Record]]:
         if stamp == 0:
             stamp = log_time
-        if ts.offset is None and ts.t.role is not Role.TF_STATIC and ts.t.role is not Role.GROUND_TRUTH_WORLD:
-            ts.pending.append((log_time, stamp, records))
-            if len(ts.pending) >= CLOCK_WINDOW:
-                yield from self._flush(ts)
-            return
         if ts.offset is None:
+            if ts.t.role is not Role.TF_STATIC and ts.t.role is not Role.GROUND_TRUTH_WORLD:
+                ts.pending.append((log_time, stamp, records))
+                if len(ts.pending) >= CLOCK_WINDOW:
+                    return self._flush(ts)
+                return []
             ts.offset = 0
             if ts.t.role is Role.TF_STATIC and abs(log_time - stamp) > CLOCK_THRESHOLD_NS:
                 self._warnings.append(
                     f"{ts.t.topic}: static transforms stamped {(log_time - stamp) / 1e9:.1f} s before their log time "
                     "(latched); they hold for the whole log"
                 )
-        yield from self._emit(ts, log_time, stamp, records)
+        out: list[tuple[str, Record]] = []
+        self._emit(ts, log_time, stamp, records, out)
+        return out
 
-    def _flush(self, ts: _TopicState) -> Iterator[tuple[str, Record]]:
+    def _flush(self, ts: _TopicState) -> list[tuple[str, Record]]:
         if ts.offset is None and ts.pending:
             d = sorted(lt - s for lt, s, _ in ts.pending)
             med = d[len(d) // 2]
@@ -1631,12 +1721,14 @@ class LogReader:
             else:
                 ts.offset = 0
         pending, ts.pending = ts.pending, []
+        out: list[tuple[str, Record]] = []
         for lt, s, recs in pending:
-            yield from self._emit(ts, lt, s, recs)
+            self._emit(ts, lt, s, recs, out)
+        return out
 
     def _emit(
-        self, ts: _TopicState, log_time: int, stamp: int, records: list[Record]
-    ) -> Iterator[tuple[str, Record]]:
+        self, ts: _TopicState, log_time: int, stamp: int, records: list[Record], out: list[tuple[str, Record]]
+    ) -> None:
         off = ts.offset or 0
         s = stamp + off
         if ts.last_stamp is not None and s < ts.last_stamp:
@@ -1645,21 +1737,29 @@ class LogReader:
         ts.stamps.append(s)
         topic = ts.t.topic
         for r in records:
-            rs = getattr(r, "stamp_ns", 0)
-            if isinstance(r, GroundTruthWorld):
+            if isinstance(r, Transform):
+                if not r.static:
+                    rs = r.stamp_ns
+                    if rs == 0:
+                        r = replace(r, stamp_ns=log_time)
+                    elif off:
+                        r = replace(r, stamp_ns=rs + off)
+                fr = None
+            elif isinstance(r, GroundTruthWorld):
                 r = replace(r, stamp_ns=log_time)
-            elif isinstance(r, Transform) and r.static:
-                pass
-            elif rs == 0:
-                r = replace(r, stamp_ns=log_time)
-            elif off:
-                r = replace(r, stamp_ns=rs + off)
+                fr = None
+            else:
+                rs = r.stamp_ns
+                if rs == 0:
+                    r = replace(r, stamp_ns=log_time)
+                elif off:
+                    r = replace(r, stamp_ns=rs + off)
+                fr = getattr(r, "frame_id", None)
             ts.records += 1
-            fr = getattr(r, "frame_id", None) if not isinstance(r, Transform) else None
             if fr is None or fr != ts.last_frame:
                 ts.last_frame = fr
                 self._note_frames(topic, r)
-            yield topic, r
+            out.append((topic, r))
 
     def _note_frames(self, topic: str, r: Record) -> None:
         if isinstance(r, Transform):
