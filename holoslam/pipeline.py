@@ -337,6 +337,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
                 sigma_px=cfg.vision.sigma_px,
                 use_images=cfg.vision.use_images,
                 use_tags=cfg.vision.use_tags,
+                progress=lambda done, total: progress("vision", done, total),
             )
             vision_report = dataclasses.asdict(vrep)
             vision_report["problems"] = list(vision_report.get("problems", ()))[:50]

@@ -130,8 +130,13 @@ def test_bundled_household_log_gives_ground_truth_object_set():
     log, _ = read_log(BUNDLED)
     world = json.loads(log.world_json)
     objects = {o["id"]: o for o in world["objects"]}
-    obs, rep = observations_from_log(log, use_tags=False)
+    calls: list[tuple[int, int]] = []
+    obs, rep = observations_from_log(log, use_tags=False, progress=lambda d, n: calls.append((d, n)))
     assert rep.corrupt_images == 0 and rep.rejected_payloads == 0
+    # progress followed the decoding: from 0, increasing, at most 50 calls, all against the image count
+    done = [d for d, _ in calls]
+    assert done[0] == 0 and done == sorted(set(done)) and 20 <= len(calls) <= 50
+    assert {n for _, n in calls} == {len(log.images)}
     seen = set(rep.object_ids)
     assert seen <= set(objects)
     # every object the images show is found, positions agree with ground truth in the world frame

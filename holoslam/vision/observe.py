@@ -15,7 +15,7 @@ accepted once at least ``min_decodes`` (default 3) of its sightings, expressed i
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -113,9 +113,11 @@ def sightings_from_log(
     use_tags: bool = True,
     decoders: tuple[Decoder, ...] | None = None,
     fallback: Fallback | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[list[Sighting], dict]:
     """All holoslam-label sightings of a log (decoded images, then robot tag sightings), and counters for
-    the report (as a plain dict; ``observations_from_log`` turns it into a ``VisionReport``)."""
+    the report (as a plain dict; ``observations_from_log`` turns it into a ``VisionReport``).
+    ``progress(done, total)`` is called with the images decoded so far, about every 2 % of them."""
     c = {
         k: 0
         for k in (
@@ -157,7 +159,10 @@ def sightings_from_log(
             tag_keys.add((t.stamp_ns, label.object_id))
             out.append(Sighting(t.stamp_ns, t.frame_id, t.payload, label, t.corners, "tags"))
     if use_images:
+        every = max(1, -(-len(log.images) // 50))  # at most 50 calls
         for idx, im in enumerate(log.images):
+            if progress is not None and idx % every == 0:
+                progress(idx, len(log.images))
             c["images"] += 1
             where = f"image {idx} ({im.frame_id} at {im.stamp_ns} ns)"
             try:
@@ -198,12 +203,14 @@ def observations_from_log(
     decoders: tuple[Decoder, ...] | None = None,
     fallback: Fallback | None = None,
     camera_info_tolerance_ns: int = 50_000_000,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[tuple[ObjectObservation, ...], VisionReport]:
     """Object observations (label centre in ``base_frame`` at each image stamp, with covariance from
-    ``sigma_px`` pixel noise) from every image and robot tag sighting of ``log``, plus a ``VisionReport``."""
+    ``sigma_px`` pixel noise) from every image and robot tag sighting of ``log``, plus a ``VisionReport``.
+    ``progress(done, total)`` follows the image decoding (see :func:`sightings_from_log`)."""
     from holoslam.frames import TransformTree
 
-    sightings, c = sightings_from_log(log, use_images, use_tags, decoders, fallback)
+    sightings, c = sightings_from_log(log, use_images, use_tags, decoders, fallback, progress)
     problems: list[str] = list(c.pop("problems"))
     foreign_payloads = c.pop("foreign_payloads")
     tree = TransformTree(log.transforms)
