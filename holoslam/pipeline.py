@@ -775,8 +775,9 @@ def run_logs(
     if len(logs) == 1 and scheduler is None:
         try:
             summary = run_log_to_folder(str(logs[0]), str(out_root), config, progress)
-        except IngestError as e:
-            raise IngestError(f"{logs[0]}: {e}") from None
+        except IngestError as e:  # name the log, once
+            msg = str(e)
+            raise IngestError(msg if msg.startswith(str(logs[0])) else f"{logs[0]}: {msg}") from None
         return {"ok": True, "logs": [summary], "text": summary["text"] + f"\n  output: {out_root}"}
 
     def on_done(item, done, total):

@@ -240,6 +240,18 @@ def test_required_role_missing(tmp_path, records):
         read_log(path, require=["odometry", "scan"])
 
 
+def test_required_role_missing_from_a_damaged_file_says_it_is_damaged(tmp_path, records):
+    path = write_ros2_log(tmp_path / "a.mcap", records)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[:200])  # the recorder died before the first chunk was complete
+    with pytest.raises(IngestError, match=r"no odometry data .* The file is damaged \(truncated"):
+        read_log(cut, require=["odometry"])
+    with pytest.raises(IngestError, match="no scan data") as info:  # an intact file: no damage claimed
+        read_log(write_ros2_log(tmp_path / "b.mcap", [r for r in records if not isinstance(r, Scan)]),
+                 require=["scan"])
+    assert "damaged" not in str(info.value)
+
+
 def test_zero_covariance_invalid_scans_missing_tf_gaps_and_order(tmp_path):
     t0 = 1_700_000_000_000_000_000
     recs = []

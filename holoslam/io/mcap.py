@@ -1891,8 +1891,15 @@ def read_log(
         role = Role(r)
         if not any(c.role == role.value and c.records for c in report.channels):
             offered = ", ".join(f"{c.topic} ({c.schema})" for c in report.channels) or "none"
+            damage = ""
+            if report.truncated or report.crc_errors or report.lost:
+                damage = (
+                    f" The file is damaged ({'truncated' if report.truncated else 'corrupt'}, "
+                    f"{report.crc_errors} CRC errors, {len(report.lost)} lost ranges): what it held before the "
+                    "damage was read; `holoslam inspect` lists what survived."
+                )
             raise IngestError(
-                f"{path}: no {role.value} data (a required input). Topics in the log: {offered}. "
+                f"{path}: no {role.value} data (a required input). Topics in the log: {offered}.{damage} "
                 "If one of them carries it, assign it in a mapping file, e.g. 'topics: {/my_topic: "
                 + role.value
                 + "}'"
