@@ -19,7 +19,9 @@ Printed per row: anchors, anchor position RMSE (m) and heading RMSE (deg) for de
 the ratio DR/graph, the object RMSE (m) for DR (sightings placed with the DR anchor poses, averaged per object)
 and the graph, the fraction of true anchor positions in their 95 % ellipses (``cov95``, after alignment; the
 first-anchor gauge variant in ``cov95@0``), for corrupted variants the ratio to clean, and for ``moved3`` how
-many of the moved objects the solver reported as moved. ``obj≥2`` is the object RMSE over the confirmed objects
+many of the moved objects the solver reported as moved; ``skip`` the observations the front end skipped (before
+the first anchor: an object seen there loses that sighting, which can leave a moved object one sighting before
+its move, too few to tell a move from a bad sighting). ``obj≥2`` is the object RMSE over the confirmed objects
 (at least two sightings kept by the solver), ``n1`` the number of objects seen once (unconfirmed: a single
 misread id naming an object seen nowhere else cannot be detected, it puts that object where the misread label
 is), ``/cl≥2`` the corrupted variant's ratio to clean on confirmed objects. Every estimate is aligned to the truth with
@@ -157,6 +159,7 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
         cov95=te.coverage95,
         cov95_0=te0.coverage95,
         fe_s=t1 - t0,
+        skipped=fe.skipped_observations,
         moved_found=moved_found,
         loops=int(np.sum(fe.problem.relative.kind == "loop")),
     )
@@ -190,7 +193,7 @@ def print_table(rows):
         f"{'log':18s} {'variant':19s} {'anch':>4s} {'DR m':>6s} {'graph m':>7s} {'ratio':>5s} {'DR°':>5s} "
         f"{'graph°':>6s} {'DR obj':>6s} {'obj m':>6s} {'n':>3s} {'obj≥2':>6s} {'n1':>2s} {'cov95':>5s} "
         f"{'cov95@0':>7s} {'/clean':>6s} {'/cl≥2':>6s} "
-        f"{'moved':>5s} {'loops':>5s} {'fe s':>5s}"
+        f"{'moved':>5s} {'skip':>4s} {'loops':>5s} {'fe s':>5s}"
     )
     print(hdr)
     for name, var, m, clean in rows:
@@ -205,7 +208,7 @@ def print_table(rows):
             f"{name:18s} {var:19s} {m['anchors']:4d} {m['dr_pos']:6.3f} {m['pos']:7.4f} "
             f"{m['dr_pos'] / m['pos']:5.1f} {m['dr_head']:5.2f} {m['head']:6.3f} {m['dr_obj']:6.3f} "
             f"{m['obj']:6.3f} {m['n_obj']:3d} {m['obj2']:6.3f} {m['n_once']:2d} {m['cov95']:5.2f} "
-            f"{m['cov95_0']:7.2f} {rel} {rel2} {mv:>5s} "
+            f"{m['cov95_0']:7.2f} {rel} {rel2} {mv:>5s} {m['skipped']:4d} "
             f"{m['loops']:5d} {m['fe_s']:5.1f}",
             flush=True,
         )
