@@ -262,3 +262,24 @@ def test_keyframe_prefilter_never_rules_out_a_keyframe():
     assert maybe[exact].all() and maybe[:50].all()
     clearly_not = (dist < cfg.keyframe_distance - 1e-3) & (turn < math.radians(cfg.keyframe_turn_deg) - 1e-3)
     assert clearly_not.sum() > 100 and not maybe[clearly_not].any()
+
+
+def test_observation_before_the_first_scan_goes_to_anchor_0_by_dead_reckoning_back():
+    # the laser starts 2 s after odometry and camera (the first 10 scans dropped): sightings in those 2 s are
+    # placed in anchor 0 through the odometry between them and the first scan, not dropped
+    log, obs, t, wTb = make_log(seed=3)
+    late = dataclasses.replace(log, scans=log.scans[10:])
+    first = late.scans[0].stamp_ns
+    early = [o for o in obs if o.stamp_ns < first]
+    assert early, "the synthetic log must have sightings before the first kept scan"
+    fe = build_problem(late, obs, FrontEndConfig(build_grids=False))
+    assert fe.skipped_observations == 0
+    P = fe.problem
+    a0 = np.array([np.interp(first, t, wTb[:, 0]), np.interp(first, t, wTb[:, 1]),
+                   np.interp(first, t, np.unwrap(wTb[:, 2]))])
+    rows = np.flatnonzero(P.landmarks.i == 0)[: len(early)]
+    assert len(rows) == len(early)
+    for r in rows:
+        name, xy, c = P.landmarks.landmark[r], P.landmarks.a_position[r], P.landmarks.cov_a_position[r]
+        e = xy - g.transform_points(g.inverse(a0), OBJECTS[name][None, :2])[0]
+        assert e @ np.linalg.solve(c, e) < 20.0 and np.hypot(*e) < 0.1, (name, e)

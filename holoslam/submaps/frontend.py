@@ -29,7 +29,9 @@ Steps (seed 002 §2, SPEC §4):
    keyframe's pose error, so together they count as one measurement).
 6. Landmarks (Eq. 16): an observation at stamp t is put into the anchor frame of the submap active at t, using
    the robot's pose there (last keyframe ∘ dead reckoning to t): a_xy = R(theta) b_xy + t, z kept; its 2x2
-   covariance is R cov_b R^T + J cov_aTb J^T.
+   covariance is R cov_b R^T + J cov_aTb J^T. An observation before the first scan (the camera may fire first)
+   goes to anchor 0 by dead reckoning back from it; only observations outside the odometry's span are skipped
+   (counted in ``skipped_observations``).
 7. Ambiguous objects: an object seen at least twice whose sightings all disagree with one another (no two
    within ``association_gate`` of each other under their covariances plus ``association_drift`` of the initial
    anchors) cannot be located: no majority says which sighting is right (one misread id or one tag at the wrong
@@ -84,8 +86,8 @@ class FrontEndConfig:
 @dataclass(frozen=True, eq=False)
 class FrontEnd:
     """Submaps, the SLAM problem, the whole-run dead reckoning (``dr_stamps_ns``, ``dr_wTb``), the anchors'
-    stamps, the base->laser pose ``bTs`` used, and what was skipped (observations before the first anchor),
-    and ``ambiguous_objects``: ids whose sightings all disagree (step 7), left out of the problem."""
+    stamps, the base->laser pose ``bTs`` used, what was skipped (observations outside the odometry's span or
+    at an anchor's origin), and ``ambiguous_objects``: ids whose sightings all disagree (step 7), left out of the problem."""
 
     submaps: tuple[Submap, ...]
     problem: object  # holoslam.graph.problem.SlamProblem
@@ -355,14 +357,24 @@ def build_problem(
     skipped = 0
     for ob in sorted(observations, key=lambda o: o.stamp_ns):
         k = int(np.searchsorted(anchors, ob.stamp_ns, side="right")) - 1
-        if k < 0 or ob.stamp_ns > ost[-1]:
+        if ob.stamp_ns > ost[-1] or ob.stamp_ns < ost[0]:
             skipped += 1
             continue
-        sm = closed[k]
-        q = int(np.searchsorted(sm.scan_stamps_ns, ob.stamp_ns, side="right")) - 1
-        dr = dead_reckon(ost, opose, int(sm.scan_stamps_ns[q]), int(ob.stamp_ns), start=sm.aTb[q],
-                         cov_start=sm.cov_aTb[q], **short)
-        xy, c2, z = landmark_in_anchor(dr.end, dr.cov_aTb_end, ob.b_position, ob.cov_b_position)
+        if k < 0:  # before the first scan (odometry covers it): dead reckoning backwards from anchor 0
+            sm = closed[0]
+            back = dead_reckon(ost, opose, int(ob.stamp_ns), int(sm.scan_stamps_ns[0]), **short)
+            Ji = g.inverse_jacobian(back.end)
+            aTb, cov_aTb = g.propagate_compose(
+                sm.aTb[0], sm.cov_aTb[0], g.inverse(back.end), Ji @ back.cov_aTb_end @ Ji.T
+            )
+            k = 0
+        else:
+            sm = closed[k]
+            q = int(np.searchsorted(sm.scan_stamps_ns, ob.stamp_ns, side="right")) - 1
+            dr = dead_reckon(ost, opose, int(sm.scan_stamps_ns[q]), int(ob.stamp_ns), start=sm.aTb[q],
+                             cov_start=sm.cov_aTb[q], **short)
+            aTb, cov_aTb = dr.end, dr.cov_aTb_end
+        xy, c2, z = landmark_in_anchor(aTb, cov_aTb, ob.b_position, ob.cov_b_position)
         if np.hypot(*xy) < 1e-3:
             skipped += 1
             continue
