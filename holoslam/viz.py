@@ -225,13 +225,16 @@ def draw_trajectory(
     n_sigma: float = 2.0,
     colour: str = "tab:blue",
     label: str | None = None,
+    points: bool = False,
 ) -> list[Any]:
-    """A trajectory (N, 3) as a line, with n-sigma covariance ellipses at every ``every``-th pose when
-    ``cov_wTb`` (N, 3, 3) is given."""
+    """A trajectory (N, 3) as a line (or, with ``points``, as separate dots: e.g. submap anchors, which a line
+    would join across walls), with n-sigma covariance ellipses at every ``every``-th pose when ``cov_wTb``
+    (N, 3, 3) is given."""
     from matplotlib.collections import LineCollection
 
     T = np.asarray(wTb, dtype=np.float64).reshape(-1, 3)
-    (line,) = ax.plot(T[:, 0], T[:, 1], "-", color=colour, lw=1.2, label=label)
+    style = dict(ls="none", marker="o", ms=2.5) if points else dict(ls="-", lw=1.2)
+    (line,) = ax.plot(T[:, 0], T[:, 1], color=colour, label=label, **style)
     arts: list[Any] = [line]
     if cov_wTb is not None:
         C = np.asarray(cov_wTb, dtype=np.float64).reshape(-1, 3, 3)

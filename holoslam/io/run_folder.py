@@ -147,7 +147,9 @@ def _pictures(out: Path, wTb, dr, wTa, cov_wTa, grid, topology, holographic, pla
         trajs["ground truth"] = gt
     fig = viz.trajectory_figure(trajs, grid=grid, title="trajectory", every=max(1, len(wTb) // 60))
     if cov_wTa is not None and np.all(np.isfinite(cov_wTa)):
-        viz.draw_trajectory(fig.axes[0], wTa, cov_wTa, every=1, colour="black", label="anchors (2-sigma)")
+        viz.draw_trajectory(
+            fig.axes[0], wTa, cov_wTa, every=1, colour="black", label="anchors (2-sigma ellipses)", points=True
+        )
         fig.axes[0].legend(fontsize=7)
     for name, f in (
         ("trajectory.png", fig),
