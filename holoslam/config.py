@@ -78,6 +78,8 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
     if tp is Path:
         if not isinstance(value, str):
             raise ConfigError(f"{where}: expected a path, got {value!r}")
+        if not value.strip():
+            raise ConfigError(f"{where}: the path is empty; give a file path or remove the key")
         return Path(value)
     if origin is tuple:
         args = typing.get_args(tp)

@@ -32,6 +32,7 @@ tags holoslam does not use (EQUIV: TORO's equivalence of two vertices) are liste
 from __future__ import annotations
 
 import math
+import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
 from enum import Enum
@@ -137,6 +138,7 @@ _TAGS: dict[str, tuple[int, str]] = {
     "FIX": (1, "fix"),
 }
 _KNOWN_IGNORED = {"EQUIV": "TORO vertex equivalence (not used by holoslam)"}
+_MAX_ID = 2**53  # ids are read as float64: larger integers are not exact (and would not fit int64)
 _INT_FIELDS = {
     "vertex": 1,
     "point": 1,
@@ -388,7 +390,10 @@ def _tokenise(
             nums = [n for t in tags for n in groups[t][0]]
             rests = [r for t in tags for r in groups[t][1]]
             try:  # loadtxt drops "# ..." tails; a line that is only a comment changes the row count below
-                a = np.loadtxt(rests, dtype=np.float64, ndmin=2, comments="#")
+                # an empty row ("TAG" alone) only warns (UserWarning): the shape check below catches it
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", UserWarning)
+                    a = np.loadtxt(rests, dtype=np.float64, ndmin=2, comments="#")
             except ValueError:
                 regular = False
                 break
@@ -415,14 +420,14 @@ def _check_array(arr: np.ndarray, rows: _Rows, nint: int, path: str, text_lines:
         raise _fail(path, rows.lines[r], text_lines[rows.lines[r] - 1], "a field is not finite (nan or inf)")
     if nint:
         ids = arr[:, :nint]
-        bad = (ids != np.round(ids)) | (ids < 0)
+        bad = (ids != np.round(ids)) | (ids < 0) | (ids > _MAX_ID)
         if bad.any():
             r = int(np.argmax(bad.any(axis=1)))
             raise _fail(
                 path,
                 rows.lines[r],
                 text_lines[rows.lines[r] - 1],
-                "a vertex id is not a non-negative integer",
+                "a vertex id is not a non-negative integer (at most 2**53)",
             )
     return arr
 
@@ -517,6 +522,10 @@ def read_g2o(path: str | Path, noise: TextNoise = TextNoise.GTSAM_AUTO, strict: 
         text = path.read_text(encoding="utf-8", errors="strict")
     except FileNotFoundError:
         raise G2oFormatError(f"{path}: no such file") from None
+    except OSError as e:  # a directory, no permission
+        raise G2oFormatError(
+            f"{path}: cannot read the file ({e.strerror or e}); pass a g2o text file"
+        ) from None
     except UnicodeDecodeError as e:
         raise G2oFormatError(f"{path}: not a text file ({e.reason} at byte {e.start})") from None
     return parse_g2o(text, source=str(path), noise=noise, strict=strict)

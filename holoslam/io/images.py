@@ -60,13 +60,28 @@ def decode_image(image: Image) -> np.ndarray:
     buf = np.frombuffer(image.data, dtype=np.uint8)
     if buf.size == 0:
         raise ImageDecodeError(f"{where}: the message carries no image bytes")
-    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    img = _imdecode(buf, cv2.IMREAD_UNCHANGED, where)
     if img is None:
         raise ImageDecodeError(
             f"{where}: {buf.size} bytes do not decode as {kind} (corrupted or truncated data; "
             f"first bytes {bytes(image.data[:8]).hex()})"
         )
     return _bgr_or_gray(img)
+
+
+def _imdecode(buf: np.ndarray, flags: int, where: str) -> np.ndarray | None:
+    """``cv2.imdecode``, with OpenCV's own refusals (a header declaring more pixels than
+    ``CV_IO_MAX_IMAGE_PIXELS``, a malformed header) turned into ImageDecodeError naming ``where``."""
+    import cv2
+
+    try:
+        return cv2.imdecode(buf, flags)
+    except cv2.error as e:
+        why = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
+        raise ImageDecodeError(
+            f"{where}: OpenCV refuses to decode its {buf.size} bytes ({why}); the header is corrupt or declares "
+            "an image too large to decode (OpenCV's limit: the OPENCV_IO_MAX_IMAGE_PIXELS environment variable)"
+        ) from None
 
 
 def _decode_raw(image: Image, enc: str, where: str) -> np.ndarray:
@@ -117,7 +132,7 @@ def read_image_file(path: str | Path, grayscale: bool = False) -> np.ndarray:
         ) from None
     if data.size == 0:
         raise ImageDecodeError(f"{path}: the file is empty (0 bytes), not an image")
-    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE if grayscale else cv2.IMREAD_UNCHANGED)
+    img = _imdecode(data, cv2.IMREAD_GRAYSCALE if grayscale else cv2.IMREAD_UNCHANGED, str(path))
     if img is None:
         raise ImageDecodeError(
             f"{path}: not a decodable image: its {data.size} bytes are corrupt, truncated or an unsupported "

@@ -236,7 +236,16 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
             p = Path(source)
             if not p.is_file():
                 raise ConfigError(f"mapping file {p} does not exist; pass the path of a YAML topic mapping")
-            name, text = str(p), p.read_text(encoding="utf-8")
+            try:
+                name, text = str(p), p.read_text(encoding="utf-8")
+            except UnicodeDecodeError as exc:
+                raise ConfigError(
+                    f"mapping file {p} is not UTF-8 text (byte {exc.start}); pass the YAML topic mapping"
+                ) from None
+            except OSError as exc:
+                raise ConfigError(
+                    f"cannot read mapping file {p}: {exc.strerror or exc}; check the path"
+                ) from None
         try:
             data = yaml.safe_load(text)
             root = yaml.compose(text)
@@ -255,7 +264,9 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
         )
     extra = set(data) - {"topics"}
     if extra:
-        raise ConfigError(f"{name}: unknown key(s) {sorted(extra)}; the only top-level key is 'topics'")
+        raise ConfigError(
+            f"{name}: unknown key(s) {sorted(map(str, extra))}; the only top-level key is 'topics'"
+        )
     topics = data.get("topics") or {}
     if not isinstance(topics, dict):
         raise ConfigError(f"{name}: 'topics' must map topic names to a role or to {{role, fields, units}}")
@@ -271,7 +282,9 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
             raise ConfigError(f"{where}: give a role name or a dictionary with role/fields/units")
         bad = set(spec) - {"role", "fields", "units"}
         if bad:
-            raise ConfigError(f"{where}: unknown key(s) {sorted(bad)}; allowed: role, fields, units")
+            raise ConfigError(
+                f"{where}: unknown key(s) {sorted(map(str, bad))}; allowed: role, fields, units"
+            )
         role = _ROLE_NAMES.get(str(spec.get("role", "")).strip().lower())
         if role is None:
             raise ConfigError(f"{where}: role {spec.get('role')!r} is not one of: {roles_txt}")
@@ -291,7 +304,7 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
                 raise ConfigError(f"{where}: field path {v!r} must be a dotted name like header.stamp")
         for k, u in units.items():
             table = _UNIT_KIND.get(k)
-            if table is None or u not in table:
+            if table is None or not isinstance(u, str) or u not in table:
                 ok = f"one of {sorted(table)}" if table else "not a field with units"
                 raise ConfigError(f"{where}: unit {u!r} for {k!r}: {ok}")
         rules.append(
@@ -416,6 +429,24 @@ def _parse_channel(body: bytes):
     from mcap.records import Channel
 
     return Channel.read(ReadDataStream(BytesIO(body)))
+
+
+def _parse_record(
+    st: _FileState, op: int, body: bytes | memoryview, rec_pos: int, start: int = 0, end: int = 0
+) -> Any:
+    """The payload of one schema, channel or message record, or None (with a LostRange naming the byte) when its
+    fields are damaged: a corrupt record outside a CRC-checked chunk loses only itself."""
+    try:
+        if op == _OP_MESSAGE:
+            cid, _seq, log_time, _pub = _MSG.unpack_from(body, 0)
+            return cid, log_time, memoryview(body)[22:]
+        return (_parse_schema if op == _OP_SCHEMA else _parse_channel)(bytes(body))
+    except Exception as exc:  # struct.error, UnicodeDecodeError, mcap's EndOfFile...: the record is corrupt
+        kind = {_OP_MESSAGE: "message", _OP_SCHEMA: "schema", _OP_CHANNEL: "channel"}[op]
+        st.lost.append(
+            LostRange(str(st.path), rec_pos, start, end, f"corrupt {kind} record at byte {rec_pos}: {exc!r}")
+        )
+        return None
 
 
 def _chunk_index_offsets(path: Path) -> list[int]:
@@ -549,22 +580,20 @@ def _iter_file(st: _FileState, messages: bool = True) -> Iterator[tuple[int, Any
             rec_pos = pos
             pos += 9 + length
             st.bytes_read = pos
-            if op == _OP_MESSAGE:
-                if messages:
-                    cid, _seq, log_time, _pub = _MSG.unpack_from(body, 0)
-                    yield op, (cid, log_time, memoryview(body)[22:])
-            elif op == _OP_CHUNK:
+            if op == _OP_CHUNK:
                 yield from _iter_chunk(st, body, rec_pos, messages)
-            elif op == _OP_SCHEMA:
-                yield op, _parse_schema(body)
-            elif op == _OP_CHANNEL:
-                yield op, _parse_channel(body)
+            elif op in (_OP_SCHEMA, _OP_CHANNEL) or (op == _OP_MESSAGE and messages):
+                if (rec := _parse_record(st, op, body, rec_pos)) is not None:
+                    yield op, rec
             elif op in (_OP_DATA_END, _OP_FOOTER):
                 st.complete = True
                 break
 
 
 def _iter_chunk(st: _FileState, body: bytes, rec_pos: int, messages: bool) -> Iterator[tuple[int, Any]]:
+    if len(body) < _CHUNK_HDR.size + 4:
+        st.lost.append(LostRange(str(st.path), rec_pos, 0, 0, f"chunk record at byte {rec_pos} is too short"))
+        return
     start, end, usize, crc = _CHUNK_HDR.unpack_from(body, 0)
     try:
         (clen,) = struct.unpack_from("<I", body, 28)
@@ -600,14 +629,12 @@ def _iter_chunk(st: _FileState, body: bytes, rec_pos: int, messages: bool) -> It
         if q + length > n:
             st.lost.append(LostRange(str(st.path), rec_pos, start, end, f"record at {p} overruns its chunk"))
             return
-        if op == _OP_MESSAGE:
-            if messages:
-                cid, _seq, log_time, _pub = _MSG.unpack_from(data, q)
-                yield op, (cid, log_time, mv[q + 22 : q + length])
-        elif op == _OP_SCHEMA:
-            yield op, _parse_schema(bytes(mv[q : q + length]))
-        elif op == _OP_CHANNEL:
-            yield op, _parse_channel(bytes(mv[q : q + length]))
+        if op == _OP_MESSAGE and messages and length >= 22:  # the fast path of a sound message
+            cid, _seq, log_time, _pub = _MSG.unpack_from(data, q)
+            yield op, (cid, log_time, mv[q + 22 : q + length])
+        elif op in (_OP_SCHEMA, _OP_CHANNEL) or (op == _OP_MESSAGE and messages):
+            if (rec := _parse_record(st, op, mv[q : q + length], rec_pos, start, end)) is not None:
+                yield op, rec
         p = q + length
 
 

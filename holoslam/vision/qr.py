@@ -407,6 +407,8 @@ def to_gray(image: np.ndarray) -> np.ndarray:
         raise VisionError(
             f"image dtype is {a.dtype}; QR detection needs uint8 pixels (convert or rescale it)"
         )
+    if a.ndim in (2, 3) and (a.shape[0] == 0 or a.shape[1] == 0):
+        raise VisionError(f"image shape {a.shape} has no pixels; pass a decoded, non-empty image")
     if a.ndim == 2:
         return a
     if a.ndim == 3 and a.shape[2] == 3:
