@@ -223,8 +223,11 @@ def test_missing_path_and_bad_rosbag_dir(tmp_path):
         read_log(tmp_path / "nope.mcap")
     d = tmp_path / "bag"
     d.mkdir()
+    (d / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  storage_identifier: foo\n")
+    with pytest.raises(IngestError, match="storage 'foo' is not supported.*ros2 bag convert"):
+        read_log(d)
     (d / "metadata.yaml").write_text("rosbag2_bagfile_information:\n  storage_identifier: sqlite3\n")
-    with pytest.raises(IngestError, match="ros2 bag convert"):
+    with pytest.raises(IngestError, match="lists no files"):  # sqlite3 is read, but this bag has no files
         read_log(d)
 
 

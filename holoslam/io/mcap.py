@@ -342,7 +342,7 @@ def _resolve_files(path: str | Path) -> list[Path]:
                 f"{meta}: not valid YAML ({exc}); fix or delete it to read the *.mcap files"
             ) from exc
         storage = str(info.get("storage_identifier", "mcap"))
-        if storage != "mcap":
+        if storage not in ("mcap", "sqlite3"):
             raise IngestError(
                 f"{p}: rosbag2 storage '{storage}' is not supported; convert it with "
                 f"`ros2 bag convert` to storage mcap"
@@ -354,11 +354,15 @@ def _resolve_files(path: str | Path) -> list[Path]:
             raise IngestError(f"{p}: metadata.yaml lists files that are not there: {', '.join(missing)}")
         if files:
             return files
-    files = sorted(
-        p.glob("*.mcap"), key=lambda f: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", f.name)]
-    )
+    natural = lambda f: [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", f.name)]  # noqa: E731
+    files = sorted(p.glob("*.mcap"), key=natural) or sorted(p.glob("*.db3"), key=natural)
+    if not files and meta.is_file():
+        raise IngestError(
+            f"{p}: metadata.yaml lists no files and the directory holds no *.mcap or *.db3; the bag is incomplete "
+            "(copy its data files next to metadata.yaml)"
+        )
     if not files:
-        raise IngestError(f"{p}: a directory without metadata.yaml or *.mcap files; not a rosbag2 bag")
+        raise IngestError(f"{p}: a directory without metadata.yaml, *.mcap or *.db3 files; not a rosbag2 bag")
     return files
 
 
@@ -375,6 +379,34 @@ def _check_magic(path: Path, head: bytes) -> None:
     elif len(head) < 8 and MCAP_MAGIC.startswith(head[:8]):
         hint = "the file stops inside the MCAP magic; the recorder crashed before writing anything"
     raise IngestError(f"{path}: not an MCAP file (first bytes {head[:8].hex(' ')}); {hint}")
+
+
+def _sqlite_to_mcap(files: list[Path]) -> tuple[list[Path], Any, str | None]:
+    """rosbag2 sqlite3 files -> (one converted MCAP in a TemporaryDirectory, that directory, report note);
+    other files pass through as (files, None, None). The caller cleans the directory up after reading."""
+    from holoslam.io.rosbag2_sqlite import db3_to_mcap, is_sqlite
+
+    heads = []
+    for f in files:
+        with open(f, "rb") as fh:
+            heads.append(is_sqlite(fh.read(16)))
+    if not any(heads):
+        return files, None, None
+    if not all(heads):
+        raise IngestError(
+            f"{files[0].parent}: a bag mixing sqlite3 (.db3) and other files "
+            f"({', '.join(f.name for f, h in zip(files, heads, strict=True) if not h)}); give one storage"
+        )
+    import tempfile
+
+    tmp = tempfile.TemporaryDirectory(prefix="holoslam-db3-")
+    try:
+        out = Path(tmp.name) / f"{files[0].stem}.mcap"
+        summary = db3_to_mcap(files, out)
+    except BaseException:
+        tmp.cleanup()
+        raise
+    return [out], tmp, f"converted from rosbag2 sqlite3 ({summary.messages} messages)"
 
 
 @dataclass(frozen=True, slots=True)
@@ -864,7 +896,14 @@ def inspect_log(path: str | Path, mapping: str | Path | dict | LogMapping | None
     """
     files = _resolve_files(path)
     m = load_mapping(mapping)
-    topics, indexed, start, end, notes = _scan_channels(files)
+    read_files, tmp, note = _sqlite_to_mcap(files)
+    try:
+        topics, indexed, start, end, notes = _scan_channels(read_files)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    if note:
+        notes = [note, *notes]
     problems = _assign_roles(topics, m)
     dur = (end - start) / 1e9 if end > start else 0.0
     chans = []
@@ -1578,15 +1617,20 @@ class LogReader:
         self.files = _resolve_files(path)
         self.mapping = load_mapping(mapping)
         self.progress = progress
-        topics, _indexed, _s, _e, _notes = _scan_channels(self.files)
-        problems = _assign_roles(topics, self.mapping)
-        if problems:
-            raise IngestError(f"{path}: " + " | ".join(problems))
+        self._read_files, self._tmp, note = _sqlite_to_mcap(self.files)
+        try:
+            topics, _indexed, _s, _e, _notes = _scan_channels(self._read_files)
+            problems = _assign_roles(topics, self.mapping)
+            if problems:
+                raise IngestError(f"{path}: " + " | ".join(problems))
+        except BaseException:
+            self._cleanup()
+            raise
         self._topics = topics
         self._state = {name: _TopicState(t) for name, t in topics.items()}
         self._clocks: list[int] = []
         self._rebased: list[str] = []
-        self._warnings: list[str] = []
+        self._warnings: list[str] = [note] if note else []
         self._files: list[_FileState] = []
         self._edges: dict[str, str] = {}  # child -> parent
         self._sensor_frames: dict[str, str] = {}  # frame -> topic
@@ -1632,13 +1676,24 @@ class LogReader:
             return lambda d: json.loads(bytes(d))
         raise ValueError(_decoder_problem(schema, channel) or f"cannot decode encoding {enc}")
 
+    def _cleanup(self) -> None:
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
     def __iter__(self) -> Iterator[tuple[str, Record]]:
+        try:
+            yield from self._iter_files()
+        finally:
+            self._cleanup()
+
+    def _iter_files(self) -> Iterator[tuple[str, Record]]:
         if self._done:
             raise IngestError(f"{self.source}: a LogReader streams once; make a new one to read again")
         self._done = True
-        total = sum(p.stat().st_size for p in self.files)
+        total = sum(p.stat().st_size for p in self._read_files)
         done_bytes = 0
-        for fi, path in enumerate(self.files):
+        for fi, path in enumerate(self._read_files):
             st = _FileState(path)
             self._files.append(st)
             schemas: dict[int, Any] = {}
