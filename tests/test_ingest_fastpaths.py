@@ -72,12 +72,14 @@ def test_scalar_covariance_rotation_is_bit_identical_to_the_matrix_form():
         a = rng.normal(size=(6, 6))
         c36 = tuple(float(x) for x in (a @ a.T * rng.uniform(1e-6, 10.0)).ravel())
         th = float(rng.uniform(-math.pi, math.pi))
-        want = mcap_io._cov_odom_to_body(mcap_io._cov3(c36), th)
+        c = c36  # the (x, y, yaw) block of the 6x6, rotated into the body frame by the matrix form
+        block = np.array([[c[0], c[1], c[5]], [c[6], c[7], c[11]], [c[30], c[31], c[35]]])
+        want = mcap_io.rotate_cov_xy(block, -th)
         got = mcap_io._cov36_to_body(c36, th)
         assert got.dtype == np.float64 and got.shape == (3, 3)
         assert np.array_equal(got, want)
     assert mcap_io._cov36_to_body((0.0,) * 36, 0.3) is None
-    assert mcap_io._cov36_to_body((1.0,) * 35, 0.3) is None  # not a 6x6 covariance: unknown, as _cov3 says
+    assert mcap_io._cov36_to_body((1.0,) * 35, 0.3) is None  # not a 6x6 covariance: unknown
 
 
 def test_camera_info_records_follow_intrinsics_that_change_mid_log(tmp_path):

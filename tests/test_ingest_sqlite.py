@@ -207,3 +207,16 @@ def test_ros1_bag_keeps_its_conversion_hint(tmp_path):
     p.write_bytes(b"#ROSBAG V2.0\n" + b"\0" * 64)
     with pytest.raises(IngestError, match="ROS 1 bag"):
         read_log(p)
+
+
+def test_messages_of_an_unknown_topic_id_are_skipped_and_reported(tmp_path, ros2_log, messages):
+    db3 = _write_db3(tmp_path / "a.db3", messages)
+    con = sqlite3.connect(db3)
+    con.execute("INSERT INTO messages (topic_id, timestamp, data) VALUES (99, 1, x'00')")
+    con.commit()
+    con.close()
+    s = db3_to_mcap(db3, tmp_path / "a.mcap")
+    assert s.orphans == 1 and s.messages == len(messages)
+    got, report = read_log(db3)  # every good record is kept, the skipped one is named
+    _assert_same(got, read_log(ros2_log)[0])
+    assert any("1 messages skipped: their topic id is not in table 'topics'" in w for w in report.warnings)

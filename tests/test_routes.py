@@ -167,14 +167,16 @@ def test_planning_errors_are_clear():
     st.lists(st.tuples(quarter, quarter, quarter, quarter), min_size=1, max_size=8),
 )
 def test_compiled_segment_check_matches_segments_free(seed, segs):
-    """The compiled check the planner validates with (``_fast.seg_free``) agrees with ``segments_free``,
+    """The compiled check the planner validates with (``_fast.seg_free_tiles``) agrees with ``segments_free``,
     itself checked against dense sampling above."""
     from holoslam.planning import _fast
 
     free = random_map(seed, 10, 10, 3, 8)
+    bits, _ = _fast.tile_bits(free)
+    tclear = _fast.block_clearance(free)
     s = np.array(segs, dtype=np.float64)
     ref = segments_free(free, s[:, :2], s[:, 2:])
-    got = [_fast.seg_free(free, u0, v0, u1, v1, 1e-9) for u0, v0, u1, v1 in s.tolist()]
+    got = [_fast.seg_free_tiles(bits, tclear, 10, 10, u0, v0, u1, v1, 1e-9) for u0, v0, u1, v1 in s.tolist()]
     assert got == ref.tolist()
 
 
@@ -239,8 +241,26 @@ def test_start_in_overlapping_regions_enters_the_corridor_late():
     assert r.length <= ref * 0.05 + 1e-9  # any-angle: never longer than the 8-connected grid path here
 
 
+def _shortcut_by_search(regs, ekeys, nr):
+    """The reference greedy corridor shortcut: from each kept region jump to the last later region of ``regs``
+    adjacent to it (``ekeys`` = sorted ``lo * nr + hi`` keys of the region edges); portal ids, or none."""
+    out, i, m = [], 0, len(regs)
+    while i < m - 1:
+        for j in range(m - 1, i, -1):
+            a, b = int(regs[i]), int(regs[j])
+            key = min(a, b) * nr + max(a, b)
+            k = int(np.searchsorted(ekeys, key))
+            if a != b and k < len(ekeys) and ekeys[k] == key:
+                out.append(k)
+                i = j
+                break
+        else:  # consecutive regions of a corridor are always adjacent; otherwise no shortcut
+            return np.zeros(0, dtype=np.int64)
+    return np.array(out, dtype=np.int64)
+
+
 def test_shortcut_through_the_adjacency_equals_the_search_over_later_regions():
-    """``shortcut_corridor_adj`` (used by the query) returns the same portals as ``shortcut_corridor`` on
+    """``shortcut_corridor_adj`` (used by the query) returns the same portals as the search over later regions on
     random walks over the region graph (walks revisit regions, like trimmed corridors may not, a harder case)."""
     from holoslam.planning import _fast
 
@@ -263,7 +283,7 @@ def test_shortcut_through_the_adjacency_equals_the_search_over_later_regions():
             r = int(E[f, 0] + E[f, 1] - r)
             walk.append(r)
         regs = np.array(walk, dtype=np.int64)
-        want = _fast.shortcut_corridor(regs, ekeys, nr)
+        want = _shortcut_by_search(regs, ekeys, nr)
         got = _fast.shortcut_corridor_adj(regs, rptr, rids, E, nr)
         assert np.array_equal(got, want), walk
         checked += regs.shape[0] > 2
@@ -296,7 +316,7 @@ def test_clearance_is_the_chessboard_distance_to_the_nearest_blocked_cell(seed, 
 )
 def test_jumping_segment_check_equals_the_exact_one(seed, h, w, n_rect, n_dots, sseed):
     """``seg_free_tiles`` (the query's check: reads the mask as 64-bit tiles of 8 x 8 cells and skips the
-    pieces inside the square of free 4 x 4-cell blocks the block clearance proves) gives ``seg_free``'s answer: long
+    pieces inside the square of free 4 x 4-cell blocks the block clearance proves) gives ``segments_free``'s answer: long
     segments over open maps (where it jumps), endpoints on a quarter-cell lattice and on grid lines,
     axis-parallel segments, points off the grid."""
     from holoslam.planning import _fast
@@ -315,8 +335,8 @@ def test_jumping_segment_check_equals_the_exact_one(seed, h, w, n_rect, n_dots, 
     a[lattice], b[lattice] = np.round(a[lattice] * 4) / 4, np.round(b[lattice] * 4) / 4
     flat = rng.random(n) < 0.15
     b[flat, 0] = a[flat, 0]
-    for (au, av), (bu, bv) in zip(a.tolist(), b.tolist(), strict=True):
-        want = _fast.seg_free(free, au, av, bu, bv, 1e-9)
+    wants = segments_free(free, a, b).tolist()
+    for (au, av), (bu, bv), want in zip(a.tolist(), b.tolist(), wants, strict=True):
         assert _fast.seg_free_tiles(bits, tclear, h, w, au, av, bu, bv, 1e-9) == want, (au, av, bu, bv)
 
 

@@ -406,7 +406,10 @@ def _sqlite_to_mcap(files: list[Path]) -> tuple[list[Path], Any, str | None]:
     except BaseException:
         tmp.cleanup()
         raise
-    return [out], tmp, f"converted from rosbag2 sqlite3 ({summary.messages} messages)"
+    note = f"converted from rosbag2 sqlite3 ({summary.messages} messages)"
+    if summary.orphans:
+        note += f"; {summary.orphans} messages skipped: their topic id is not in table 'topics'"
+    return [out], tmp, note
 
 
 @dataclass(frozen=True, slots=True)
@@ -1079,14 +1082,6 @@ def _yaw(q: Any) -> float:
     )
 
 
-def _cov3(cov36: Any) -> np.ndarray | None:
-    """The (x, y, yaw) block of a 6x6 row-major covariance; None when all zero (= unknown)."""
-    c = tuple(cov36)
-    if len(c) != 36 or not any(c):
-        return None
-    return np.array([[c[0], c[1], c[5]], [c[6], c[7], c[11]], [c[30], c[31], c[35]]], dtype=np.float64)
-
-
 def rotate_cov_xy(cov3: np.ndarray, phi: float) -> np.ndarray:
     """``J cov3 J^T`` with J = blockdiag(R(phi), 1): the (x, y, yaw) covariance with its x/y axes rotated by
     phi. The 2x2 block uses the double-angle form, so an isotropic block stays exactly isotropic."""
@@ -1106,16 +1101,13 @@ def rotate_cov_xy(cov3: np.ndarray, phi: float) -> np.ndarray:
     return out
 
 
-def _cov_odom_to_body(cov_odom: np.ndarray, theta: float) -> np.ndarray:
-    """nav_msgs/Odometry's pose covariance is in the parent (odom) frame; ``Odometry.cov_odomTb`` is in the
-    body frame (GTSAM's right perturbation): rotate the x/y block by R(theta)^T."""
-    return rotate_cov_xy(cov_odom, -theta)
-
-
-def _cov36_to_body(c: tuple[float, ...], theta: float) -> np.ndarray | None:
-    """``_cov_odom_to_body(_cov3(c), theta)`` for a 36-tuple of floats (the fast CDR path), in scalar
-    arithmetic: the same operations in the same order, so bit-identical, without nine numpy indexings per
-    message. None when all zero (= unknown)."""
+def _cov36_to_body(c: Any, theta: float) -> np.ndarray | None:
+    """nav_msgs/Odometry's 6x6 row-major pose covariance ``c`` is in the parent (odom) frame;
+    ``Odometry.cov_odomTb`` is the (x, y, yaw) block in the body frame (GTSAM's right perturbation), i.e.
+    ``rotate_cov_xy(block, -theta)``, computed here in scalar arithmetic with the same operations in the same
+    order (bit-identical, without numpy indexing per message). None when all zero or not 36 numbers (unknown)."""
+    if not isinstance(c, tuple):  # the generic decoders give lists or arrays; the fast CDR path a float tuple
+        c = tuple(float(v) for v in c)
     if len(c) != 36 or not any(c):
         return None
     phi = -theta
@@ -1213,13 +1205,6 @@ def _convert(c: _Conv, kind: str, msg: Any) -> tuple[int, list[Record]]:
             x, y, z = msg["position"]
             th = yaw_from_quaternion(*msg["orientation_xyzw"])
             cov, speed = msg["pose_covariance"], float(msg["linear"][0])
-            if role is Role.ODOMETRY:
-                cov3 = _cov36_to_body(cov, th)
-                if cov3 is None:
-                    c.zero_cov += 1
-                return stamp, [
-                    Odometry(stamp, Pose2(x, y, th), cov3, speed, frame or "odom", child or "base_link")
-                ]
         else:
             stamp, frame = _header_stamp(msg)
             x, y, z, th, cov = _pose_from(msg, kind)
@@ -1233,11 +1218,9 @@ def _convert(c: _Conv, kind: str, msg: Any) -> tuple[int, list[Record]]:
                 speed = math.nan
         if role is Role.GROUND_TRUTH:
             return stamp, [GroundTruthPose(stamp, Pose2(x, y, th), z=z, frame_id=frame or "map")]
-        cov3 = _cov3(cov) if cov is not None else None
+        cov3 = _cov36_to_body(cov, th) if cov is not None else None
         if cov3 is None and cov is not None:
             c.zero_cov += 1
-        if cov3 is not None:
-            cov3 = _cov_odom_to_body(cov3, th)
         return stamp, [Odometry(stamp, Pose2(x, y, th), cov3, speed, frame or "odom", child or "base_link")]
     if role is Role.SCAN:
         if custom:

@@ -40,6 +40,7 @@ class Db3Summary:
     messages: int
     topic_counts: tuple[tuple[str, int], ...]  # (topic, messages), sorted by topic
     definitions: tuple[tuple[str, str], ...]  # (type, "bag" | "ros2defs" | "none"), sorted by type
+    orphans: int = 0  # messages whose topic id is not in table 'topics' (not written; reported)
 
 
 def is_sqlite(head: bytes) -> bool:
@@ -123,7 +124,7 @@ def db3_to_mcap(db3_paths: Sequence[str | Path] | str | Path, out_path: str | Pa
     ``holoslam.io.ros2defs.msgdef``, else empty), one channel per (topic, type) with the bag's serialization
     format (``cdr``), messages merged across files in (timestamp, file, id) order with
     log_time = publish_time = timestamp. Raises IngestError naming the file for a missing, corrupt or
-    non-rosbag2 database.
+    non-rosbag2 database; messages whose topic id is not in table ``topics`` are counted in ``orphans``.
     """
     from mcap.writer import CompressionType, Writer
 
@@ -161,13 +162,12 @@ def db3_to_mcap(db3_paths: Sequence[str | Path] | str | Path, out_path: str | Pa
                         counts.setdefault(name, 0)
                     topic_map[(fi, int(tid))] = (channel_ids[key], name)
             streams = [_rows(con, fi, p) for fi, (con, p) in enumerate(zip(cons, paths, strict=True))]
-            n = 0
+            n = orphans = 0
             for ts, fi, _rid, tid, data in heapq.merge(*streams):
                 ch = topic_map.get((fi, tid))
-                if ch is None:
-                    raise IngestError(
-                        f"{paths[fi]}: message id {_rid} refers to topic id {tid}, which is not in table 'topics'"
-                    )
+                if ch is None:  # no topic, no type: undecodable; the others go on
+                    orphans += 1
+                    continue
                 w.add_message(ch[0], log_time=ts, data=data, publish_time=ts)
                 counts[ch[1]] += 1
                 n += 1
@@ -181,4 +181,5 @@ def db3_to_mcap(db3_paths: Sequence[str | Path] | str | Path, out_path: str | Pa
         messages=n,
         topic_counts=tuple(sorted(counts.items())),
         definitions=tuple(sorted(sources.items())),
+        orphans=orphans,
     )

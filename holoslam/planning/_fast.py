@@ -8,12 +8,11 @@ on-disk cache next to this file). Every kernel is a plain function of numpy arra
   the regions holding them (:func:`_regions_at`, bucket index), :func:`corridor_astar` (A* over the port
   graph with Euclidean + ALT landmark heuristic), corridor trimming, :func:`corridor_path` (:func:`funnel`,
   polished by :func:`refine` where the funnel path turns back) on the corridor and on its greedy shortcut
-  (:func:`shortcut_corridor`), :func:`string_pull` on the grid and :func:`simplify_validate` (collinear
+  (:func:`shortcut_corridor_adj`), :func:`string_pull` on the grid and :func:`simplify_validate` (collinear
   points dropped, every segment not checked by the string pull checked exactly by :func:`seg_free_tiles`).
-* :func:`seg_free` -- the exact segment test of ``routes.segments_free`` (the same cut-at-grid-lines,
-  midpoint-in-a-free-cell rule with the same ``eps``), without allocation; :func:`seg_free_tiles` gives the
-  same answer on the 64-bit tiles of :func:`tile_bits`, jumping over squares of free tiles
-  (:func:`chessboard_clearance`), and is what the query uses.
+* :func:`seg_free_tiles` -- the exact segment test of ``routes.segments_free`` (the same cut-at-grid-lines,
+  midpoint-in-a-free-cell rule with the same ``eps``, tested equal) without allocation, on the 64-bit tiles
+  of :func:`tile_bits`, jumping over squares of free tiles (:func:`chessboard_clearance`).
 * :func:`refine` -- exact coordinate descent for the shortest polyline through boxes; also the reference the
   tests compare the funnel with.
 * Build kernels of :mod:`holoslam.planning.twolayer`: :func:`label_image`, :func:`block_edges` (layer-1
@@ -34,75 +33,6 @@ _JIT = {"cache": True, "nogil": True}
 WORKSPACE_DTYPE = np.dtype(
     [("g", "f8"), ("h", "f8"), ("stamp", "i4"), ("parent", "i4"), ("pos", "i4"), ("pad", "i4")], align=True
 )
-
-
-@nb.njit(**_JIT)
-def _point_free(free, u, v, eps):
-    h, w = free.shape
-    ru = np.rint(u)
-    rv = np.rint(v)
-    on_u = abs(u - ru) <= eps
-    on_v = abs(v - rv) <= eps
-    fu = np.int64(ru) if on_u else np.int64(math.floor(u))
-    fv = np.int64(rv) if on_v else np.int64(math.floor(v))
-    for du in range(2):
-        if du == 1 and not on_u:
-            break
-        cu = fu - du
-        for dv in range(2):
-            if dv == 1 and not on_v:
-                break
-            cv = fv - dv
-            if cu >= 0 and cu < w and cv >= 0 and cv < h and free[cv, cu]:
-                return True
-    return False
-
-
-@nb.njit(**_JIT)
-def seg_free(free, au, av, bu, bv, eps):
-    """True when every point of the segment a -> b lies in the closed union of free cells (the rule of
-    ``routes.segments_free``): the segment is cut at every integer u and v line it crosses and the middle of
-    each piece must be free. The crossings of each axis are already sorted along the segment, so the two
-    sequences are merged on the fly (no allocation)."""
-    if au == bu and av == bv:
-        return _point_free(free, au, av, eps)
-    lo = min(au, bu)
-    hi = max(au, bu)
-    f_u = np.int64(math.floor(lo + eps)) + 1
-    n_u = max(np.int64(math.ceil(hi - eps)) - 1 - f_u + 1, 0)
-    lo = min(av, bv)
-    hi = max(av, bv)
-    f_v = np.int64(math.floor(lo + eps)) + 1
-    n_v = max(np.int64(math.ceil(hi - eps)) - 1 - f_v + 1, 0)
-    du = bu - au
-    dv = bv - av
-    iu = 0
-    iv = 0
-    t_prev = 0.0
-    while True:
-        # next crossing of each axis in increasing t (lines visited upward or downward with the direction)
-        tu = 2.0
-        if iu < n_u:
-            x = f_u + iu if du > 0 else f_u + n_u - 1 - iu
-            tu = (x - au) / du
-        tv = 2.0
-        if iv < n_v:
-            y = f_v + iv if dv > 0 else f_v + n_v - 1 - iv
-            tv = (y - av) / dv
-        if tu <= tv:
-            t = tu
-            iu += 1
-        else:
-            t = tv
-            iv += 1
-        if t > 1.0:
-            t = 1.0
-        tm = 0.5 * (t_prev + t)
-        if not _point_free(free, au + du * tm, av + dv * tm, eps):
-            return False
-        if t >= 1.0:
-            return True
-        t_prev = t
 
 
 @nb.njit(**_JIT)
@@ -177,7 +107,8 @@ def _cell_free(bits, w, r, c):
 
 @nb.njit(**_JIT)
 def _point_free_bits(bits, h, w, u, v, eps):
-    """:func:`_point_free` on the tiled mask."""
+    """Is the point (u, v) in the closed union of free cells of the tiled mask (a point within ``eps`` of a
+    grid line touches the cells on both sides; ``routes._point_free``'s rule)?"""
     ru = np.rint(u)
     rv = np.rint(v)
     on_u = abs(u - ru) <= eps
@@ -219,13 +150,13 @@ def _crossings_upto(f, n, a, d, t):
 
 @nb.njit(**_JIT)
 def seg_free_tiles(bits, tclear, h, w, au, av, bu, bv, eps):
-    """:func:`seg_free` (the same answer) on the tiled mask ``bits`` of an (h, w) grid (:func:`tile_bits`),
+    """``routes.segments_free`` (the same answer) on the tiled mask ``bits`` of an (h, w) grid (:func:`tile_bits`),
     jumping through free space: ``tclear`` (ceil(h / 4), ceil(w / 4)) uint8 is the chessboard clearance, in
     blocks of 4 x 4 cells, of the fully free blocks (:func:`block_clearance`), so after checking a piece of
     the segment inside a block of clearance K >= 1 (the (2K - 1)-block square around it is free) every piece
     up to where the segment leaves that square is free and skipped. The cost is the number of pieces in
     blocks with blocked cells plus the number of jumps, not the segment's length in cells, and the pieces it
-    checks are pieces of ``seg_free``'s own cut (between consecutive grid-line crossings)."""
+    checks are pieces of ``segments_free``'s own cut (between consecutive grid-line crossings)."""
     if au == bu and av == bv:
         return _point_free_bits(bits, h, w, au, av, eps)
     lo = min(au, bu)
@@ -241,7 +172,7 @@ def seg_free_tiles(bits, tclear, h, w, au, av, bu, bv, eps):
     iu = np.int64(0)
     iv = np.int64(0)
     t_prev = 0.0
-    # the next crossing of each axis (the same expressions as seg_free), recomputed only when passed
+    # the next crossing of each axis in increasing t, recomputed only when passed
     tu = 2.0
     if n_u > 0:
         tu = ((f_u if du > 0 else f_u + n_u - 1) - au) / du
@@ -718,7 +649,7 @@ def _near_corner_blocked(bits, tclear, h, w, pts, i, j, eps):
 def simplify_validate(bits, tclear, h, w, pts, checked, eps, tol):
     """Drop the points where the polyline does not turn (|cross| <= tol * |a| * |b|, same direction), then
     check every remaining segment exactly on the grid (``seg_free_tiles``) but those ``checked`` already (segment
-    q -> q + 1 of ``pts`` passed ``seg_free`` and both ends are kept). Returns (points, ok)."""
+    q -> q + 1 of ``pts`` passed ``seg_free_tiles`` and both ends are kept). Returns (points, ok)."""
     k = pts.shape[0]
     keep = np.empty(k, dtype=np.int64)
     nk = 1
@@ -907,41 +838,11 @@ def funnel(su, sv, gu, gv, boxes):
 
 
 @nb.njit(**_JIT)
-def shortcut_corridor(regs, ekeys, nr):
-    """Greedy corridor shortcut: from each kept region jump to the last later region of ``regs`` adjacent
-    to it (``ekeys`` = sorted ``lo * nr + hi`` keys of the region edges); returns the portal (region edge)
-    ids of the shortened corridor."""
-    m = regs.shape[0]
-    out = np.empty(max(m - 1, 0), dtype=np.int64)
-    n = 0
-    i = 0
-    while i < m - 1:
-        best = -1
-        bk = -1
-        for j in range(m - 1, i, -1):
-            a = regs[i]
-            b = regs[j]
-            if a == b:
-                continue
-            key = min(a, b) * nr + max(a, b)
-            k = np.searchsorted(ekeys, key)
-            if k < ekeys.shape[0] and ekeys[k] == key:
-                best = j
-                bk = k
-                break
-        if best < 0:  # consecutive regions of a corridor are always adjacent; keep the rest as it is
-            return out[:0]
-        out[n] = bk
-        n += 1
-        i = best
-    return out[:n].copy()
-
-
-@nb.njit(**_JIT)
 def shortcut_corridor_adj(regs, rptr, rids, E, nr):
-    """:func:`shortcut_corridor` (same result) through the region adjacency (CSR ``rptr`` / ``rids`` of each
-    region's edges ``E``) instead of a search over all later regions: O(m * degree), not O(m^2 log F). The
-    region edges are sorted by key, so an edge's index is its index in the sorted keys."""
+    """Greedy corridor shortcut: from each kept region of ``regs`` jump to the last later region adjacent to it;
+    returns the portal (region edge) ids of the shortened corridor (empty when two consecutive regions are not
+    adjacent). Read through the region adjacency (CSR ``rptr`` / ``rids`` of each region's edges ``E``), not a
+    search over all later regions: O(m * degree), not O(m^2 log F); the tests compare it with that search."""
     return _shortcut_adj(regs, rptr, rids, E, np.full(nr, -1, dtype=np.int64))
 
 
