@@ -31,6 +31,9 @@ __all__ = [
 
 def wrap(theta: np.ndarray | float) -> np.ndarray | float:
     """Wrap angles to [-pi, pi)."""
+    if type(theta) is float:  # one Python float: the same arithmetic without an array round trip (~10x faster)
+        s = (theta + np.pi) % (2.0 * np.pi) - np.pi
+        return -np.pi if s >= np.pi else s
     w = (np.asarray(theta, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
     w = np.where(w >= np.pi, -np.pi, w)  # float rounding can land exactly on +pi
     return float(w) if np.ndim(theta) == 0 else w

@@ -244,7 +244,7 @@ def build_problem(
     last_kf_k, win_kf, win0, win = -1, -1, 0, np.zeros(0, dtype=bool)
     closed_kf_w: list[np.ndarray] = []  # keyframe positions of the closed submaps in the world (step 5)
     kf_start = [0]  # where each closed submap's keyframes start in their concatenation
-    old_index: dict[int, NearestIndex] = {}  # k-d trees of the closed submaps' points, built on first revisit
+    old_index: dict[int, NearestIndex] = {}  # nearest-point indexes of closed submaps, built on first revisit
     for k_scan, scan in enumerate(scans):
         if progress is not None and k_scan % every == 0:
             progress(k_scan, len(scans))

@@ -267,15 +267,6 @@ class NearestIndex:
         return np.minimum(j, self.dst.shape[0] - 1), d * d
 
 
-_NearestIndex = NearestIndex  # the former private name
-
-
-def _wrap1(theta: float) -> float:
-    """``holoslam.geometry.wrap`` of one Python float (same arithmetic, without the array round trip)."""
-    w = (theta + np.pi) % (2.0 * np.pi) - np.pi
-    return -np.pi if w >= np.pi else w
-
-
 def _icp_terms(px, py, c0, s0, tx, ty, qx, qy, nqx, nqy, index: NearestIndex, gate: float, huber: float):
     """numpy version of ``_fast.icp_terms``: (J (m, 3), w (m,), r (m,)) of the matched points."""
     pax, pay = tx + c0 * px - s0 * py, ty + s0 * px + c0 * py
@@ -342,7 +333,7 @@ def register_points(
             return bad
         # left update: T <- Exp(dx) * T (small-angle first-order on translation about the origin)
         c, s = np.cos(dx[2]), np.sin(dx[2])
-        tx, ty, th = c * tx - s * ty + dx[0], s * tx + c * ty + dx[1], _wrap1(float(th + dx[2]))
+        tx, ty, th = c * tx - s * ty + dx[0], s * tx + c * ty + dx[1], g.wrap(float(th + dx[2]))
         gate = max(cfg.min_distance, 0.7 * gate)
         if np.hypot(dx[0], dx[1]) < 1e-5 and abs(dx[2]) < 1e-5 and gate <= cfg.min_distance:
             break
