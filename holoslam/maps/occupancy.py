@@ -102,21 +102,14 @@ def build_grid(
     p_hit: float = 0.75,
     p_miss: float = 0.4,
     l_max: float = 6.0,
-    step: float = 0.5,
     occupied_thresh: float = 0.65,
     free_thresh: float = 0.196,
-    chunk_beams: int = 8000,
 ) -> OccupancyGrid:
-    """Ray-cast scans taken at sensor poses ``wTs`` ((N, 3), one per scan) into an occupancy grid.
-
-    ``step`` (validated, in (0, 1] cells) and ``chunk_beams`` are kept for callers of the former sampling
-    ray caster and no longer change the result: the traversal is exact and needs no chunks."""
+    """Ray-cast scans taken at sensor poses ``wTs`` ((N, 3), one per scan) into an occupancy grid."""
     if not np.isfinite(resolution) or resolution <= 0:
         raise MapError(f"grid resolution must be a positive number of metres per cell, got {resolution}")
     if not (0.5 < p_hit < 1.0 and 0.0 < p_miss < 0.5):
         raise MapError(f"need 0.5 < p_hit < 1 and 0 < p_miss < 0.5, got p_hit={p_hit}, p_miss={p_miss}")
-    if not 0 < step <= 1:
-        raise MapError(f"ray sampling step must be in (0, 1] cells, got {step}")
     origins, ends, hit = beam_endpoints(wTs, scans, no_return_clear_m)
     if bounds is None:
         sensors = np.asarray(wTs, dtype=np.float64).reshape(-1, 3)[:, :2]
