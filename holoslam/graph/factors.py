@@ -165,15 +165,10 @@ def _plan_models(plan: _NoisePlan, est: Any) -> list[Any]:
     import gtsam
 
     diag_model, full_model = gtsam.noiseModel.Diagonal.Sigmas, gtsam.noiseModel.Gaussian.SqrtInformation
-    if plan.is_diag.all():
-        models = list(map(diag_model, plan.sigmas))
-    elif not plan.is_diag.any():
-        models = list(map(full_model, plan.R, repeat(False)))
-    else:
-        models = [
-            diag_model(s_k) if d_k else full_model(r_k, False)
-            for d_k, s_k, r_k in zip(plan.is_diag.tolist(), plan.sigmas, plan.R, strict=True)
-        ]
+    models = [
+        diag_model(s_k) if d_k else full_model(r_k, False)
+        for d_k, s_k, r_k in zip(plan.is_diag.tolist(), plan.sigmas, plan.R, strict=True)
+    ]
     if est is not None:
         robust = gtsam.noiseModel.Robust.Create
         models = [robust(est, model) for model in models]
