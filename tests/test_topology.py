@@ -277,6 +277,16 @@ def _graph_lists(G):
     return nodes, edges, [(v, list(G.adj[v])) for v in G]
 
 
+def _numpy_graph(*args, **kwargs):
+    """skeleton_to_graph on its numpy path (as without numba): the reference of the compiled kernels."""
+    from unittest import mock
+
+    from holoslam.maps import topology
+
+    with mock.patch.object(topology, "_kernels", lambda: None):
+        return skeleton_to_graph(*args, **kwargs)
+
+
 @settings(max_examples=80, deadline=None)
 @given(st.integers(1, 40), st.integers(1, 40), st.floats(0.2, 0.8), st.integers(0, 2**31 - 1), st.booleans())
 def test_compiled_graph_equals_the_numpy_path(h, w, density, seed, thinned):
@@ -288,7 +298,7 @@ def test_compiled_graph_equals_the_numpy_path(h, w, density, seed, thinned):
     sk = thin(m) if thinned else m
     clr = clearance_map(m, 0.05) if seed % 2 else None
     fast = skeleton_to_graph(sk, resolution=0.05, clearance=clr)
-    ref = skeleton_to_graph(sk, resolution=0.05, clearance=clr, _numba=False)
+    ref = _numpy_graph(sk, resolution=0.05, clearance=clr)
     assert _graph_lists(fast) == _graph_lists(ref)
 
 
@@ -303,4 +313,4 @@ def test_compiled_graph_equals_the_numpy_path_on_rings_and_long_chains():
     m[57, 60:80] = True
     G = skeleton_to_graph(m, resolution=0.1)
     assert sorted(nx.get_node_attributes(G, "kind").values()).count("loop") == 2
-    assert _graph_lists(G) == _graph_lists(skeleton_to_graph(m, resolution=0.1, _numba=False))
+    assert _graph_lists(G) == _graph_lists(_numpy_graph(m, resolution=0.1))

@@ -191,7 +191,6 @@ def skeleton_to_graph(
     anchors_wTa: np.ndarray | None = None,
     prune_spur_m: float = 0.0,
     spur_clearance_factor: float = 0.0,
-    _numba: bool = True,
 ) -> nx.MultiGraph:
     """Topology graph of an 8-connected skeleton (module docstring). ``clearance`` is an (H, W) metres map
     (``clearance_map``); without it clearances are NaN. Cell (row, col) has its centre at
@@ -211,8 +210,7 @@ def skeleton_to_graph(
         clr = clr_flat[sk.rc[:, 0] * sk.w + sk.rc[:, 1]].astype(np.float64)
     else:
         clr = np.full(n, np.nan)
-    fast = _kernels() if _numba else None
-    arrays = _graph_arrays_numba if fast is not None else _graph_arrays_numpy
+    arrays = _graph_arrays_numba if _kernels() is not None else _graph_arrays_numpy
     kinds, rep, all_u, all_v, rc, starts, length, min_clr = arrays(sk, clr, float(resolution))
 
     node_rc = sk.rc[rep]
