@@ -1,4 +1,5 @@
-"""Accuracy of a SLAM result against ground truth (numpy only): alignment, trajectory and object errors.
+"""Accuracy of a SLAM result against ground truth (numpy only): alignment, trajectory and object errors,
+relation errors (the Freiburg benchmark's metric) and ATE / RPE against a ground-truth trajectory.
 
 The world frame of a SLAM run is arbitrary (its first anchor, or the compass's magnetic frame), so estimates are
 compared after the rigid SE(2) transform ``T`` that best maps them onto the truth (:func:`align_se2`, closed-form
@@ -10,16 +11,26 @@ Mahalanobis distance of the error under the 2x2 position marginal is below the c
 5.991. An anchor covariance ``cov_wTa`` is in the pose's own (body) frame (GTSAM's right perturbation), so its
 position block is rotated into the world frame by R(theta) of the aligned estimate first. Poses whose position
 covariance is (numerically) zero are the gauge (the fixed first anchor) and are left out of the coverage.
+
+Relation errors (Kümmerle et al. 2009, "On measuring the accuracy of SLAM algorithms"; :func:`relation_errors`)
+need no alignment: for each relation (t1, t2, t_rel, yaw_rel) the estimated relative pose d = X(t1)^-1 X(t2) is
+compared with it, translational error ||t(d) - t_rel|| (m), rotational error |wrap(yaw(d) - yaw_rel)| (deg),
+summarised by mean and sample (N-1) standard deviation. X(t) is the estimated pose with the nearest stamp, when
+it is within ``max_dt_ns`` of t (nothing is interpolated); otherwise the relation is unmatched and left out.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from holoslam import geometry as g
+
+if TYPE_CHECKING:
+    from holoslam.io.relations import Relations
 
 __all__ = [
     "CHI2_2D_95",
@@ -30,10 +41,18 @@ __all__ = [
     "trajectory_errors",
     "object_errors",
     "truth_at",
+    "RelationErrors",
+    "relation_errors",
+    "GroundTruthErrors",
+    "ground_truth_errors",
+    "DEFAULT_MAX_DT_NS",
+    "DEFAULT_RPE_DELTA_NS",
 ]
 
 CHI2_2D_95 = 5.991464547107979  # chi-square quantile, 2 degrees of freedom, p = 0.95
 _GAUGE_VAR = 1e-10  # m^2: a position variance below this is the fixed gauge, not an estimate
+DEFAULT_MAX_DT_NS = 50_000_000  # 0.05 s: a relation stamp's pose must be this close (the benchmark scorer's)
+DEFAULT_RPE_DELTA_NS = 1_000_000_000  # 1 s between the two poses of a relative pose error
 
 
 def _xy(a: np.ndarray, name: str) -> np.ndarray:
@@ -223,4 +242,240 @@ def truth_at(stamps_ns: np.ndarray, gt_stamps_ns: np.ndarray, gt_wTb: np.ndarray
             np.interp(qf, tf, P[:, 1]),
             g.wrap(np.interp(qf, tf, np.unwrap(P[:, 2]))),
         ]
+    )
+
+
+# ------------------------------------------------------------------------------------------ relation errors
+
+
+def _sorted_unique(stamps_ns: np.ndarray, wTb: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Stamps (N,) int64 and poses (N, 3) sorted in time; of poses sharing a stamp the last one given is kept."""
+    t = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+    P = np.asarray(wTb, dtype=np.float64).reshape(-1, 3)
+    if t.shape[0] != P.shape[0]:
+        raise ValueError(f"{name}: {t.shape[0]} stamps for {P.shape[0]} poses; pass one stamp per pose")
+    if t.shape[0] == 0:
+        raise ValueError(f"{name}: no pose to evaluate")
+    order = np.argsort(t, kind="stable")
+    t, P = t[order], P[order]
+    keep = np.append(np.diff(t) != 0, True)
+    return t[keep], P[keep]
+
+
+def _nearest(stamps: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the nearest of sorted unique ``stamps`` to each of ``q`` (the earlier on a tie), and |dt|."""
+    i = np.searchsorted(stamps, q)
+    left = np.clip(i - 1, 0, stamps.shape[0] - 1)
+    right = np.clip(i, 0, stamps.shape[0] - 1)
+    dl, dr = np.abs(q - stamps[left]), np.abs(stamps[right] - q)
+    idx = np.where(dl <= dr, left, right)
+    return idx, np.minimum(dl, dr)
+
+
+def _mean_std_max(v: np.ndarray) -> tuple[float, float, float]:
+    """Mean, sample standard deviation (N-1; 0 for one value) and max; NaN for none."""
+    if v.size == 0:
+        return float("nan"), float("nan"), float("nan")
+    return float(np.mean(v)), float(np.std(v, ddof=1)) if v.size > 1 else 0.0, float(np.max(v))
+
+
+def _rounded(v: float, digits: int = 6) -> float | None:
+    return round(float(v), digits) if np.isfinite(v) else None
+
+
+@dataclass(frozen=True, eq=False)
+class RelationErrors:
+    """Relation errors of a trajectory (see the module docstring). Per relation (N,): ``matched`` (both stamps
+    had a pose within ``max_dt_ns``), ``translation_m`` and ``rotation_deg`` (NaN when unmatched). Statistics
+    over the matched relations: mean, sample standard deviation (N-1) and max."""
+
+    n_relations: int
+    n_matched: int
+    matched: np.ndarray
+    translation_m: np.ndarray
+    rotation_deg: np.ndarray
+    translation_mean_m: float
+    translation_std_m: float
+    translation_max_m: float
+    rotation_mean_deg: float
+    rotation_std_deg: float
+    rotation_max_deg: float
+    max_dt_ns: int
+
+    @property
+    def n_unmatched(self) -> int:
+        return self.n_relations - self.n_matched
+
+    def to_dict(self) -> dict[str, Any]:
+        """The summary as JSON-able scalars (no per-relation arrays); NaN (nothing matched) becomes None."""
+        return {
+            "relations": self.n_relations,
+            "matched": self.n_matched,
+            "unmatched": self.n_unmatched,
+            "max_dt_s": self.max_dt_ns / 1e9,
+            "translation_m": {
+                "mean": _rounded(self.translation_mean_m),
+                "std": _rounded(self.translation_std_m),
+                "max": _rounded(self.translation_max_m),
+            },
+            "rotation_deg": {
+                "mean": _rounded(self.rotation_mean_deg),
+                "std": _rounded(self.rotation_std_deg),
+                "max": _rounded(self.rotation_max_deg),
+            },
+        }
+
+    def to_text(self) -> str:
+        return "\n".join(
+            [
+                f"relations {self.n_relations}: matched {self.n_matched}, unmatched {self.n_unmatched} "
+                f"(a pose within {self.max_dt_ns / 1e9:g} s of both stamps)",
+                f"  translational error {self.translation_mean_m:.4f} ± {self.translation_std_m:.4f} m "
+                f"(max {self.translation_max_m:.4f})",
+                f"  rotational error    {self.rotation_mean_deg:.3f} ± {self.rotation_std_deg:.3f} deg "
+                f"(max {self.rotation_max_deg:.3f})",
+            ]
+        )
+
+
+def relation_errors(
+    stamps_ns: np.ndarray, wTb: np.ndarray, relations: Relations, max_dt_ns: int = DEFAULT_MAX_DT_NS
+) -> RelationErrors:
+    """Relation errors of the trajectory ``wTb`` (N, 3) at ``stamps_ns`` (N,) against ``relations``
+    (:class:`holoslam.io.relations.Relations`): the Freiburg benchmark's metric (module docstring). The
+    trajectory's stamps need not be sorted; of poses sharing a stamp the last one given is used."""
+    t, P = _sorted_unique(stamps_ns, wTb, "relation_errors")
+    if max_dt_ns < 0:
+        raise ValueError(f"relation_errors: max_dt_ns must be >= 0, got {max_dt_ns}")
+    t1 = np.asarray(relations.t1_ns, dtype=np.int64).reshape(-1)
+    t2 = np.asarray(relations.t2_ns, dtype=np.int64).reshape(-1)
+    R = np.asarray(relations.T, dtype=np.float64).reshape(-1, 3)
+    i1, d1 = _nearest(t, t1)
+    i2, d2 = _nearest(t, t2)
+    ok = (d1 <= max_dt_ns) & (d2 <= max_dt_ns)
+    d = g.between(P[i1[ok]], P[i2[ok]])
+    trans = np.full(t1.shape[0], np.nan)
+    rot = np.full(t1.shape[0], np.nan)
+    trans[ok] = np.hypot(d[:, 0] - R[ok, 0], d[:, 1] - R[ok, 1])
+    rot[ok] = np.degrees(np.abs(g.wrap(d[:, 2] - R[ok, 2])))
+    tm, ts, tx = _mean_std_max(trans[ok])
+    rm, rs, rx = _mean_std_max(rot[ok])
+    for a in (ok, trans, rot):
+        a.setflags(write=False)
+    return RelationErrors(
+        n_relations=int(t1.shape[0]),
+        n_matched=int(ok.sum()),
+        matched=ok,
+        translation_m=trans,
+        rotation_deg=rot,
+        translation_mean_m=tm,
+        translation_std_m=ts,
+        translation_max_m=tx,
+        rotation_mean_deg=rm,
+        rotation_std_deg=rs,
+        rotation_max_deg=rx,
+        max_dt_ns=int(max_dt_ns),
+    )
+
+
+# -------------------------------------------------------------------------- ATE / RPE against a trajectory
+
+
+@dataclass(frozen=True, eq=False)
+class GroundTruthErrors:
+    """Errors against a ground-truth trajectory. ``ate``: absolute trajectory error after SE(2) alignment
+    (:func:`trajectory_errors`) of the ``ate.n`` estimated poses inside the truth's time span, the truth
+    interpolated at their stamps. RPE: for each compared pose i, the first pose j at least ``rpe_delta_ns``
+    later (kept when it is less than twice that later), E = (truth_i^-1 truth_j)^-1 (est_i^-1 est_j);
+    ``rpe_translation_m`` = ||t(E)|| and ``rpe_rotation_deg`` = |yaw(E)| per pair (independent of alignment)."""
+
+    n_estimate: int
+    ate: TrajectoryErrors
+    rpe_delta_ns: int
+    rpe_translation_m: np.ndarray
+    rpe_rotation_deg: np.ndarray
+
+    @property
+    def ate_mean_m(self) -> float:
+        return float(np.mean(self.ate.position_errors_m))
+
+    def _rpe_stats(self) -> dict[str, dict[str, float | None]]:
+        out: dict[str, dict[str, float | None]] = {}
+        for key, v in (("translation_m", self.rpe_translation_m), ("rotation_deg", self.rpe_rotation_deg)):
+            m, s, x = _mean_std_max(v)
+            rmse = float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+            out[key] = {"rmse": _rounded(rmse), "mean": _rounded(m), "std": _rounded(s), "max": _rounded(x)}
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "poses": self.n_estimate,
+            "ate": {
+                "poses_compared": self.ate.n,
+                "rmse_m": _rounded(self.ate.rmse_m),
+                "mean_m": _rounded(self.ate_mean_m),
+                "max_m": _rounded(self.ate.max_m),
+                "heading_rmse_deg": _rounded(self.ate.heading_rmse_deg),
+                "alignment_xytheta": [_rounded(v) for v in self.ate.T],
+            },
+            "rpe": {"delta_s": self.rpe_delta_ns / 1e9, "pairs": int(self.rpe_translation_m.size)}
+            | self._rpe_stats(),
+        }
+
+    def to_text(self) -> str:
+        r = self._rpe_stats()
+        tr, ro = r["translation_m"], r["rotation_deg"]
+        return "\n".join(
+            [
+                f"ATE over {self.ate.n} of {self.n_estimate} poses (after SE(2) alignment): "
+                f"RMSE {self.ate.rmse_m:.4f} m, mean {self.ate_mean_m:.4f} m, max {self.ate.max_m:.4f} m, "
+                f"heading RMSE {self.ate.heading_rmse_deg:.3f} deg",
+                f"RPE over {self.rpe_delta_ns / 1e9:g} s ({self.rpe_translation_m.size} pairs): "
+                f"translation RMSE {_fmt(tr['rmse'], 4)} m (mean {_fmt(tr['mean'], 4)}, max {_fmt(tr['max'], 4)}), "
+                f"rotation RMSE {_fmt(ro['rmse'], 3)} deg (mean {_fmt(ro['mean'], 3)}, max {_fmt(ro['max'], 3)})",
+            ]
+        )
+
+
+def _fmt(v: float | None, digits: int) -> str:
+    return "n/a" if v is None else f"{v:.{digits}f}"
+
+
+def ground_truth_errors(
+    stamps_ns: np.ndarray,
+    wTb: np.ndarray,
+    gt_stamps_ns: np.ndarray,
+    gt_wTb: np.ndarray,
+    rpe_delta_ns: int = DEFAULT_RPE_DELTA_NS,
+) -> GroundTruthErrors:
+    """ATE (after :func:`align_se2`) and RPE over ``rpe_delta_ns`` of an estimate against a ground-truth
+    trajectory (see :class:`GroundTruthErrors`). Raises ValueError when no estimated pose lies in the truth's
+    time span."""
+    if rpe_delta_ns <= 0:
+        raise ValueError(f"ground_truth_errors: rpe_delta_ns must be > 0, got {rpe_delta_ns}")
+    t, P = _sorted_unique(stamps_ns, wTb, "ground_truth_errors (estimate)")
+    gt, G = _sorted_unique(gt_stamps_ns, gt_wTb, "ground_truth_errors (truth)")
+    inside = (t >= gt[0]) & (t <= gt[-1])
+    if not inside.any():
+        raise ValueError(
+            f"ground_truth_errors: no estimated pose in the truth's span [{gt[0] / 1e9:.6f}, {gt[-1] / 1e9:.6f}] s "
+            f"(the estimate spans [{t[0] / 1e9:.6f}, {t[-1] / 1e9:.6f}] s)"
+        )
+    t, P = t[inside], P[inside]
+    truth = truth_at(t, gt, G)
+    ate = trajectory_errors(P, truth, None)
+    j = np.searchsorted(t, t + rpe_delta_ns, side="left")
+    ok = j < t.shape[0]
+    i, j = np.nonzero(ok)[0], j[ok]
+    near = (t[j] - t[i]) < 2 * rpe_delta_ns
+    i, j = i[near], j[near]
+    E = g.between(g.between(truth[i], truth[j]), g.between(P[i], P[j]))
+    rpe_t = np.hypot(E[:, 0], E[:, 1])
+    rpe_r = np.degrees(np.abs(g.wrap(E[:, 2])))
+    return GroundTruthErrors(
+        n_estimate=int(np.asarray(stamps_ns).size),
+        ate=ate,
+        rpe_delta_ns=int(rpe_delta_ns),
+        rpe_translation_m=rpe_t,
+        rpe_rotation_deg=rpe_r,
     )
