@@ -178,6 +178,29 @@ def cmd_topology(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_evaluate(a: argparse.Namespace) -> int:
+    from holoslam.jobs import evaluate_trajectory
+
+    ev = evaluate_trajectory(
+        a.target, relations=a.relations, truth=a.truth, max_dt_s=a.max_dt, rpe_delta_s=a.rpe_delta
+    )
+    if a.json:
+        print(json.dumps(ev.to_dict(), indent=2))
+    else:
+        lines = [f"{ev.trajectory} ({ev.poses} poses) against {ev.reference}"]
+        for result in (ev.relations, ev.truth):
+            if result is not None:
+                lines.append(result.to_text())
+        print("\n".join(lines))
+    if not ev.ok:
+        _err(
+            f"no relation of {ev.reference} has a pose of {ev.trajectory} within {a.max_dt:g} s of both "
+            "stamps; write the trajectory at the scan stamps (holoslam run does) or raise --max-dt"
+        )
+        return EXIT_FAILED
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------------------------------- parser
 
 
@@ -265,6 +288,28 @@ def build_parser() -> argparse.ArgumentParser:
         "--formats", nargs="+", default=["all"], choices=["all", "pictures", "mcap", "graphs", "tum"]
     )
     s.set_defaults(func=cmd_export)
+
+    s = sub.add_parser("evaluate", help="score a run's trajectory against ground truth (relations or TUM)")
+    s.add_argument("target", type=Path, help="a run folder (its trajectory.tum) or a TUM trajectory file")
+    ref = s.add_mutually_exclusive_group(required=True)
+    ref.add_argument(
+        "--relations", type=Path, help="a .relations file (Freiburg benchmark): relation errors, mean ± std"
+    )
+    ref.add_argument("--truth", type=Path, help="a TUM ground truth: ATE after SE(2) alignment, and RPE")
+    s.add_argument(
+        "--max-dt",
+        type=float,
+        default=0.05,
+        help="a relation stamp is matched to the nearest pose within this many seconds (default 0.05)",
+    )
+    s.add_argument(
+        "--rpe-delta",
+        type=float,
+        default=1.0,
+        help="seconds between the two poses of an RPE pair (default 1)",
+    )
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_evaluate)
 
     s = sub.add_parser("datasets", help="list the bundled and known datasets and where they are")
     s.add_argument("--json", action="store_true")

@@ -279,8 +279,9 @@ def _mean_std_max(v: np.ndarray) -> tuple[float, float, float]:
     return float(np.mean(v)), float(np.std(v, ddof=1)) if v.size > 1 else 0.0, float(np.max(v))
 
 
-def _rounded(v: float, digits: int = 6) -> float | None:
-    return round(float(v), digits) if np.isfinite(v) else None
+def _finite_or_none(v: float) -> float | None:
+    """A float for JSON: full precision, None for NaN (nothing to measure)."""
+    return float(v) if np.isfinite(v) else None
 
 
 @dataclass(frozen=True, eq=False)
@@ -314,14 +315,14 @@ class RelationErrors:
             "unmatched": self.n_unmatched,
             "max_dt_s": self.max_dt_ns / 1e9,
             "translation_m": {
-                "mean": _rounded(self.translation_mean_m),
-                "std": _rounded(self.translation_std_m),
-                "max": _rounded(self.translation_max_m),
+                "mean": _finite_or_none(self.translation_mean_m),
+                "std": _finite_or_none(self.translation_std_m),
+                "max": _finite_or_none(self.translation_max_m),
             },
             "rotation_deg": {
-                "mean": _rounded(self.rotation_mean_deg),
-                "std": _rounded(self.rotation_std_deg),
-                "max": _rounded(self.rotation_max_deg),
+                "mean": _finite_or_none(self.rotation_mean_deg),
+                "std": _finite_or_none(self.rotation_std_deg),
+                "max": _finite_or_none(self.rotation_max_deg),
             },
         }
 
@@ -404,7 +405,12 @@ class GroundTruthErrors:
         for key, v in (("translation_m", self.rpe_translation_m), ("rotation_deg", self.rpe_rotation_deg)):
             m, s, x = _mean_std_max(v)
             rmse = float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
-            out[key] = {"rmse": _rounded(rmse), "mean": _rounded(m), "std": _rounded(s), "max": _rounded(x)}
+            out[key] = {
+                "rmse": _finite_or_none(rmse),
+                "mean": _finite_or_none(m),
+                "std": _finite_or_none(s),
+                "max": _finite_or_none(x),
+            }
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -412,11 +418,11 @@ class GroundTruthErrors:
             "poses": self.n_estimate,
             "ate": {
                 "poses_compared": self.ate.n,
-                "rmse_m": _rounded(self.ate.rmse_m),
-                "mean_m": _rounded(self.ate_mean_m),
-                "max_m": _rounded(self.ate.max_m),
-                "heading_rmse_deg": _rounded(self.ate.heading_rmse_deg),
-                "alignment_xytheta": [_rounded(v) for v in self.ate.T],
+                "rmse_m": _finite_or_none(self.ate.rmse_m),
+                "mean_m": _finite_or_none(self.ate_mean_m),
+                "max_m": _finite_or_none(self.ate.max_m),
+                "heading_rmse_deg": _finite_or_none(self.ate.heading_rmse_deg),
+                "alignment_xytheta": [_finite_or_none(v) for v in self.ate.T],
             },
             "rpe": {"delta_s": self.rpe_delta_ns / 1e9, "pairs": int(self.rpe_translation_m.size)}
             | self._rpe_stats(),
