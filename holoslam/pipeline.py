@@ -168,8 +168,8 @@ class RunResult:
 
     source: str
     config: RunConfig
-    stamps_ns: np.ndarray  # (N,) odometry stamps
-    wTb: np.ndarray  # (N, 3) optimised base trajectory
+    stamps_ns: np.ndarray  # (N,) odometry and scan stamps, sorted, unique
+    wTb: np.ndarray  # (N, 3) optimised base trajectory at stamps_ns
     dead_reckoning_wTb: np.ndarray  # (N, 3)
     anchor_stamps_ns: np.ndarray  # (K,)
     wTa: np.ndarray  # (K, 3)
@@ -362,16 +362,18 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         sol = solve(fe.problem, options)
 
     with _stage(progress, timings, "trajectory"):
-        stamps, odomTb = log.odometry_arrays()
+        odom_stamps, odomTb = log.odometry_arrays()
+        scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
+        # a pose at every odometry and every scan stamp, so ground truth stamped by scan (relations) scores it
+        stamps = np.union1d(odom_stamps, scan_stamps)
         dr = _interp(fe.dr_stamps_ns, fe.dr_wTb, stamps)
         key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
         # between keyframes (a few tenths of a second) the wheel odometry's own motion is the most faithful
-        wTb = optimised_trajectory(stamps, stamps, odomTb, key_stamps, wTk)
+        wTb = optimised_trajectory(stamps, odom_stamps, odomTb, key_stamps, wTk)
         objects = _objects(fe.problem, sol, observations, features)
 
     with _stage(progress, timings, "occupancy grid"):
-        scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
-        wTb_scan = optimised_trajectory(scan_stamps, stamps, odomTb, key_stamps, wTk)
+        wTb_scan = optimised_trajectory(scan_stamps, odom_stamps, odomTb, key_stamps, wTk)
         wTs = g.compose(wTb_scan, np.broadcast_to(fe.bTs, wTb_scan.shape))
         grid = build_grid(
             wTs,
