@@ -1,0 +1,213 @@
+"""Compiled kernels (numba, ``cache=True``) of the branch-and-bound scan matcher, :mod:`holoslam.submaps.bnb`.
+
+Imported lazily by :mod:`holoslam.submaps.bnb` (numba import ~0.5 s; the first call of each kernel compiles it,
+a few seconds once per machine, then loads it from numba's on-disk cache next to this file).
+
+Grids. Level 0 is the probability grid itself (float32, H x W). Level d >= 1 (block width w = 2^d) is stored
+quantised (uint8, ``q = ceil((p - lo) / step)``, so ``lo + q * step >= p``) and padded to
+(H + w - 1) x (W + w - 1): its cell (i, j) holds the maximum over the fine cells [i - w + 1, i] x [j - w + 1, j]
+(cells outside the grid count as the outside value), i.e. the block of w x w fine cells *starting* at fine cell
+(i - w + 1, j - w + 1). A point in fine cell (r, c) shifted by the candidate offset (x, y) looks up level d at
+(r + y + w - 1, c + x + w - 1): the bound of every offset in [x, x + w) x [y, y + w). Levels are built by
+doubling, ``L_d[i] = max(L_{d-1}[i - w/2], L_{d-1}[i])`` along rows then columns: O(1) per cell and level.
+
+Scores are sums over the points (the caller divides by N): exact ones in float64 of the float32 cells, in
+point order (the same additions as the numpy reference, so the two agree bit for bit); bounds are
+``N * lo + Q * step + slack`` with Q the integer sum of the quantised cells, never below the exact score of
+any candidate they cover.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+_JIT = {"cache": True, "nogil": True}
+
+
+@nb.njit(**_JIT)
+def quantise(prob, lo, step):  # pragma: no cover - compiled
+    """uint8 codes q of the cells, the smallest with ``lo + q * step >= p`` (in float64), at most 255."""
+    h, w = prob.shape
+    q = np.empty((h, w), dtype=np.uint8)
+    for i in range(h):
+        for j in range(w):
+            p = np.float64(prob[i, j])
+            k = max(math.ceil((p - lo) / step), 0)
+            while k < 255 and lo + k * step < p:
+                k += 1
+            q[i, j] = k
+    return q
+
+
+@nb.njit(**_JIT)
+def _pool(src, hs, ws, half, q_out, tmp, dst):  # pragma: no cover - compiled
+    """One doubling step: src (hs x ws, flat) -> dst ((hs + half) x (ws + half), flat), through tmp
+    (hs x (ws + half)): each cell the max of the cell and the one ``half`` before it, columns then rows."""
+    wd = ws + half
+    for i in range(hs):
+        for j in range(wd):
+            a = src[i * ws + j - half] if j >= half else q_out
+            b = src[i * ws + j] if j < ws else q_out
+            tmp[i * wd + j] = a if a > b else b
+    for i in range(hs + half):
+        for j in range(wd):
+            a = tmp[(i - half) * wd + j] if i >= half else q_out
+            b = tmp[i * wd + j] if i < hs else q_out
+            dst[i * wd + j] = a if a > b else b
+
+
+@nb.njit(**_JIT)
+def pool_levels(q0, depth, q_out):  # pragma: no cover - compiled
+    """Levels 1..depth-1 of the quantised grid q0 (H x W) in one flat uint8 buffer; ``starts[d]`` is where
+    level d begins (starts[0] = 0, unused: level 0 is the float grid)."""
+    h, w = q0.shape
+    starts = np.zeros(depth + 1, dtype=np.int64)
+    for d in range(1, depth):
+        sh = (1 << d) - 1
+        starts[d + 1] = starts[d] + (h + sh) * (w + sh)
+    levels = np.empty(starts[depth], dtype=np.uint8)
+    if depth <= 1:
+        return levels, starts
+    big = (1 << (depth - 1)) - 1
+    tmp = np.empty((h + big) * (w + big), dtype=np.uint8)
+    _pool(q0.ravel(), h, w, 1, q_out, tmp, levels[starts[1]:starts[2]])
+    for d in range(2, depth):
+        half = 1 << (d - 1)
+        hs, ws = h + half - 1, w + half - 1
+        _pool(levels[starts[d - 1]:starts[d]], hs, ws, half, q_out, tmp, levels[starts[d]:starts[d + 1]])
+    return levels, starts
+
+
+@nb.njit(**_JIT, inline="always")
+def _exact(prob, rows, cols, a, x, y, p_out):  # pragma: no cover - compiled
+    """Sum over the points of angle a of the cell at offset (x, y) (float64, in point order)."""
+    h, w = prob.shape
+    s = 0.0
+    for i in range(rows.shape[1]):
+        r = rows[a, i] + y
+        c = cols[a, i] + x
+        if 0 <= r < h and 0 <= c < w:
+            s += np.float64(prob[r, c])
+        else:
+            s += p_out
+    return s
+
+
+@nb.njit(**_JIT, inline="always")
+def _bound(levels, start, hd, wd, sh, rows, cols, a, x, y, q_out):  # pragma: no cover - compiled
+    """Integer sum over the points of angle a of the level cells (padded dims hd x wd, shift sh = w - 1)."""
+    s = 0
+    ys, xs = y + sh, x + sh
+    for i in range(rows.shape[1]):
+        r = rows[a, i] + ys
+        c = cols[a, i] + xs
+        if 0 <= r < hd and 0 <= c < wd:
+            s += levels[start + r * wd + c]
+        else:
+            s += q_out
+    return s
+
+
+@nb.njit(**_JIT)
+def _score(prob, levels, starts, d, rows, cols, a, x, y, quant):  # pragma: no cover - compiled
+    """The exact sum (d = 0) or the bound (d >= 1) of candidate (a, x, y); quant = (lo, step, q_out, p_out,
+    slack)."""
+    lo, step, q_out, p_out, slack = quant
+    if d == 0:
+        return _exact(prob, rows, cols, a, x, y, p_out)
+    h, w = prob.shape
+    sh = (1 << d) - 1
+    q = _bound(levels, starts[d], h + sh, w + sh, sh, rows, cols, a, x, y, np.int64(q_out))
+    return rows.shape[1] * lo + q * step + slack
+
+
+@nb.njit(**_JIT)
+def _push_children(prob, levels, starts, rows, cols, a, x, y, d, box, quant, best, st, sp):  # pragma: no cover
+    """Score the (up to four) children of candidate (a, x, y) at level d - 1 and push those above ``best``
+    onto the stack st (a, x, y, level, score arrays) from position sp, best child last: (new sp, children
+    scored)."""
+    h = 1 << (d - 1)
+    x_hi, y_hi = box[1], box[3]
+    ns = scored = 0
+    cx = np.empty(4, dtype=np.int64)
+    cy = np.empty(4, dtype=np.int64)
+    cs = np.empty(4, dtype=np.float64)
+    for dx in range(2):
+        if x + dx * h > x_hi:
+            break
+        for dy in range(2):
+            if y + dy * h > y_hi:
+                break
+            s = _score(prob, levels, starts, d - 1, rows, cols, a, x + dx * h, y + dy * h, quant)
+            scored += 1
+            if s > best:
+                k = ns  # insertion sort, ascending: the best child ends on top of the stack
+                while k > 0 and cs[k - 1] > s:
+                    cx[k], cy[k], cs[k] = cx[k - 1], cy[k - 1], cs[k - 1]
+                    k -= 1
+                cx[k], cy[k], cs[k] = x + dx * h, y + dy * h, s
+                ns += 1
+    for k in range(ns):
+        st[0][sp], st[1][sp], st[2][sp], st[3][sp], st[4][sp] = a, cx[k], cy[k], d - 1, cs[k]
+        sp += 1
+    return sp, scored
+
+
+@nb.njit(**_JIT)
+def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0):  # pragma: no cover
+    """Depth-first branch and bound (Hess et al. 2016, Alg. 3) over angles 0..A-1 (rows/cols (A, N): the
+    points' cells at each angle) and integer offsets box = (x_lo, x_hi, y_lo, y_hi), from level d_top down.
+    Returns (best sum, a, x, y, nodes scored); a = -1 when nothing beats best0 (strictly)."""
+    n_ang = rows.shape[0]
+    x_lo, x_hi, y_lo, y_hi = box
+    w = 1 << d_top
+    nx = (x_hi - x_lo) // w + 1
+    ny = (y_hi - y_lo) // w + 1
+    top = np.empty(n_ang * nx * ny, dtype=np.float64)
+    for a in range(n_ang):
+        for ix in range(nx):
+            for iy in range(ny):
+                top[(a * nx + ix) * ny + iy] = _score(prob, levels, starts, d_top, rows, cols, a,
+                                                      x_lo + ix * w, y_lo + iy * w, quant)
+    order = np.argsort(-top, kind="mergesort")
+    cap = 4 * d_top + 4
+    st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
+          np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
+    best, ba, bx, by = best0, -1, 0, 0
+    nodes = top.size
+    for k in order:
+        if top[k] <= best:
+            break
+        a, rem = divmod(k, nx * ny)
+        st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = a, x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, \
+            d_top, top[k]
+        sp = 1
+        while sp > 0:
+            sp -= 1
+            if st[4][sp] <= best:
+                continue
+            a, x, y, d = st[0][sp], st[1][sp], st[2][sp], st[3][sp]
+            if d == 0:
+                best, ba, bx, by = st[4][sp], a, x, y
+                continue
+            sp, scored = _push_children(prob, levels, starts, rows, cols, a, x, y, d, box, quant, best, st, sp)
+            nodes += scored
+    return best, ba, bx, by, nodes
+
+
+@nb.njit(**_JIT)
+def exhaustive(prob, rows, cols, box, p_out):  # pragma: no cover - compiled
+    """Every candidate scored exactly (the compiled brute force, for benchmarks): (best sum, a, x, y), the
+    first best in (a, y, x) order."""
+    x_lo, x_hi, y_lo, y_hi = box
+    best, ba, bx, by = -np.inf, -1, 0, 0
+    for a in range(rows.shape[0]):
+        for y in range(y_lo, y_hi + 1):
+            for x in range(x_lo, x_hi + 1):
+                s = _exact(prob, rows, cols, a, x, y, p_out)
+                if s > best:
+                    best, ba, bx, by = s, a, x, y
+    return best, ba, bx, by

@@ -1,0 +1,257 @@
+"""Fast correlative scan matching by branch and bound (Hess et al., "Real-Time Loop Closure in 2D LIDAR SLAM",
+ICRA 2016, Alg. 2-3; Cartographer's FastCorrelativeScanMatcher2D; after Olson's multi-resolution correlative
+matching, ICRA 2009).
+
+The problem: a probability grid ``prob`` (H, W) of a submap, cell (r, c) covering
+x in [ox + c res, ox + (c + 1) res), y in [oy + r res, oy + (r + 1) res) of the anchor frame a; scan points
+``b_pts`` (N, 2) in the base frame b. The score of a pose aTb is the mean over the points of the cell holding
+aTb * p (``OUTSIDE`` = 0.1 for a point off the grid). The candidates around a seed aTb0:
+
+* angles theta0 + k dtheta, |k| <= n, n = ceil(window_theta / step), dtheta = window_theta / n (the window's
+  ends and the seed's angle are candidates, the spacing never coarser than ``step``); ``step`` defaults to
+  Cartographer's acos(1 - res^2 / (2 d_max^2)), d_max the farthest point: the step that moves it by one cell;
+* translations: the points are rotated once per angle, placed at the seed's position and put in their cells;
+  a candidate adds an integer cell offset (i, j), |i| <= ceil(window_x / res), |j| <= ceil(window_y / res),
+  and its pose is (x0 + i res, y0 + j res, theta0 + k dtheta).
+
+:func:`search` returns the candidate of highest score strictly above ``min_score`` (the same best score as
+:func:`brute_force`, which scores every candidate); it prunes with upper bounds from :func:`precompute`'s
+max-pooled grids: level d holds, per cell, the max of the 2^d x 2^d block of fine cells starting there,
+quantised to uint8 rounding up, so a level-d bound covers 2^d x 2^d offsets. Precompute once per finished
+submap (a few ms) and search it with any number of scans.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from holoslam.errors import MapError
+from holoslam.geometry import wrap
+
+__all__ = ["OUTSIDE", "PrecomputedGrids", "Match", "precompute", "search", "brute_force", "angular_step"]
+
+OUTSIDE = np.float32(0.1)  # the score of a point off the grid (what an unknown cell holds)
+_MAX_DEPTH = 12
+_MAX_CELLS = 1 << 28  # |cell index| and window limits in cells, far from int32 overflow
+_SLACK = 1e-9  # per point, added to bounds: float64 rounding of the sums can never make a bound too low
+
+
+@dataclass(frozen=True, eq=False)
+class PrecomputedGrids:
+    """The max-pooled grids of one submap (:func:`precompute`). ``prob`` (H, W) float32, read-only: level 0,
+    the grid itself; ``levels`` the uint8 levels 1..depth-1 back to back, level d of (H + 2^d - 1) x
+    (W + 2^d - 1) cells at ``levels[starts[d]:starts[d + 1]]``, cell (i, j) bounding the fine cells
+    [i - 2^d + 1, i] x [j - 2^d + 1, j] by ``q_lo + q * q_step``; ``origin`` (ox, oy) and ``res`` (m)
+    place cell (r, c) in the anchor frame."""
+
+    prob: np.ndarray
+    levels: np.ndarray
+    starts: np.ndarray
+    depth: int
+    origin: tuple[float, float]
+    res: float
+    q_lo: float
+    q_step: float
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.prob.shape  # type: ignore[return-value]
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held: the float32 grid and the uint8 levels."""
+        return int(self.prob.nbytes + self.levels.nbytes + self.starts.nbytes)
+
+    @property
+    def q_out(self) -> int:
+        """The code of the outside value (``OUTSIDE``)."""
+        return _codes(np.array([[OUTSIDE]], dtype=np.float32), self.q_lo, self.q_step)[0, 0]
+
+    def level(self, d: int) -> np.ndarray:
+        """Level d as float64 upper bounds (d = 0: the grid itself), padded: (H + 2^d - 1, W + 2^d - 1)."""
+        if not 0 <= d < self.depth:
+            raise ValueError(f"level {d} is not in 0..{self.depth - 1}")
+        if d == 0:
+            return self.prob.astype(np.float64)
+        sh = (1 << d) - 1
+        h, w = self.prob.shape
+        q = self.levels[self.starts[d]:self.starts[d + 1]].reshape(h + sh, w + sh)
+        return self.q_lo + q.astype(np.float64) * self.q_step
+
+
+@dataclass(frozen=True, eq=False)
+class Match:
+    """The best candidate: ``aTb`` (3,) (x, y, theta wrapped to [-pi, pi)) and its ``score`` (mean cell
+    probability at the points, in [0.1, 0.9] for a grid of such values)."""
+
+    aTb: np.ndarray
+    score: float
+
+
+def _kernels():
+    from holoslam.submaps import _bnb_fast
+
+    return _bnb_fast
+
+
+def _codes(prob: np.ndarray, lo: float, step: float) -> np.ndarray:
+    """uint8 codes rounding up (numpy form of ``_bnb_fast.quantise``, for a few values)."""
+    p = prob.astype(np.float64)
+    q = np.clip(np.ceil((p - lo) / step), 0, 255)
+    q = np.where((lo + q * step < p) & (q < 255), q + 1, q)
+    return q.astype(np.uint8)
+
+
+def precompute(prob: np.ndarray, depth: int = 7, *, origin: tuple[float, float], res: float) -> PrecomputedGrids:
+    """The max-pooled grids of ``prob`` (H, W) at block widths 2^0..2^(depth-1) (Cartographer's default
+    depth is 7). ``origin`` (ox, oy) and ``res`` (m) place the grid in the anchor frame. The grid is copied
+    (float32, read-only); levels 1..depth-1 take sum_d (H + 2^d - 1)(W + 2^d - 1) bytes."""
+    p = np.asarray(prob)
+    if p.ndim != 2 or p.size == 0:
+        raise MapError(f"precompute needs a non-empty 2-D probability grid, got shape {p.shape}")
+    p = np.array(p, dtype=np.float32, order="C", copy=True)
+    if not np.isfinite(p).all():
+        raise MapError("precompute: the probability grid holds NaN or infinite cells; fill unknown cells with 0.1")
+    if not 1 <= int(depth) <= _MAX_DEPTH:
+        raise ValueError(f"precompute: depth must be in 1..{_MAX_DEPTH}, got {depth}")
+    ox, oy = (float(v) for v in origin)
+    if not (math.isfinite(ox) and math.isfinite(oy) and math.isfinite(res) and res > 0):
+        raise MapError(f"precompute: origin {origin} and resolution {res} must be finite, resolution > 0")
+    lo = float(min(p.min(), OUTSIDE))
+    hi = float(max(p.max(), OUTSIDE))
+    step = (hi - lo) * (1.0 + 1e-6) / 255.0 if hi > lo else 1.0
+    fast = _kernels()
+    q0 = fast.quantise(p, lo, step)
+    q_out = _codes(np.array([[OUTSIDE]], dtype=np.float32), lo, step)[0, 0]
+    levels, starts = fast.pool_levels(q0, int(depth), np.uint8(q_out))
+    p.flags.writeable = False
+    levels.flags.writeable = False
+    starts.flags.writeable = False
+    return PrecomputedGrids(p, levels, starts, int(depth), (ox, oy), float(res), lo, step)
+
+
+def angular_step(b_pts: np.ndarray, res: float) -> float:
+    """Cartographer's angular step acos(1 - res^2 / (2 d_max^2)): the rotation that moves the farthest point
+    ``d_max`` by one cell (pi when every point lies within half a cell of the origin)."""
+    p = np.asarray(b_pts, dtype=np.float64).reshape(-1, 2)
+    d_max = float(np.sqrt((p * p).sum(axis=1)).max()) if p.size else 0.0
+    if d_max <= 0.5 * res:
+        return math.pi
+    return math.acos(1.0 - res * res / (2.0 * d_max * d_max))
+
+
+@dataclass(frozen=True, eq=False)
+class _Candidates:
+    """The discrete search: angles (A,), the points' cells at each angle rows/cols (A, N) int32 (the seed's
+    translation included), the offset box (x_lo, x_hi, y_lo, y_hi) in cells."""
+
+    angles: np.ndarray
+    rows: np.ndarray
+    cols: np.ndarray
+    box: tuple[int, int, int, int]
+    seed: np.ndarray
+
+
+def _window_cells(window_xy_m, res: float) -> tuple[int, int]:
+    wxy = np.broadcast_to(np.asarray(window_xy_m, dtype=np.float64), (2,))
+    if not (np.isfinite(wxy).all() and (wxy >= 0).all()):
+        raise ValueError(f"the translation window must be finite and >= 0 (m), got {window_xy_m}")
+    cells = np.ceil(wxy / res - 1e-9).astype(np.int64)
+    if (cells > _MAX_CELLS).any():
+        raise ValueError(f"the translation window {window_xy_m} m is too large for {res} m cells")
+    return int(cells[0]), int(cells[1])
+
+
+def _candidates(grids: PrecomputedGrids, b_pts, seed_aTb, window_xy_m, window_theta_rad,
+                step: float | None) -> _Candidates:
+    pts = np.asarray(b_pts, dtype=np.float64).reshape(-1, 2)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    if pts.shape[0] == 0:
+        raise ValueError("the scan has no finite points to match")
+    seed = np.asarray(seed_aTb, dtype=np.float64).reshape(3)
+    if not np.isfinite(seed).all():
+        raise ValueError(f"the seed pose must be finite, got {seed}")
+    wt = float(window_theta_rad)
+    if not (math.isfinite(wt) and 0 <= wt <= math.pi):
+        raise ValueError(f"the angular window must be in [0, pi] rad, got {window_theta_rad}")
+    step = angular_step(pts, grids.res) if step is None else float(step)
+    if not (math.isfinite(step) and step > 0):
+        raise ValueError(f"the angular step must be > 0 rad, got {step}")
+    n = math.ceil(wt / step - 1e-9) if wt > 0 else 0
+    k = np.arange(-n, n + 1, dtype=np.float64)
+    angles = seed[2] + (k * (wt / n) if n else k)
+    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
+    x = c * pts[:, 0] - s * pts[:, 1] + seed[0]
+    y = s * pts[:, 0] + c * pts[:, 1] + seed[1]
+    lim = float(_MAX_CELLS)
+    cols = np.clip(np.floor((x - grids.origin[0]) / grids.res), -lim, lim).astype(np.int32)
+    rows = np.clip(np.floor((y - grids.origin[1]) / grids.res), -lim, lim).astype(np.int32)
+    wx, wy = _window_cells(window_xy_m, grids.res)
+    return _Candidates(angles, rows, cols, (-wx, wx, -wy, wy), seed)
+
+
+def _match(cand: _Candidates, res: float, a: int, x: int, y: int, total: float) -> Match:
+    aTb = np.array([cand.seed[0] + x * res, cand.seed[1] + y * res, wrap(float(cand.angles[a]))])
+    return Match(aTb, total / cand.rows.shape[1])
+
+
+def _top_level(grids: PrecomputedGrids, box: tuple[int, int, int, int]) -> int:
+    """The coarsest level searched: at most depth - 1, and no block wider than the window's span."""
+    span = max(box[1] - box[0], box[3] - box[2]) + 1
+    return max(0, min(grids.depth - 1, span.bit_length() - 1))
+
+
+def search(
+    grids: PrecomputedGrids,
+    b_pts: np.ndarray,
+    seed_aTb: np.ndarray,
+    window_xy_m: float | tuple[float, float],
+    window_theta_rad: float,
+    min_score: float,
+    angular_step: float | None = None,
+) -> Match | None:
+    """The best pose aTb of the scan ``b_pts`` (N, 2, base frame; non-finite points dropped) within
+    +-``window_xy_m`` (one value or (x, y)) and +-``window_theta_rad`` of ``seed_aTb``, by depth-first
+    branch and bound, best child first; None when no candidate scores strictly above ``min_score``. Exact:
+    the same best score as :func:`brute_force` (ties between equal scores may pick another pose)."""
+    cand = _candidates(grids, b_pts, seed_aTb, window_xy_m, window_theta_rad, angular_step)
+    n = cand.rows.shape[1]
+    quant = (grids.q_lo, grids.q_step, float(grids.q_out), float(OUTSIDE), _SLACK * n)
+    best, a, x, y, _nodes = _kernels().branch_and_bound(
+        grids.prob, grids.levels, grids.starts, cand.rows, cand.cols, cand.box, _top_level(grids, cand.box),
+        quant, float(min_score) * n)
+    return None if a < 0 else _match(cand, grids.res, a, x, y, best)
+
+
+def brute_force(
+    grids: PrecomputedGrids,
+    b_pts: np.ndarray,
+    seed_aTb: np.ndarray,
+    window_xy_m: float | tuple[float, float],
+    window_theta_rad: float,
+    min_score: float,
+    angular_step: float | None = None,
+) -> Match | None:
+    """The reference of :func:`search` in numpy: every candidate scored (per angle, the points' shifted
+    windows of the grid added in point order, float64), the first best in (angle, y, x) order kept."""
+    cand = _candidates(grids, b_pts, seed_aTb, window_xy_m, window_theta_rad, angular_step)
+    x_lo, x_hi, y_lo, y_hi = cand.box
+    wx, wy = x_hi, y_hi
+    h, w = grids.prob.shape
+    ext = np.full((h + 4 * wy + 2, w + 4 * wx + 2), OUTSIDE, dtype=np.float32)
+    py, px = 2 * wy + 1, 2 * wx + 1  # ext[r + py, c + px] = prob[r, c]
+    ext[py:py + h, px:px + w] = grids.prob
+    best, arg = float(min_score) * cand.rows.shape[1], None
+    for a in range(cand.angles.size):
+        rr = np.clip(cand.rows[a].astype(np.int64), -wy - 1, h + wy) + py
+        cc = np.clip(cand.cols[a].astype(np.int64), -wx - 1, w + wx) + px
+        score = np.zeros((2 * wy + 1, 2 * wx + 1))
+        for r, c in zip(rr, cc, strict=True):
+            score += ext[r - wy:r + wy + 1, c - wx:c + wx + 1]
+        j = int(np.argmax(score))
+        if score.flat[j] > best:
+            best, arg = float(score.flat[j]), (a, j % (2 * wx + 1) - wx, j // (2 * wx + 1) - wy)
+    return None if arg is None else _match(cand, grids.res, *arg, best)
