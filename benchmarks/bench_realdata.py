@@ -1,0 +1,197 @@
+"""Real laser logs with ground truth (the Freiburg SLAM benchmark): holoslam's relation error, time and memory
+next to Cartographer's published figures.
+
+    .venv/bin/python benchmarks/bench_realdata.py [--logs intel aces fr079] [--duration S] [--out DIR]
+
+Data: ``../shared/realdata/`` beside the repository (or ``--data``): ``<log>.mcap`` and ``<log>.relations`` for
+intel, aces and fr079 (see its README). ``--duration S`` runs on a cut of the first S seconds of each log
+(``holoslam.io.mcap_cut.cut_log``, written to the output folder) scored on the relations whose two stamps are
+in the cut (``holoslam.io.relations.cut_relations``; these logs' header stamps are their log times).
+
+Each log is run in a child process (this script with ``--child``) doing what ``holoslam run LOG -o OUT`` does:
+``holoslam.pipeline.run`` with the default ``RunConfig``, then the run folder written. The parent measures the
+child's wall time (interpreter start and imports included) and its peak resident memory from the rusage that
+``os.wait4`` returns for that child (the per-child form of ``resource.getrusage(RUSAGE_CHILDREN).ru_maxrss``,
+which is a maximum over every child so far and so would carry one log's peak into the next row).
+
+The written ``trajectory.tum`` is scored with ``holoslam.evaluate.relation_errors`` (nearest pose within
+0.05 s) and cross-checked with the independent scorer ``score_relations.py`` of the data folder run as a
+program: matched counts must be equal and the translational and rotational means agree to 1e-6 (the scorer's
+per-relation CSV has 6 decimals); a check line per log says so, and the script exits 1 when a check fails.
+
+Columns: transl / rot = mean ± sample std of the relation errors; matched = relations with a pose within
+0.05 s of both stamps / all relations (of the cut); max = largest translational error; run s = the child's
+wall time, pipeline s = ``report.json``'s total of the stages; RSS = the child's peak resident set; carto =
+Cartographer's published error (Hess et al. 2016, Table II, as quoted in the data README); ratio = holoslam /
+Cartographer (translation, rotation); carto s = its published wall time for the whole log (Table V, 6-core
+workstation; not comparable with a cut).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "realdata"
+LOGS = ("intel", "aces", "fr079")
+# Hess, Kohler, Rapp, Andor, ICRA 2016: Table II (mean ± std of the absolute relation error) and Table V (wall s)
+CARTOGRAPHER = {
+    "intel": {"transl": (0.0229, 0.0239), "rot": (0.453, 1.335), "wall_s": 179.0},
+    "aces": {"transl": (0.0375, 0.0426), "rot": (0.373, 0.469), "wall_s": 41.0},
+    "fr079": {"transl": (0.0452, 0.0354), "rot": (0.538, 0.718), "wall_s": 62.0},
+}
+MEAN_TOLERANCE = 1e-6
+
+
+def child(log: str, out: str) -> None:
+    """What ``holoslam run LOG -o OUT`` does, with the default configuration."""
+    from holoslam.pipeline import RunConfig, run_log_to_folder
+
+    summary = run_log_to_folder(log, out, RunConfig())
+    Path(out, "bench_child.json").write_text(json.dumps({"seconds": summary["seconds"]}))
+
+
+def run_child(log: Path, out: Path) -> tuple[float, float, int]:
+    """(wall s, peak RSS MB, exit code) of one child running the log into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(log), str(out)]
+    with open(out / "bench_child.log", "wb") as log_file:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    return wall, usage.ru_maxrss / 1024.0, proc.returncode  # ru_maxrss is in KiB on Linux
+
+
+def scorer_check(scorer: Path, tum: Path, rel_path: Path, errors, workdir: Path) -> tuple[bool, str]:
+    """Run ``score_relations.py`` on the same files; compare matched counts and means."""
+    per = workdir / "score_relations_per_relation.csv"
+    res = subprocess.run(
+        [sys.executable, str(scorer), str(tum), str(rel_path), "--per-relation", str(per)],
+        capture_output=True,
+        text=True,
+    )
+    if res.returncode not in (0, 1) or not per.is_file():
+        return False, f"score_relations.py failed (exit {res.returncode}): {res.stderr.strip()}"
+    rows = list(csv.DictReader(per.open()))
+    t = np.array([float(r["trans_m"]) for r in rows])
+    r = np.array([float(r["rot_deg"]) for r in rows])
+    mt = float(t.mean()) if t.size else math.nan
+    mr = float(r.mean()) if r.size else math.nan
+    dt, dr = abs(mt - errors.translation_mean_m), abs(mr - errors.rotation_mean_deg)
+    same_count = len(rows) == errors.n_matched
+    ok = same_count and dt < MEAN_TOLERANCE and dr < MEAN_TOLERANCE
+    text = (
+        f"score_relations.py matched {len(rows)} (holoslam {errors.n_matched}); "
+        f"transl mean {mt:.7f} vs {errors.translation_mean_m:.7f} (|diff| {dt:.1e}); "
+        f"rot mean {mr:.7f} vs {errors.rotation_mean_deg:.7f} (|diff| {dr:.1e}): "
+        + ("agree to 1e-6" if ok else "DISAGREE")
+    )
+    return ok, text
+
+
+def bench_log(name: str, data: Path, out_root: Path, duration: float | None) -> tuple[dict, bool, str]:
+    from holoslam.evaluate import relation_errors
+    from holoslam.io.mcap_cut import cut_log
+    from holoslam.io.relations import cut_relations, read_relations, write_relations
+    from holoslam.io.trajectory import read_tum
+
+    log, rel_path = data / f"{name}.mcap", data / f"{name}.relations"
+    rel = read_relations(rel_path)
+    work = out_root / name
+    work.mkdir(parents=True, exist_ok=True)
+    if duration is not None:
+        cut = cut_log(log, work / f"{name}_first{duration:g}s.mcap", 0.0, duration)
+        log = cut.path
+        rel = cut_relations(rel, cut.start_ns, cut.end_ns)
+        rel_path = write_relations(work / f"{name}_first{duration:g}s.relations", rel)
+    run_dir = work / "run"
+    wall, rss_mb, code = run_child(log, run_dir)
+    if code != 0:
+        tail = (run_dir / "bench_child.log").read_text(errors="replace").strip().splitlines()[-3:]
+        raise SystemExit(f"{name}: the run failed (exit {code}): {' | '.join(tail)}")
+    tum = run_dir / "trajectory.tum"
+    stamps, wTb = read_tum(tum)
+    e = relation_errors(stamps, wTb, rel)
+    ok, check = scorer_check(data / "score_relations.py", tum, rel_path, e, work)
+    pipeline_s = json.loads((run_dir / "bench_child.json").read_text())["seconds"]
+    row = {
+        "log": name + ("" if duration is None else f" ({duration:g} s)"),
+        "transl": (e.translation_mean_m, e.translation_std_m),
+        "rot": (e.rotation_mean_deg, e.rotation_std_deg),
+        "matched": f"{e.n_matched}/{e.n_relations}",
+        "max_m": e.translation_max_m,
+        "run_s": wall,
+        "pipeline_s": float(pipeline_s),
+        "rss_mb": rss_mb,
+        "carto": CARTOGRAPHER[name],
+    }
+    return row, ok, check
+
+
+def print_table(rows: list[dict]) -> None:
+    head = (
+        f"{'log':<14}{'transl m (mean ± std)':>24}{'rot deg (mean ± std)':>22}{'matched':>12}{'max m':>8}"
+        f"{'run s':>8}{'pipeline s':>11}{'RSS MB':>8}   {'carto m / deg':<16}{'ratio':>14}{'carto s':>9}"
+    )
+    print(head)
+    for r in rows:
+        c = r["carto"]
+        ratio = f"{r['transl'][0] / c['transl'][0]:.1f}x/{r['rot'][0] / c['rot'][0]:.1f}x"
+        print(
+            f"{r['log']:<14}{r['transl'][0]:>12.4f} ± {r['transl'][1]:<9.4f}{r['rot'][0]:>10.3f} ± {r['rot'][1]:<9.3f}"
+            f"{r['matched']:>12}{r['max_m']:>8.3f}{r['run_s']:>8.1f}{r['pipeline_s']:>11.1f}{r['rss_mb']:>8.0f}"
+            f"   {c['transl'][0]:.4f} / {c['rot'][0]:.3f}{ratio:>15}{c['wall_s']:>9.0f}"
+        )
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--logs", nargs="+", choices=LOGS, default=list(LOGS), help="which logs (default: all)")
+    ap.add_argument("--duration", type=float, help="run on a cut of the first S seconds of each log")
+    ap.add_argument("--data", type=Path, default=DATA, help=f"folder of the logs (default {DATA})")
+    ap.add_argument("--out", type=Path, help="keep the run folders here (default: a temporary folder)")
+    ap.add_argument("--child", nargs=2, metavar=("LOG", "OUT"), help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.child:
+        child(*a.child)
+        return 0
+    if a.duration is not None and not a.duration > 0:
+        ap.error("--duration must be > 0 seconds")
+    missing = [
+        n for n in a.logs if not (a.data / f"{n}.mcap").is_file() or not (a.data / f"{n}.relations").is_file()
+    ]
+    if missing or not (a.data / "score_relations.py").is_file():
+        print(f"realdata not found in {a.data} (missing: {', '.join(missing) or 'score_relations.py'})")
+        return 2
+    with tempfile.TemporaryDirectory(prefix="bench_realdata_") as tmp:
+        out_root = a.out or Path(tmp)
+        rows, all_ok = [], True
+        for name in a.logs:
+            row, ok, check = bench_log(name, a.data, out_root, a.duration)
+            print(f"check {row['log']}: {check}", flush=True)
+            rows.append(row)
+            all_ok &= ok
+        print()
+        what = "whole logs" if a.duration is None else f"the first {a.duration:g} s of each log"
+        print(f"relation error of holoslam run (default RunConfig) on {what}; nearest pose within 0.05 s")
+        print_table(rows)
+        if a.out:
+            print(f"run folders in {a.out}")
+    return 0 if all_ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
