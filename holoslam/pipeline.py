@@ -186,6 +186,16 @@ class RunResult:
     report: dict[str, Any]
 
 
+def reestimate_anchors(problem: Any) -> np.ndarray:
+    """The front end's re-estimate after loop closures: the anchors' poses from the relative poses found so
+    far, loops under the robust kernel, one plain solve (no outlier rounds: the final solve does those)."""
+    from holoslam.solve import SolveOptions, solve
+
+    opts = SolveOptions(reject_outliers=True, max_rounds=0, final_gaussian=False, detect_moved=False,
+                        max_iterations=50)
+    return solve(problem, opts).wTa
+
+
 def optimised_trajectory(
     stamps_ns: np.ndarray,
     dr_stamps_ns: np.ndarray,
@@ -349,7 +359,8 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
 
     fe_stage = "front end (submaps, Eq. 12/14/15/16)"
     with _stage(progress, timings, fe_stage):
-        fe = build_problem(log, observations, cfg.frontend, lambda done, total: progress(fe_stage, done, total))
+        fe = build_problem(log, observations, cfg.frontend, lambda done, total: progress(fe_stage, done, total),
+                           optimize=reestimate_anchors)
 
     with _stage(progress, timings, "optimise"):
         options = SolveOptions(

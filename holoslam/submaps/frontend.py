@@ -1,45 +1,30 @@
 """The SLAM front end: a log and object observations -> submaps and a :class:`holoslam.graph.problem.SlamProblem`.
 
-Steps (seed 002 §2, SPEC §4):
+Steps (seed 002 §2, SPEC §4 and §8), each a named function or class:
 
 1. Dead reckoning of the whole run (Eq. 14, compass heading changes with the odometry fallback) gives
-   ``wTb`` at every odometry stamp: the seed of everything else and the "dead reckoning alone" baseline.
-2. Scans are walked in time order. A keyframe (see ``holoslam.submaps.segment``) is registered by point-to-line
-   ICP into the active submap's points, seeded by the odometry increment from the previous keyframe; a failed
-   match keeps the seed with the dead-reckoning covariance added. Over such short intervals (a keyframe is
-   0.2 m or 10 degrees from the last; a sighting is a few seconds from its keyframe) the odometry's heading
-   change is far better than the difference of two compass readings (sqrt(2) x 1.5 deg of white noise), so
-   these use dead reckoning without the compass; the compass enters between anchors and as heading factors.
-   A keyframe's pose covariance in the anchor frame is its registration's plus the previous keyframe's: the
-   map it registered into was placed by the keyframes before it, so their errors carry over (a conservative
-   random walk; the registration alone is overconfident by 2-5x in variance against ground truth). The policy of ``segment.py`` decides when a new
-   submap starts; its anchor is the base pose at that keyframe.
-3. Between consecutive anchors m and n two independent relative poses are emitted: ``dead_reckoning`` (Eq. 14
-   from m's anchor to n's anchor stamp, with its analytic covariance) and, when the arrival scan registers into
-   submap m, ``scan_match`` (Eq. 15 with nTr = identity, since n's anchor is the arrival pose); its covariance
-   is ICP's plus that of the last keyframe of submap m (the map the scan registered into was placed by it).
+   ``wTb`` at every odometry stamp: the prediction of scan matching and the "dead reckoning alone" baseline.
+2. Local SLAM (``local_slam.LocalSlam``): scans that pass the motion filter become nodes, matched into the
+   older of two active probability-grid submaps (Eq. 12, ``scanmatch``) and inserted into both. Each new
+   submap is anchored at a node; its pose in the submap it was matched into is a ``scan_match`` relative pose
+   (Eq. 15), beside the ``dead_reckoning`` relative pose between the two anchors' stamps (Eq. 14).
+3. Revisits (``loops.LoopSearch``): every few nodes, the finished submaps near the node's current world
+   estimate are searched by branch-and-bound in a window that grows with the distance travelled since the
+   last closure; a closure is a ``loop`` relative pose (robust kernel in the solver). After each closure the
+   anchors are re-estimated through the ``optimize`` callback (the pipeline passes the solver), so windows
+   stay small once the map is consistent.
 4. Compass yaw at every anchor stamp (raw, with its bias) -> HeadingMeasurements.
-5. Revisits: every ``revisit_every`` keyframes the scan is registered into the older submaps (not the
-   previous one, nor one already linked to the current submap) that have a keyframe within ``revisit_radius``
-   of the current estimate, the ``max_loop_candidates`` nearest first; a match that passes ICP's quality gate
-   and lies within ``max_loop_correction`` of its seed gives a ``loop`` relative pose by Eq. 15,
-   mTn = mTr ∘ (nTr)^-1 with nTr the keyframe's pose in its own submap. Its covariance adds the old map's own
-   error where the scan matched (the nearest old keyframe's pose covariance) to ICP's; at most one loop links
-   a pair of submaps, and the k loops found from one keyframe are each inflated by k (they share that
-   keyframe's pose error, so together they count as one measurement).
-6. Landmarks (Eq. 16): an observation at stamp t is put into the anchor frame of the submap active at t, using
-   the robot's pose there (last keyframe ∘ dead reckoning to t): a_xy = R(theta) b_xy + t, z kept; its 2x2
-   covariance is R cov_b R^T + J cov_aTb J^T. An observation before the first scan (the camera may fire first)
-   goes to anchor 0 by dead reckoning back from it; only observations outside the odometry's span are skipped
-   (counted in ``skipped_observations``).
-7. Ambiguous objects: an object seen at least twice whose sightings all disagree with one another (no two
+5. Landmarks (Eq. 16): an observation at stamp t is put into the anchor frame of the submap active at t, using
+   the robot's pose there (nearest earlier node ∘ dead reckoning to t): a_xy = R(theta) b_xy + t, z kept; its
+   2x2 covariance is R cov_b R^T + J cov_aTb J^T. An observation before the first scan (the camera may fire
+   first) goes to anchor 0 by dead reckoning back from it; only observations outside the odometry's span are
+   skipped (counted in ``skipped_observations``).
+6. Ambiguous objects: an object seen at least twice whose sightings all disagree with one another (no two
    within ``association_gate`` of each other under their covariances plus ``association_drift`` of the initial
-   anchors) cannot be located: no majority says which sighting is right (one misread id or one tag at the wrong
-   place among two sightings). Its sightings are left out and its id is listed in ``ambiguous_objects``, rather
-   than placing it at an arbitrary one. Objects with a consistent majority, or two self-consistent groups (a
-   moved object), go to the solver, whose outlier rejection and moved-object detection handle them; each
-   object's initial position is the mean of its largest agreeing group (the earliest on a tie), so a robust
-   kernel does not start, and stay, at a wrong sighting.
+   anchors) cannot be located: its sightings are left out and its id is listed in ``ambiguous_objects``.
+   Objects with a consistent majority, or two self-consistent groups (a moved object), go to the solver,
+   whose outlier rejection and moved-object detection handle them; each object's initial position is the
+   mean of its largest agreeing group (the earliest on a tie).
 """
 
 from __future__ import annotations
@@ -52,17 +37,10 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.errors import IngestError
 from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interpolate_poses, interpolate_yaw
-from holoslam.submaps.features import ScanFeatures, extract_features, transform_features
-from holoslam.submaps.localize import NearestIndex, register_points, scan_normals
-from holoslam.submaps.segment import (
-    SegmentConfig,
-    Submap,
-    local_grid,
-    side_width,
-    split_reason,
-    transform_normals,
-    voxel_append,
-)
+from holoslam.submaps.features import FeatureConfig, ScanFeatures, extract_features, transform_features
+from holoslam.submaps.local_slam import ActiveSubmap, LocalSlam, LocalSlamConfig
+from holoslam.submaps.loops import LoopConfig, LoopSearch
+from holoslam.submaps.segment import Submap, voxel_downsample
 from holoslam.types import LogData, ObjectObservation
 
 __all__ = ["FrontEndConfig", "FrontEnd", "build_problem", "base_to_laser", "landmark_in_anchor"]
@@ -71,16 +49,15 @@ __all__ = ["FrontEndConfig", "FrontEnd", "build_problem", "base_to_laser", "land
 @dataclass(frozen=True, slots=True)
 class FrontEndConfig:
     dead_reckoning: DeadReckoningConfig = field(default_factory=DeadReckoningConfig)
-    segment: SegmentConfig = field(default_factory=SegmentConfig)
-    revisit_every: int = 3  # keyframes
-    revisit_radius: float = 1.5  # m from the nearest keyframe of an older submap
-    max_loop_candidates: int = 3  # the older submaps with the nearest keyframes are tried, at most this many
-    max_loop_correction: float = 0.5  # m between a loop's seed and its match
+    local: LocalSlamConfig = field(default_factory=LocalSlamConfig)
+    loops: LoopConfig = field(default_factory=LoopConfig)
+    features: FeatureConfig = field(default_factory=FeatureConfig)
     default_heading_sigma: float = 0.03  # rad, when the log gives none
     base_frame: str = "base_link"
     build_grids: bool = True
     association_drift: float = 0.15  # m, allowance for the initial anchors' drift when comparing sightings
     association_gate: float = 13.8  # chi-square(2) 0.999: two sightings of one object agree below this
+    point_voxel: float = 0.05  # m, decimation of a submap's points (features, pictures)
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,47 +112,51 @@ def landmark_in_anchor(
     return a_xy, 0.5 * (cov + cov.T), float(pb[2])
 
 
-class _Open:
-    """The submap being built."""
+def _submap_record(sm: ActiveSubmap, cfg: FrontEndConfig, reason: str) -> Submap:
+    """A finished submap as the record the rest of holoslam reads (keyframes = its nodes)."""
+    P = np.array(sm.aTb).reshape(-1, 3)
+    feats = [transform_features(T, extract_features(b, cfg.features)) for T, b in zip(P, sm.b_points, strict=True)]
+    features = ScanFeatures(*(np.vstack([getattr(x, k) for x in feats]) for k in
+                              ("segments", "lines", "corners", "crossings", "points")))
+    pts = np.vstack([g.transform_points(T, b) for T, b in zip(P, sm.b_points, strict=True)])
+    pts, nrm = voxel_downsample(pts, np.zeros_like(pts), cfg.point_voxel)
+    grid = sm.grid() if cfg.build_grids else None
+    return Submap(sm.index, sm.anchor_stamp_ns, np.array(sm.stamps, np.int64), P, np.array(sm.cov).reshape(-1, 3, 3),
+                  tuple(sm.b_points), pts, nrm, features, grid, reason)
 
-    def __init__(self, index: int, stamp: int, reason: str, cfg: SegmentConfig, travelled0: float) -> None:
-        self.index, self.stamp, self.reason, self.cfg = index, stamp, reason, cfg
-        self.stamps: list[int] = []
-        self.poses: list[np.ndarray] = []
-        self.covs: list[np.ndarray] = []
-        self.bpts: list[np.ndarray] = []
-        self.ranges: list[np.ndarray] = []
-        self.angles: list[np.ndarray] = []
-        self.pts = np.zeros((0, 2))
-        self.nrm = np.zeros((0, 2))
-        self.codes = np.zeros(0, dtype=np.int64)  # voxel codes of pts (segment.voxel_append)
-        self.feats: list[ScanFeatures] = []
-        self.narrow = False
-        self.travelled0 = travelled0
 
-    def add(self, stamp, aTb, cov, bpts, bnrm, ranges, angles, bTs) -> None:
-        self.stamps.append(int(stamp))
-        self.poses.append(np.asarray(aTb, float))
-        self.covs.append(np.asarray(cov, float))
-        self.bpts.append(bpts)
-        self.ranges.append(ranges)
-        self.angles.append(angles)
-        p = g.transform_points(aTb, bpts)
-        n = transform_normals(aTb, bnrm)
-        self.pts, self.nrm, self.codes = voxel_append(self.pts, self.nrm, self.codes, p, n, self.cfg.voxel)
-        self.feats.append(transform_features(aTb, extract_features(bpts, self.cfg.features)))
+class _Graph:
+    """The relative poses found so far and the anchors' current world estimate."""
 
-    def close(self, bTs: np.ndarray, build_grid: bool) -> Submap:
-        f = self.feats
-        feats = ScanFeatures(*(np.vstack([getattr(x, k) for x in f]) for k in
-                               ("segments", "lines", "corners", "crossings", "points")))
-        P = np.array(self.poses)
-        grid = None
-        if build_grid:
-            aTs = g.compose(P, np.broadcast_to(bTs, P.shape))
-            grid = local_grid(aTs, self.ranges, self.angles, self.cfg.grid_resolution, self.cfg.clear_range)
-        return Submap(self.index, self.stamp, np.array(self.stamps, np.int64), P, np.array(self.covs),
-                      tuple(self.bpts), self.pts, self.nrm, feats, grid, self.reason)
+    def __init__(self, first_wTa: np.ndarray) -> None:
+        self.i: list[int] = []
+        self.j: list[int] = []
+        self.T: list[np.ndarray] = []
+        self.cov: list[np.ndarray] = []
+        self.kind: list[str] = []
+        self.est: list[np.ndarray] = [np.asarray(first_wTa, np.float64)]
+
+    def add(self, i: int, j: int, T, cov, kind: str) -> None:
+        self.i.append(i), self.j.append(j), self.T.append(np.asarray(T, float)), self.kind.append(kind)
+        self.cov.append(np.asarray(cov, float) + np.eye(3) * 1e-10)
+
+    def measurements(self):
+        from holoslam.graph.problem import RelativePoseMeasurements
+
+        if not self.i:
+            return RelativePoseMeasurements.empty()
+        return RelativePoseMeasurements(np.array(self.i), np.array(self.j), np.array(self.T), np.array(self.cov),
+                                        np.array(self.kind, dtype=object))
+
+    def reoptimise(self, optimize: Callable[[object], np.ndarray] | None) -> None:
+        if optimize is None:
+            return
+        from holoslam.graph.problem import SlamProblem
+
+        n = len(self.est)
+        problem = SlamProblem(num_poses=n, relative=self.measurements(), initial_wTa=np.array(self.est))
+        wTa = np.asarray(optimize(problem))
+        self.est = list(wTa)
 
 
 def build_problem(
@@ -183,18 +164,15 @@ def build_problem(
     observations: Sequence[ObjectObservation] = (),
     config: FrontEndConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
+    optimize: Callable[[object], np.ndarray] | None = None,
 ) -> FrontEnd:
     """Run the front end over a log (see the module docstring). Raises IngestError when the log lacks
-    odometry or scans. ``progress(done, total)`` is called with the scans walked, about every 2% of them."""
-    from holoslam.graph.problem import (
-        HeadingMeasurements,
-        LandmarkMeasurements,
-        RelativePoseMeasurements,
-        SlamProblem,
-    )
+    odometry or scans. ``progress(done, total)`` is called with the scans walked, about every 2% of them.
+    ``optimize(problem) -> wTa`` re-estimates the anchors after loop closures (without it the front end keeps
+    its chained estimate, and loop windows grow with the distance since the start)."""
+    from holoslam.graph.problem import SlamProblem
 
     cfg = config or FrontEndConfig()
-    scfg = cfg.segment
     if len(log.odometry) < 2:
         raise IngestError(f"{log.source}: the front end needs odometry (/odom), found {len(log.odometry)} records")
     if not log.scans:
@@ -205,7 +183,6 @@ def build_problem(
     have_h = hst.size >= 2
     hargs = dict(heading_stamps_ns=hst if have_h else None, heading_yaw=hyaw if have_h else None,
                  heading_sigma=hsig if have_h else None, config=cfg.dead_reckoning)
-    # short intervals (keyframe to keyframe, keyframe to a sighting): odometry headings only (step 2)
     short = dict(config=replace(cfg.dead_reckoning, use_compass=False))
     scans = [s for s in log.scans if ost[0] <= s.stamp_ns <= ost[-1]]
     if not scans:
@@ -217,142 +194,92 @@ def build_problem(
     whole = dead_reckon(ost, opose, t_first, int(ost[-1]), start=start, **hargs)
     dr_st, dr_wTb = whole.stamps_ns, whole.aTb
     path_len = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(dr_wTb[:, :2], axis=0).T))])
+    scan_t = np.array([s.stamp_ns for s in scans], dtype=np.int64)
+    odo_at_scans = interpolate_poses(ost, opose, scan_t)
+    travelled = np.interp((scan_t - dr_st[0]).astype(float), (dr_st - dr_st[0]).astype(float), path_len)
 
-    def dr_at(t: int) -> np.ndarray:
-        return interpolate_poses(dr_st, dr_wTb, np.array([t]))[0]
-
-    def travelled_at(t: int) -> float:
-        return float(np.interp(float(t - dr_st[0]), (dr_st - dr_st[0]).astype(float), path_len))
-
-    rel_i, rel_j, rel_T, rel_cov, rel_kind = [], [], [], [], []
-
-    def add_rel(i, j, T, cov, kind):
-        rel_i.append(i), rel_j.append(j), rel_T.append(np.asarray(T, float)), rel_kind.append(kind)
-        rel_cov.append(np.asarray(cov, float) + np.eye(3) * 1e-10)
-
+    # 2-3. local SLAM and revisits
+    slam = LocalSlam(cfg.local, bTs)
+    loops = LoopSearch(cfg.loops, cfg.local.match)
+    graph = _Graph(dr_wTb[0])
     closed: list[Submap] = []
-    est_wTa: list[np.ndarray] = [dr_at(t_first)]
-    cur = _Open(0, t_first, "start", scfg, 0.0)
-    last_kf_t, last_kf_pose, last_kf_cov = None, None, None
-    kf_count = 0
-    loops_tried = 0
-    linked: set[tuple[int, int]] = set()  # (old, current) submap pairs that already have a loop
-    every = max(1, -(-len(scans) // 50))  # at most 50 calls
-    kf_turn = np.radians(scfg.keyframe_turn_deg)
-    # the odometry at every scan, once: a cheap test that rules out most scans as keyframes before the exact one
-    odo_at_scans = interpolate_poses(ost, opose, np.array([s.stamp_ns for s in scans], dtype=np.int64))
-    last_kf_k, win_kf, win0, win = -1, -1, 0, np.zeros(0, dtype=bool)
-    closed_kf_w: list[np.ndarray] = []  # keyframe positions of the closed submaps in the world (step 5)
-    kf_start = [0]  # where each closed submap's keyframes start in their concatenation
-    old_index: dict[int, NearestIndex] = {}  # nearest-point indexes of closed submaps, built on first revisit
-    for k_scan, scan in enumerate(scans):
-        if progress is not None and k_scan % every == 0:
-            progress(k_scan, len(scans))
+    n_arrivals, last_t, n_nodes, last_closure = 0, t_first, 0, float(travelled[0])
+    every = max(1, -(-len(scans) // 50))
+    for k, scan in enumerate(scans):
+        if progress is not None and k % every == 0:
+            progress(k, len(scans))
         t = int(scan.stamp_ns)
-        valid = scan.valid
-        if np.count_nonzero(valid) < scfg.icp.min_points:
+        if np.count_nonzero(scan.valid) < cfg.local.match.min_points or not slam.wants(t, odo_at_scans[k]):
             continue
-        if last_kf_t is not None:  # not a keyframe: nothing else of the scan is needed
-            if win_kf != last_kf_k or not win0 <= k_scan < win0 + win.size:
-                win_kf, win0 = last_kf_k, k_scan
-                win = _may_be_keyframes(odo_at_scans[last_kf_k], odo_at_scans[k_scan:k_scan + 64], scfg)
-            if not win[k_scan - win0]:
-                continue
-            odo_pair = interpolate_poses(ost, opose, np.array([last_kf_t, t]))
-            dT = g.between(odo_pair[0], odo_pair[1])
-            if np.hypot(dT[0], dT[1]) < scfg.keyframe_distance and abs(dT[2]) < kf_turn:
-                continue
-        r_ok, a_ok = scan.ranges[valid].astype(np.float64), scan.angles[valid]
-        s_pts = np.column_stack([r_ok * np.cos(a_ok), r_ok * np.sin(a_ok)])
-        bpts = g.transform_points(bTs, s_pts)
-        snrm, nok = scan_normals(s_pts)
-        bnrm = transform_normals(bTs, snrm)
-        ranges = np.where(valid, scan.ranges, np.inf).astype(np.float64)
-        angles = scan.angles
-        if last_kf_t is None:  # the very first scan anchors submap 0
-            cur.add(t, np.zeros(3), np.eye(3) * 1e-12, bpts, bnrm, ranges, angles, bTs)
-            last_kf_k, last_kf_t, last_kf_pose, last_kf_cov = k_scan, t, np.zeros(3), np.zeros((3, 3))
-            continue
-        kf_count += 1
-        seed = g.compose(last_kf_pose, dT)
-        reg = register_points(bpts[nok], cur.pts, cur.nrm, seed, scfg.icp)
-        if reg.ok:
-            aTb, cov = reg.aTb, reg.cov_aTb + last_kf_cov
-        else:
-            dr = dead_reckon(ost, opose, last_kf_t, t, start=last_kf_pose, cov_start=last_kf_cov, **short)
-            aTb, cov = seed, dr.cov_aTb_end
-        width = side_width(bpts)
-        if width < scfg.doorway_width:
-            cur.narrow = True
-        reason = split_reason(scfg, travelled_at(t) - cur.travelled0, aTb, t - cur.stamp, cur.narrow, width)
-        if reason is None:
-            cur.add(t, aTb, cov, bpts, bnrm, ranges, angles, bTs)
-            last_kf_k, last_kf_t, last_kf_pose, last_kf_cov = k_scan, t, aTb, cov
-        else:
-            # 3. a new anchor at this keyframe: dead reckoning and (if it registered) scan match, Eq. 15
-            m, n = cur.index, cur.index + 1
-            dr = dead_reckon(ost, opose, cur.stamp, t, **hargs)
-            add_rel(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
-            if reg.ok:
-                # the map the arrival scan registered into was placed by the earlier keyframes: their pose
-                # error in the anchor frame (that of the last one) adds to the registration's own
-                mTn, cov_mTn = _eq15(reg.aTb, reg.cov_aTb + cur.covs[-1], np.zeros(3), np.zeros((3, 3)))
-                add_rel(m, n, mTn, cov_mTn, "scan_match")
-                best = mTn
-            else:
-                best = dr.end
-            closed.append(cur.close(bTs, cfg.build_grids))
-            closed_kf_w.append(g.transform_points(est_wTa[m], closed[-1].aTb[:, :2]))
-            kf_start.append(kf_start[-1] + closed_kf_w[-1].shape[0])
-            est_wTa.append(g.compose(est_wTa[m], best))
-            cur = _Open(n, t, reason, scfg, travelled_at(t))
-            cur.add(t, np.zeros(3), np.eye(3) * 1e-12, bpts, bnrm, ranges, angles, bTs)
-            last_kf_k, last_kf_t, last_kf_pose, last_kf_cov = k_scan, t, np.zeros(3), np.zeros((3, 3))
-            aTb, cov = np.zeros(3), np.zeros((3, 3))
-        # 5. revisits
-        if kf_count % cfg.revisit_every == 0 and len(closed) >= 2:
-            wTr = g.compose(est_wTa[cur.index], aTb)
-            found: list[tuple[int, np.ndarray, np.ndarray]] = []
-            # the older submaps (not the previous one, nor one linked already) whose anchor is near and that
-            # have a keyframe within revisit_radius: every closed submap at once
-            n_old = cur.index - 1
-            kf_w = np.vstack(closed_kf_w[:n_old])  # their keyframes in the world (est_wTa of closed ones is fixed)
-            dmin = np.minimum.reduceat(np.hypot(*(kf_w - wTr[:2]).T), kf_start[:n_old])
-            near_anchor = np.hypot(*(np.array(est_wTa[:n_old])[:, :2] - wTr[:2]).T) <= (cfg.revisit_radius
-                                                                                       + scfg.max_distance)
-            ok = near_anchor & (dmin <= cfg.revisit_radius)
-            cands = [(float(dmin[i]), i) for i in np.flatnonzero(ok).tolist() if (i, cur.index) not in linked]
-            for _, oi in sorted(cands)[: cfg.max_loop_candidates]:
-                old = closed[oi]
-                loops_tried += 1
-                seed_m = g.between(est_wTa[old.index], wTr)
-                if oi not in old_index:
-                    old_index[oi] = NearestIndex(old.points, scfg.icp.block)
-                lr = register_points(bpts[nok], old.points, old.normals, seed_m, scfg.icp, old_index[oi])
-                if not lr.ok or np.hypot(*(lr.aTb[:2] - seed_m[:2])) > cfg.max_loop_correction:
-                    continue
-                # plus the old map's own error where the scan matched: its nearest keyframe's pose covariance
-                near = int(np.argmin(np.hypot(*(old.aTb[:, :2] - lr.aTb[:2]).T)))
-                mTn, cov_mTn = _eq15(lr.aTb, lr.cov_aTb + old.cov_aTb[near], aTb, cov)
-                found.append((old.index, mTn, cov_mTn))
-                linked.add((old.index, cur.index))
-            # the loops of one keyframe share its pose error in the current submap (and overlapping old maps
-            # share points): k of them are not k independent measurements; inflating each by k keeps their
-            # combined information at that of one (covariance intersection's conservative bound)
-            for m_old, mTn, cov_mTn in found:
-                add_rel(m_old, cur.index, mTn, cov_mTn * len(found), "loop")
-    closed.append(cur.close(bTs, cfg.build_grids))
-    anchors = np.array([s.anchor_stamp_ns for s in closed], dtype=np.int64)
+        lt = last_t
+        node = slam.add(t, odo_at_scans[k],
+                        lambda lt=lt, t=t: dead_reckon(ost, opose, lt, t, **short).cov_aTb_end,
+                        scan.points(), np.where(scan.valid, scan.ranges, np.inf).astype(np.float64),
+                        scan.angles, float(travelled[k]))
+        last_t, n_nodes = t, n_nodes + 1
+        for m, n, mTn, cov_mTn in slam.arrivals[n_arrivals:]:
+            dr = dead_reckon(ost, opose, graph_stamp(slam, m), graph_stamp(slam, n), **hargs)
+            graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
+            graph.add(m, n, mTn, cov_mTn, "scan_match")
+            graph.est.append(g.compose(graph.est[m], mTn))
+        n_arrivals = len(slam.arrivals)
+        while len(closed) < len(slam.finished):
+            sm = slam.finished[len(closed)]
+            closed.append(_submap_record(sm, cfg, "scans"))
+            if closed[-1].grid is not None:
+                loops.add_submap(sm.index, closed[-1].grid)
+        if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
+            found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
+                                 float(travelled[k]) - last_closure)
+            for c in found:
+                graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
+            if found:
+                last_closure = float(travelled[k])
+                graph.reoptimise(optimize)
+    slam.close()
+    while len(closed) < len(slam.finished):
+        closed.append(_submap_record(slam.finished[len(closed)], cfg, "scans"))
+    closed.sort(key=lambda sm: sm.index)
+    anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
     N = len(closed)
-    # 4. compass headings per anchor
-    if have_h:
-        yaw, idx, w = interpolate_yaw(hst, hyaw, anchors)
-        inside = (anchors >= hst[0]) & (anchors <= hst[-1])
-        sig = np.sqrt(np.sum(w * hsig[idx] ** 2, axis=1))
-        headings = HeadingMeasurements(np.nonzero(inside)[0], g.wrap(yaw[inside]), sig[inside])
-    else:
-        headings = HeadingMeasurements.empty()
-    # 6. landmarks (Eq. 16)
+    headings = _headings(hst, hyaw, hsig, anchors) if have_h else None
+    li, lid, lxy, lcov, lz, skipped = _landmarks(observations, closed, anchors, ost, opose, short)
+    init = np.array(graph.est).reshape(N, 3)
+    drop, init_lm = _object_consensus(init, li, lid, lxy, lcov, cfg)
+    if drop:
+        keep = [k for k, name in enumerate(lid) if name not in drop]
+        li, lid, lxy, lcov, lz = ([seq[k] for k in keep] for seq in (li, lid, lxy, lcov, lz))
+    from holoslam.graph.problem import HeadingMeasurements, LandmarkMeasurements
+
+    landmarks = (LandmarkMeasurements(np.array(li, np.int64), tuple(lid), np.array(lxy).reshape(-1, 2),
+                                      np.array(lcov).reshape(-1, 2, 2), np.array(lz))
+                 if li else LandmarkMeasurements.empty())
+    problem = SlamProblem(num_poses=N, relative=graph.measurements(),
+                          headings=headings if headings is not None else HeadingMeasurements.empty(),
+                          landmarks=landmarks, initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
+    return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops.tried,
+                    tuple(sorted(drop)))
+
+
+def graph_stamp(slam: LocalSlam, index: int) -> int:
+    for sm in (*slam.finished, *slam.active):
+        if sm.index == index:
+            return sm.anchor_stamp_ns
+    raise KeyError(index)
+
+
+def _headings(hst, hyaw, hsig, anchors):
+    """Step 4: compass yaw at the anchor stamps inside the compass's span."""
+    from holoslam.graph.problem import HeadingMeasurements
+
+    yaw, idx, w = interpolate_yaw(hst, hyaw, anchors)
+    inside = (anchors >= hst[0]) & (anchors <= hst[-1])
+    sig = np.sqrt(np.sum(w * hsig[idx] ** 2, axis=1))
+    return HeadingMeasurements(np.nonzero(inside)[0], g.wrap(yaw[inside]), sig[inside])
+
+
+def _landmarks(observations, closed, anchors, ost, opose, short):
+    """Step 5 (Eq. 16): every observation in the anchor frame of the submap active at its stamp."""
     li, lid, lxy, lcov, lz = [], [], [], [], []
     skipped = 0
     for ob in sorted(observations, key=lambda o: o.stamp_ns):
@@ -379,31 +306,7 @@ def build_problem(
             skipped += 1
             continue
         li.append(k), lid.append(ob.object_id), lxy.append(xy), lcov.append(c2), lz.append(z)
-    init = np.array(est_wTa).reshape(N, 3)
-    drop, init_lm = _object_consensus(init, li, lid, lxy, lcov, cfg)
-    if drop:
-        keep = [k for k, name in enumerate(lid) if name not in drop]
-        li, lid, lxy, lcov, lz = ([seq[k] for k in keep] for seq in (li, lid, lxy, lcov, lz))
-    landmarks = (LandmarkMeasurements(np.array(li, np.int64), tuple(lid), np.array(lxy).reshape(-1, 2),
-                                      np.array(lcov).reshape(-1, 2, 2), np.array(lz))
-                 if li else LandmarkMeasurements.empty())
-    relative = (RelativePoseMeasurements(np.array(rel_i), np.array(rel_j), np.array(rel_T), np.array(rel_cov),
-                                         np.array(rel_kind, dtype=object))
-                if rel_i else RelativePoseMeasurements.empty())
-    problem = SlamProblem(num_poses=N, relative=relative, headings=headings, landmarks=landmarks,
-                          initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
-    return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops_tried,
-                    tuple(sorted(drop)))
-
-
-def _may_be_keyframes(kf_odo: np.ndarray, odo: np.ndarray, scfg: SegmentConfig, margin: float = 1e-6) -> np.ndarray:
-    """Which scans with odometry poses ``odo`` (N, 3) may be keyframes after the keyframe at ``kf_odo``: those
-    whose motion from it is not below both keyframe thresholds by more than ``margin`` (m, rad). The poses here
-    are interpolated once for all scans, which differs from the exact per-pair interpolation of
-    ``build_problem`` by rounding only (~1e-12), so a False is certain and a True gets the exact test."""
-    dT = g.between(np.broadcast_to(kf_odo, odo.shape), odo)
-    return ((np.hypot(dT[:, 0], dT[:, 1]) >= scfg.keyframe_distance - margin)
-            | (np.abs(dT[:, 2]) >= np.radians(scfg.keyframe_turn_deg) - margin))
+    return li, lid, lxy, lcov, lz, skipped
 
 
 def _object_consensus(
@@ -435,9 +338,3 @@ def _object_consensus(
         info = np.linalg.inv(C[members])
         init[name] = np.linalg.solve(info.sum(axis=0), np.einsum("kij,kj->i", info, w[members]))
     return ambiguous, init
-
-
-def _eq15(mTr, cov_mTr, nTr, cov_nTr):
-    from holoslam.submaps.deadreckon import relative_anchor_pose
-
-    return relative_anchor_pose(mTr, cov_mTr, nTr, cov_nTr)

@@ -1,0 +1,234 @@
+"""Compiled kernels of the submap probability grids (numba, ``cache=True``): scan insertion, bicubic lookup with
+gradient, the continuous least-squares scan matcher and the brute-force correlative window search.
+
+Grid convention (shared with :mod:`holoslam.submaps.probgrid`): cell (r, c) covers
+x in [ox + c res, ox + (c + 1) res), y in [oy + r res, oy + (r + 1) res); a cell's value is sampled at its
+centre. Log-odds grids are float32; ``0`` with ``known == 0`` is an unknown cell.
+
+Imported lazily by :mod:`holoslam.submaps.probgrid` and :mod:`holoslam.submaps.scanmatch`; the first call
+compiles (a few seconds, once per machine), later processes load from numba's on-disk cache.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+_JIT = {"cache": True, "nogil": True}
+
+
+@nb.njit(**_JIT)
+def insert_scan(logodds, prob, known, marker, stamp, ox, oy, res, sx, sy, ex, ey, hit, l_hit, l_miss, l_max, p_min,
+                p_max):  # pragma: no cover
+    """Insert one scan: beams from the sensor at (sx, sy) to the end points (ex, ey) (grid frame, metres).
+    Every end cell with ``hit`` gets ``l_hit`` once, every other cell a beam crosses gets ``l_miss`` once per
+    scan (``marker`` holds the last scan ``stamp`` that updated a cell; hits first, so a cell that holds a
+    return is never cleared by the same scan, Cartographer's rule). Log-odds are clamped to +-``l_max``."""
+    rows, cols = logodds.shape
+    n = ex.size
+    for k in range(n):
+        if not hit[k]:
+            continue
+        c = int(math.floor((ex[k] - ox) / res))
+        r = int(math.floor((ey[k] - oy) / res))
+        if 0 <= r < rows and 0 <= c < cols and marker[r, c] != stamp:
+            marker[r, c] = stamp
+            v = min(max(logodds[r, c] + l_hit, -l_max), l_max)
+            logodds[r, c] = v
+            prob[r, c] = min(max(1.0 / (1.0 + math.exp(-v)), p_min), p_max)
+            known[r, c] = 1
+    c0 = int(math.floor((sx - ox) / res))
+    r0 = int(math.floor((sy - oy) / res))
+    for k in range(n):
+        c1 = int(math.floor((ex[k] - ox) / res))
+        r1 = int(math.floor((ey[k] - oy) / res))
+        # Bresenham from the sensor cell to the end cell, the end cell excluded
+        dc, dr = abs(c1 - c0), -abs(r1 - r0)
+        scx = 1 if c0 < c1 else -1
+        scy = 1 if r0 < r1 else -1
+        err = dc + dr
+        c, r = c0, r0
+        while not (c == c1 and r == r1):
+            if 0 <= r < rows and 0 <= c < cols and marker[r, c] != stamp:
+                marker[r, c] = stamp
+                v = min(max(logodds[r, c] + l_miss, -l_max), l_max)
+                logodds[r, c] = v
+                prob[r, c] = min(max(1.0 / (1.0 + math.exp(-v)), p_min), p_max)
+                known[r, c] = 1
+            e2 = 2 * err
+            if e2 >= dr:
+                err += dr
+                c += scx
+            if e2 <= dc:
+                err += dc
+                r += scy
+
+
+@nb.njit(**_JIT)
+def _cubic(p0, p1, p2, p3, t):  # pragma: no cover
+    """Catmull-Rom cubic through p1 (t = 0) and p2 (t = 1): value and derivative in t."""
+    a = -p0 + 3.0 * p1 - 3.0 * p2 + p3
+    b = 2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3
+    c = -p0 + p2
+    v = 0.5 * (((a * t + b) * t + c) * t + 2.0 * p1)
+    d = 0.5 * ((3.0 * a * t + 2.0 * b) * t + c)
+    return v, d
+
+
+@nb.njit(**_JIT)
+def _cell(prob, r, c, outside):  # pragma: no cover
+    rows, cols = prob.shape
+    if 0 <= r < rows and 0 <= c < cols:
+        return prob[r, c]
+    return outside
+
+
+@nb.njit(**_JIT)
+def bicubic(prob, u, v, outside):  # pragma: no cover
+    """Bicubic (Catmull-Rom) interpolation of ``prob`` at continuous cell coordinates (u along columns, v along
+    rows, integers at cell centres): value, d/du, d/dv."""
+    c = int(math.floor(u))
+    r = int(math.floor(v))
+    tu = u - c
+    tv = v - r
+    col_v = np.empty(4)
+    col_d = np.empty(4)
+    for i in range(4):
+        rr = r - 1 + i
+        val, der = _cubic(_cell(prob, rr, c - 1, outside), _cell(prob, rr, c, outside),
+                          _cell(prob, rr, c + 1, outside), _cell(prob, rr, c + 2, outside), tu)
+        col_v[i] = val
+        col_d[i] = der
+    value, dv = _cubic(col_v[0], col_v[1], col_v[2], col_v[3], tv)
+    du, _ = _cubic(col_d[0], col_d[1], col_d[2], col_d[3], tv)
+    return value, du, dv
+
+
+@nb.njit(**_JIT)
+def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_trans, w_rot, iters, outside):  # pragma: no cover
+    """Continuous scan-to-grid matching: Gauss-Newton with Levenberg damping on
+    sum_i (w_occ / sqrt(N) (1 - P(T p_i)))^2 + w_trans^2 |t - t_pred|^2 + w_rot^2 (theta - theta_pred)^2,
+    P bicubic. Starts at (x0, y0, t0), prior at (px_, py_, pt_). Returns x, y, theta, the final cost, the
+    occupied-space cost alone, the 3x3 Gauss-Newton Hessian of the occupied term and the iterations used."""
+    n = px.size
+    s = w_occ / math.sqrt(max(n, 1))
+    x, y, t = x0, y0, t0
+    lam = 1e-3
+    H = np.zeros((3, 3))
+    g = np.zeros(3)
+    Hocc = np.zeros((3, 3))
+
+    def evaluate(x, y, t, H, g, Hocc, want):
+        ct, st = math.cos(t), math.sin(t)
+        cost_occ = 0.0
+        if want:
+            H[:] = 0.0
+            g[:] = 0.0
+            Hocc[:] = 0.0
+        for k in range(n):
+            wx = ct * px[k] - st * py[k] + x
+            wy = st * px[k] + ct * py[k] + y
+            u = (wx - ox) / res - 0.5
+            v = (wy - oy) / res - 0.5
+            val, du, dv = bicubic(prob, u, v, outside)
+            r = s * (1.0 - val)
+            cost_occ += r * r
+            if want:
+                gx = -s * du / res
+                gy = -s * dv / res
+                j0, j1 = gx, gy
+                j2 = gx * (-st * px[k] - ct * py[k]) + gy * (ct * px[k] - st * py[k])
+                J = (j0, j1, j2)
+                for a in range(3):
+                    g[a] += J[a] * r
+                    for b in range(3):
+                        H[a, b] += J[a] * J[b]
+        dt = math.atan2(math.sin(t - pt_), math.cos(t - pt_))
+        cost = cost_occ + w_trans * w_trans * ((x - px_) ** 2 + (y - py_) ** 2) + w_rot * w_rot * dt * dt
+        if want:
+            Hocc[:] = H
+            H[0, 0] += w_trans * w_trans
+            H[1, 1] += w_trans * w_trans
+            H[2, 2] += w_rot * w_rot
+            g[0] += w_trans * w_trans * (x - px_)
+            g[1] += w_trans * w_trans * (y - py_)
+            g[2] += w_rot * w_rot * dt
+        return cost, cost_occ
+
+    cost, cost_occ = evaluate(x, y, t, H, g, Hocc, True)
+    used = 0
+    for it in range(iters):
+        used = it + 1
+        A = H.copy()
+        for a in range(3):
+            A[a, a] += lam * (H[a, a] + 1e-9)
+        step = np.linalg.solve(A, -g)
+        nx, ny, nt = x + step[0], y + step[1], t + step[2]
+        ncost, nocc = evaluate(nx, ny, nt, H, g, Hocc, False)
+        if ncost < cost:
+            x, y, t = nx, ny, nt
+            lam = max(lam * 0.3, 1e-7)
+            small = abs(cost - ncost) < 1e-10 * max(cost, 1e-12) or (
+                abs(step[0]) < 1e-6 and abs(step[1]) < 1e-6 and abs(step[2]) < 1e-7)
+            cost, cost_occ = evaluate(x, y, t, H, g, Hocc, True)
+            if small:
+                break
+        else:
+            lam *= 10.0
+            if lam > 1e6:
+                break
+    t = math.atan2(math.sin(t), math.cos(t))
+    return x, y, t, cost, cost_occ, Hocc, used
+
+
+@nb.njit(**_JIT)
+def window_scores(prob, ox, oy, res, px, py, cx, cy, ct, nxy, angles, outside):  # pragma: no cover
+    """Mean probability of the points at every pose of a window: translations cx + i res, cy + j res for
+    i, j in [-nxy, nxy] and rotations ct + angles[a]. Returns (len(angles), 2 nxy + 1, 2 nxy + 1) scores
+    (axis 1 along y, axis 2 along x). Points snap to the cell holding them (Olson's lookup)."""
+    rows, cols = prob.shape
+    na = angles.size
+    m = 2 * nxy + 1
+    out = np.zeros((na, m, m))
+    n = px.size
+    inv = 1.0 / max(n, 1)
+    for a in range(na):
+        th = ct + angles[a]
+        c, s = math.cos(th), math.sin(th)
+        for k in range(n):
+            wx = c * px[k] - s * py[k] + cx
+            wy = s * px[k] + c * py[k] + cy
+            c0 = int(math.floor((wx - ox) / res)) - nxy
+            r0 = int(math.floor((wy - oy) / res)) - nxy
+            for j in range(m):
+                r = r0 + j
+                if r < 0 or r >= rows:
+                    for i in range(m):
+                        out[a, j, i] += outside
+                    continue
+                for i in range(m):
+                    cc = c0 + i
+                    if 0 <= cc < cols:
+                        out[a, j, i] += prob[r, cc]
+                    else:
+                        out[a, j, i] += outside
+    for a in range(na):
+        for j in range(m):
+            for i in range(m):
+                out[a, j, i] *= inv
+    return out
+
+
+@nb.njit(**_JIT)
+def mean_bicubic(prob, ox, oy, res, px, py, x, y, t, outside):  # pragma: no cover
+    """Mean bicubic probability of the points at pose (x, y, t)."""
+    c, s = math.cos(t), math.sin(t)
+    tot = 0.0
+    n = px.size
+    for k in range(n):
+        wx = c * px[k] - s * py[k] + x
+        wy = s * px[k] + c * py[k] + y
+        tot += bicubic(prob, (wx - ox) / res - 0.5, (wy - oy) / res - 0.5, outside)[0]
+    return tot / max(n, 1)

@@ -1,0 +1,121 @@
+"""Revisits: loop closures between a node and older, finished submaps, found however far odometry has drifted.
+
+For a node r of submap n at the current world estimate wTr, every finished submap m (not n's own neighbours in
+the chain) whose anchor lies within ``max_constraint_distance`` of wTr is searched by branch-and-bound over its
+precomputed multi-resolution grids (``bnb``, Hess et al. 2016) in a window around the estimate mTr that grows
+with the uncertainty of the estimate: ``window_xy = min(max_window_xy, base + rate * d)``, d the distance
+travelled since the last accepted closure (odometry plus scan matching drift a few per cent of the distance
+on real robots; the estimate is re-optimised after every closure, so d restarts there). A match counts when
+its score (mean probability of the points) reaches ``min_score`` (``min_score_wide`` for windows beyond
+``wide_window_xy``: a wide search has more chances of a wrong match), is refined by the continuous matcher
+against m's grid, and gives the ``loop`` relative pose of Eq. 15, mTn = mTr ∘ (nTr)^-1, with the refined
+match's covariance. Loops enter the graph with a robust kernel (DCS in ``solve``), so a wrong one that passes
+here does not bend the map. Defaults: Cartographer's published constraint-builder settings (SPEC §8: +-7 m,
++-30 deg, 15 m, score 0.55 / 0.6, depth 7).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from holoslam import geometry as g
+from holoslam.submaps.probgrid import ProbGrid
+from holoslam.submaps.scanmatch import MatchConfig, match_scan
+
+__all__ = ["LoopConfig", "LoopCandidate", "LoopSearch"]
+
+
+@dataclass(frozen=True, slots=True)
+class LoopConfig:
+    every_nodes: int = 3  # search from every k-th node (Cartographer samples 30 % of pairs)
+    max_constraint_distance: float = 15.0  # m between the node and an old submap's anchor
+    base_window_xy: float = 1.0  # m, window half-width right after a closure
+    window_rate: float = 0.05  # m of window per m travelled since the last closure
+    max_window_xy: float = 7.0  # m
+    base_window_deg: float = 10.0
+    window_deg_rate: float = 1.0  # deg per m travelled since the last closure
+    max_window_deg: float = 30.0
+    min_score: float = 0.55
+    min_score_wide: float = 0.6
+    wide_window_xy: float = 3.0  # m
+    depth: int = 7
+    skip_recent: int = 2  # the submaps this many before the current one are its chain neighbours
+    max_per_pair: int = 4  # closures kept between one old submap and one new submap
+
+
+@dataclass(frozen=True, slots=True)
+class LoopCandidate:
+    old: int
+    new: int
+    mTn: np.ndarray
+    cov_mTn: np.ndarray
+    score: float
+    window_xy: float
+
+
+class LoopSearch:
+    """Holds the finished submaps' precomputed grids and searches nodes against them."""
+
+    def __init__(self, cfg: LoopConfig, match_cfg: MatchConfig) -> None:
+        self.cfg = cfg
+        # the refinement against an old map starts from the branch-and-bound pose (a cell, an angular step)
+        self.refine_cfg = MatchConfig(
+            linear_window=0.05, angular_window_deg=1.0, occupied_weight=match_cfg.occupied_weight,
+            translation_weight=match_cfg.translation_weight, rotation_weight=match_cfg.rotation_weight,
+            iterations=match_cfg.iterations, kappa=match_cfg.kappa, min_score=0.0)
+        self.grids: dict[int, ProbGrid] = {}
+        self.pre: dict[int, object] = {}
+        self.pairs: dict[tuple[int, int], int] = {}
+        self.tried = 0
+
+    def add_submap(self, index: int, grid: ProbGrid) -> None:
+        self.grids[index] = grid
+
+    def _precomputed(self, m: int):
+        from holoslam.submaps import bnb
+
+        if m not in self.pre:
+            gr = self.grids[m]
+            self.pre[m] = bnb.precompute(gr.prob, self.cfg.depth, origin=gr.origin, res=gr.resolution)
+        return self.pre[m]
+
+    def window(self, since_closure_m: float) -> tuple[float, float]:
+        c = self.cfg
+        xy = min(c.max_window_xy, c.base_window_xy + c.window_rate * since_closure_m)
+        deg = min(c.max_window_deg, c.base_window_deg + c.window_deg_rate * since_closure_m)
+        return xy, math.radians(deg)
+
+    def search(self, n: int, nTr: np.ndarray, cov_nTr: np.ndarray, b_pts: np.ndarray, est_wTa: np.ndarray,
+               since_closure_m: float) -> list[LoopCandidate]:
+        """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps."""
+        from holoslam.submaps import bnb
+
+        c = self.cfg
+        wTr = g.compose(est_wTa[n], nTr)
+        wxy, wth = self.window(since_closure_m)
+        min_score = c.min_score_wide if wxy > c.wide_window_xy else c.min_score
+        olds = [m for m in self.grids if m < n - c.skip_recent and self.pairs.get((m, n), 0) < c.max_per_pair]
+        if not olds:
+            return []
+        olds_arr = np.array(olds)
+        dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
+        found: list[LoopCandidate] = []
+        for m in olds_arr[dist <= c.max_constraint_distance + wxy].tolist():
+            seed = g.between(est_wTa[m], wTr)
+            self.tried += 1
+            hit = bnb.search(self._precomputed(m), b_pts, seed, wxy, wth, min_score)
+            if hit is None:
+                continue
+            gr = self.grids[m]
+            ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, hit.aTb, self.refine_cfg)
+            if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * gr.resolution:
+                continue
+            from holoslam.submaps.deadreckon import relative_anchor_pose
+
+            mTn, cov_mTn = relative_anchor_pose(ref.aTb, ref.cov_aTb, nTr, cov_nTr)
+            found.append(LoopCandidate(m, n, mTn, cov_mTn, ref.score, wxy))
+            self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
+        return found

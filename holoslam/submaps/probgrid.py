@@ -1,0 +1,140 @@
+"""The local geometric map of a submap as a probability grid (seed 002's "local geometric map"; SPEC §8).
+
+Each scan inserted into a submap raises the odds of the cells that hold its returns and lowers those its beams
+cross (each cell updated at most once per scan, a return never cleared by its own scan). The grid grows as
+scans reach beyond it. :meth:`GridBuilder.freeze` gives a :class:`ProbGrid`: the probability that a cell is
+occupied, clamped to [``p_min``, ``p_max``], unknown cells at ``p_min`` so a scan never matches into unexplored
+space. Scan matching (``scanmatch``) and loop-closure search (``bnb``) read that array.
+
+Defaults (:class:`GridConfig`) are Cartographer's published 2D settings (Hess et al. 2016, SPEC §8), chosen for
+real laser scanners, not for holoslam's simulator: 0.05 m cells, hit probability 0.55, miss 0.49, probabilities
+clamped to [0.1, 0.9] (odds 9:1), returns beyond 30 m not inserted, and a beam without a return clearing 5 m.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["GridConfig", "ProbGrid", "GridBuilder", "scan_endpoints"]
+
+
+@dataclass(frozen=True, slots=True)
+class GridConfig:
+    resolution: float = 0.05  # m per cell
+    hit_probability: float = 0.55  # odds update of a cell holding a return
+    miss_probability: float = 0.49  # odds update of a cell a beam crosses
+    p_min: float = 0.1  # probabilities clamped to [p_min, p_max]; unknown cells read p_min
+    p_max: float = 0.9
+    max_range: float = 30.0  # m: returns farther than this are treated as no return
+    missing_ray_length: float = 5.0  # m of free space cleared along a beam without a return
+    grow_margin: float = 5.0  # m added around the scans when the grid grows
+
+
+def _logit(p: float) -> float:
+    return math.log(p / (1.0 - p))
+
+
+@dataclass(frozen=True, eq=False)
+class ProbGrid:
+    """A finished probability grid: ``prob`` float32 (rows, cols) in [p_min, p_max], cell (r, c) covering
+    x in [ox + c res, ...), y in [oy + r res, ...) of the submap's anchor frame."""
+
+    prob: np.ndarray
+    origin: tuple[float, float]
+    resolution: float
+    p_min: float = 0.1
+
+    def known_bounds(self) -> tuple[float, float, float, float]:
+        """(x0, y0, x1, y1) of the cells above p_min (the explored part)."""
+        r, c = np.nonzero(self.prob > self.p_min)
+        if r.size == 0:
+            return (self.origin[0], self.origin[1], self.origin[0], self.origin[1])
+        res = self.resolution
+        return (self.origin[0] + c.min() * res, self.origin[1] + r.min() * res,
+                self.origin[0] + (c.max() + 1) * res, self.origin[1] + (r.max() + 1) * res)
+
+
+def scan_endpoints(ranges: np.ndarray, angles: np.ndarray, aTs: np.ndarray, cfg: GridConfig
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Beam end points in the grid frame (x, y) and which are returns: a finite range within ``max_range``
+    is a return at its range; any other beam is free space for ``missing_ray_length``."""
+    r = np.asarray(ranges, dtype=np.float64)
+    hit = np.isfinite(r) & (r > 0) & (r <= cfg.max_range)
+    length = np.where(hit, r, cfg.missing_ray_length)
+    c, s = np.cos(angles + aTs[2]), np.sin(angles + aTs[2])
+    return aTs[0] + length * c, aTs[1] + length * s, hit
+
+
+class GridBuilder:
+    """The growing log-odds grid of the active submap (mutable by design: scans are inserted one by one)."""
+
+    def __init__(self, cfg: GridConfig) -> None:
+        self.cfg = cfg
+        self.res = cfg.resolution
+        self.origin = (0.0, 0.0)
+        self.logodds = np.zeros((0, 0), np.float32)
+        self.prob = np.zeros((0, 0), np.float32)
+        self.known = np.zeros((0, 0), np.uint8)
+        self.marker = np.zeros((0, 0), np.int32)
+        self.stamp = 0
+        self.count = 0
+        self._l_hit = _logit(cfg.hit_probability)
+        self._l_miss = _logit(cfg.miss_probability)
+        self._l_max = _logit(cfg.p_max)
+
+    def _grow(self, x0: float, y0: float, x1: float, y1: float) -> None:
+        res, m = self.res, self.cfg.grow_margin
+        rows, cols = self.logodds.shape
+        ox, oy = self.origin
+        if rows and x0 >= ox and y0 >= oy and x1 < ox + cols * res and y1 < oy + rows * res:
+            return
+        if rows:
+            x0, y0 = min(x0, ox), min(y0, oy)
+            x1, y1 = max(x1, ox + cols * res), max(y1, oy + rows * res)
+        # new origin on the old lattice so existing cells keep their place
+        nox = ox - math.ceil((ox - (x0 - m)) / res) * res if rows else math.floor((x0 - m) / res) * res
+        noy = oy - math.ceil((oy - (y0 - m)) / res) * res if rows else math.floor((y0 - m) / res) * res
+        ncols = int(math.ceil((x1 + m - nox) / res))
+        nrows = int(math.ceil((y1 + m - noy) / res))
+        lo = np.zeros((nrows, ncols), np.float32)
+        pr = np.full((nrows, ncols), self.cfg.p_min, np.float32)
+        kn = np.zeros((nrows, ncols), np.uint8)
+        mk = np.zeros((nrows, ncols), np.int32)
+        if rows:
+            dc = int(round((ox - nox) / res))
+            dr = int(round((oy - noy) / res))
+            lo[dr:dr + rows, dc:dc + cols] = self.logodds
+            pr[dr:dr + rows, dc:dc + cols] = self.prob
+            kn[dr:dr + rows, dc:dc + cols] = self.known
+            mk[dr:dr + rows, dc:dc + cols] = self.marker
+        self.origin, self.logodds, self.prob, self.known, self.marker = (nox, noy), lo, pr, kn, mk
+
+    def insert(self, ranges: np.ndarray, angles: np.ndarray, aTs: np.ndarray) -> None:
+        """Insert a scan taken from sensor pose ``aTs`` (3,) in the grid's frame."""
+        from holoslam.submaps import _grid_fast as fast
+
+        ex, ey, hit = scan_endpoints(ranges, angles, np.asarray(aTs, np.float64), self.cfg)
+        if ex.size == 0:
+            return
+        self._grow(min(ex.min(), aTs[0]), min(ey.min(), aTs[1]), max(ex.max(), aTs[0]), max(ey.max(), aTs[1]))
+        self.stamp += 1
+        fast.insert_scan(self.logodds, self.prob, self.known, self.marker, self.stamp, self.origin[0], self.origin[1],
+                         self.res, float(aTs[0]), float(aTs[1]), ex, ey, hit, self._l_hit, self._l_miss,
+                         self._l_max, self.cfg.p_min, self.cfg.p_max)
+        self.count += 1
+
+    def freeze(self) -> ProbGrid:
+        """The finished grid, cropped to its known cells plus a small border."""
+        p = self.prob
+        r, c = np.nonzero(self.known)
+        if r.size == 0:
+            return ProbGrid(p.copy(), self.origin, self.res, self.cfg.p_min)
+        pad = 2
+        r0, r1 = max(r.min() - pad, 0), min(r.max() + pad + 1, p.shape[0])
+        c0, c1 = max(c.min() - pad, 0), min(c.max() + pad + 1, p.shape[1])
+        origin = (self.origin[0] + c0 * self.res, self.origin[1] + r0 * self.res)
+        return ProbGrid(np.ascontiguousarray(p[r0:r1, c0:c1]), origin, self.res, self.cfg.p_min)
+
