@@ -56,11 +56,12 @@ def test_crop_around_label():
 
 @pytest.fixture(scope="module")
 def household():
+    from holoslam.io.datasets import bundled_household_log
     from holoslam.io.mcap import read_log
     from holoslam.vision.locate import base_to_submap
     from holoslam.vision.observe import accept_landmarks, observations_from_log
 
-    log, _ = read_log("datasets/household_small.mcap")
+    log, _ = read_log(bundled_household_log())
     obs, _report = observations_from_log(log)
     stamps, wTb = log.ground_truth_arrays()
     idx = np.abs(stamps[None, :] - np.array([o.stamp_ns for o in obs])[:, None]).argmin(axis=1)

@@ -153,8 +153,10 @@ def bundled_household_log(verify: bool = True) -> Path:
                 raise IngestError(
                     f"bundled log {path} has sha256 {digest[:12]}..., "
                     f"the manifest says {entry.sha256[:12]}...: "
-                    f"the file was modified or truncated; restore it from git or regenerate it with: "
-                    f"{entry.extra.get('cli_equivalent', 'holoslam simulate')}"
+                    f"the file was modified or truncated; restore it from git "
+                    f"(git checkout -- datasets/{entry.file}): a log regenerated with "
+                    f"'{entry.extra.get('cli_equivalent', 'holoslam simulate')}' has the same content "
+                    f"but, on another machine, not the same bytes"
                 )
             _verified[key] = True
     return path
