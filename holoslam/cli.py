@@ -51,6 +51,13 @@ def _err(msg: str) -> None:
     sys.stderr.write(f"holoslam: {msg}\n")
 
 
+def _json(v, indent: int | None = 2) -> str:
+    """Strict JSON (NaN / infinity printed as null: ``NaN`` is not JSON and breaks jq and JSON.parse)."""
+    from holoslam.io.jsonsafe import dumps
+
+    return dumps(v, indent=indent)
+
+
 def _parse_xy(text: str) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in text.split(","))
@@ -70,7 +77,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     summary = simulate(
         a.output, seed=a.seed, duration_s=a.duration, image_rate_hz=a.image_rate, noise_scale=a.noise_scale
     )
-    print(json.dumps(summary, indent=2) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
+    print(_json(summary) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
     return EXIT_OK
 
 
@@ -78,7 +85,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
     from holoslam.pipeline import inspect
 
     text, data = inspect(a.log, mapping=a.mapping)
-    print(json.dumps(data, indent=2) if a.json else text)
+    print(_json(data) if a.json else text)
     return EXIT_OK
 
 
@@ -95,7 +102,7 @@ def cmd_run(a: argparse.Namespace) -> int:
     progress = Progress(quiet=a.quiet or a.json)
     outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress)
     if a.json:
-        print(json.dumps(outcome, indent=2))
+        print(_json(outcome))
     elif not a.quiet:
         print(outcome["text"])
     return EXIT_OK if outcome["ok"] else EXIT_FAILED
@@ -114,7 +121,7 @@ def cmd_solve(a: argparse.Namespace) -> int:
         kernel_parameter=a.kernel_parameter,
         noise=a.noise,
     )
-    print(json.dumps(summary, indent=2) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
+    print(_json(summary) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
     return EXIT_OK
 
 
@@ -123,7 +130,7 @@ def cmd_plan(a: argparse.Namespace) -> int:
 
     route = plan_to_object(a.run, a.to, from_xy=a.from_xy)
     if a.json:
-        print(json.dumps(route, indent=2))
+        print(_json(route))
     else:
         print(route["text"])
     return EXIT_OK
@@ -142,7 +149,7 @@ def cmd_datasets(a: argparse.Namespace) -> int:
 
     rows = list_datasets()
     if a.json:
-        print(json.dumps(rows, indent=2))
+        print(_json(rows))
         return EXIT_OK
     for r in rows:
         where = r.get("path") or f"not found here; {r.get('source') or 'see datasets/manifest.yaml'}"
@@ -161,7 +168,7 @@ def cmd_tags(a: argparse.Namespace) -> int:
             _err(item["error"])
             continue
         if a.json:
-            print(json.dumps(item))
+            print(_json(item, indent=None))
         else:
             what = (
                 f"label {item['label']['id']} ({item['label']['type']})" if item.get("label") else "foreign"

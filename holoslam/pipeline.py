@@ -747,9 +747,16 @@ def run_log_to_folder(
     log: str, out_dir: str, config: RunConfig | None = None, progress: Progress | None = None
 ) -> dict[str, Any]:
     """Run one log and write its output folder; returns a short summary (for the batch runner)."""
-    from holoslam.io.run_folder import write_run
+    from holoslam.io.run_folder import prepare_output_folder, write_run
 
-    result = run(log, config, progress)
+    existed = Path(out_dir).exists()
+    prepare_output_folder(out_dir)  # an unwritable folder is a one-line error before the run, not after it
+    try:
+        result = run(log, config, progress)
+    except BaseException:
+        if not existed and not any(Path(out_dir).iterdir()):
+            Path(out_dir).rmdir()  # a run that failed leaves no empty folder behind
+        raise
     written = write_run(
         result,
         out_dir,
@@ -783,8 +790,11 @@ def run_logs(
     """Run one or many logs. One log writes straight into ``out_root``; many logs get one sub-folder each,
     processed in parallel (local processes, or a Dask cluster given its scheduler address)."""
     from holoslam.batch import run_many
+    from holoslam.io.run_folder import prepare_output_folder
 
     progress = progress or _noop
+    if len(logs) > 1 or scheduler is not None:
+        prepare_output_folder(out_root)  # once, before any log is dispatched
     if len(logs) == 1 and scheduler is None:
         try:
             summary = run_log_to_folder(str(logs[0]), str(out_root), config, progress)

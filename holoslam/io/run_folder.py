@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 
 from holoslam.errors import ConfigError, IngestError
+from holoslam.io.jsonsafe import dumps
 
-__all__ = ["SavedRun", "write_run", "load_run", "export_saved", "RUN_FILES"]
+__all__ = ["SavedRun", "write_run", "load_run", "export_saved", "prepare_output_folder", "RUN_FILES"]
 
 RUN_FILES = (
     "trajectory.tum",
@@ -47,12 +48,27 @@ RUN_FILES = (
 )
 
 
-def _out_dir(out_dir: str | Path) -> Path:
+def prepare_output_folder(out_dir: str | Path) -> Path:
+    """Create ``out_dir`` (and its parents) and check a file can be written in it, so a run finds out before
+    its work, not after. Raises ``ConfigError`` (one line: which folder, why, what to do)."""
+    import os
+    import tempfile
+
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"output {out} exists and is not a folder; name a folder for the run's files")
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".holoslam-write-check-", dir=out)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        why = e.strerror or type(e).__name__
+        raise ConfigError(
+            f"cannot create or write the output folder {out}: {why}; name a folder you can write (-o)"
+        ) from None
     return out
+
 
 
 def _anchors_csv(stamps: np.ndarray, wTa: np.ndarray, cov: np.ndarray | None) -> str:
@@ -184,7 +200,7 @@ def write_run(
     from holoslam.maps.topology import to_graphml_ready
     from holoslam.pipeline import format_run_report
 
-    out = _out_dir(out_dir)
+    out = prepare_output_folder(out_dir)
     if progress:
         progress(f"writing {out}")
     written: list[Path] = []
@@ -200,7 +216,7 @@ def write_run(
     written += list(write_graph_files(to_graphml_ready(result.topology), out, "topology"))
     written += list(write_graph_files(result.holographic, out, "holographic"))
     written.append(write_planning(result.planning, out / "planning.json"))
-    (out / "report.json").write_text(json.dumps(result.report, indent=2, default=_json_default))
+    (out / "report.json").write_text(dumps(result.report, indent=2))  # strict JSON: NaN/inf -> null
     (out / "report.txt").write_text(format_run_report(result.report) + "\n")
     written += [out / "report.json", out / "report.txt"]
     if results_mcap:
@@ -228,18 +244,6 @@ def write_run(
             result.planning,
         )
     return written
-
-
-def _json_default(v: Any) -> Any:
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, np.integer | np.floating | np.bool_):
-        return v.item()
-    if isinstance(v, Path):
-        return str(v)
-    if hasattr(v, "value"):
-        return v.value
-    return str(v)
 
 
 @dataclass(frozen=True, eq=False)
@@ -357,7 +361,7 @@ def export_saved(saved: SavedRun, to: Path, formats: set[str]) -> list[Path]:
     from holoslam.io.results_mcap import write_results_mcap
     from holoslam.io.trajectory import write_tum
 
-    out = _out_dir(to)
+    out = prepare_output_folder(to)
     every = "all" in formats
     written: list[Path] = []
     dr = saved.dead_reckoning_wTb if saved.dead_reckoning_wTb is not None else saved.wTb

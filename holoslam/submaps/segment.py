@@ -196,7 +196,7 @@ def local_grid(
     free_n = _free_counts(tx, ty, ca, sa, nk, step, lo, resolution, W, H, flat)
     occ_n = np.bincount(flat(occ_x, occ_y), minlength=H * W) if occ_x.size else np.zeros(H * W, np.int64)
     logodds = 0.85 * occ_n - 0.4 * free_n
-    prob = 1.0 / (1.0 + np.exp(-logodds))
+    prob = 1.0 / (1.0 + np.exp(-np.clip(logodds, -500.0, 500.0)))  # same values; exp(>709) would overflow
     occ = np.where((free_n + occ_n) > 0, np.round(prob * 100.0), -1).astype(np.int8).reshape(H, W)
     return OccupancyGrid(occ, resolution, float(lo[0]), float(lo[1]))
 
