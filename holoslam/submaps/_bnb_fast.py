@@ -29,34 +29,66 @@ _JIT = {"cache": True, "nogil": True}
 
 @nb.njit(**_JIT)
 def quantise(prob, lo, step):  # pragma: no cover - compiled
-    """uint8 codes q of the cells, the smallest with ``lo + q * step >= p`` (in float64), at most 255."""
+    """uint8 codes q of the cells: ``ceil((p - lo) / step)`` in [0, 255], raised where float rounding left
+    ``lo + q * step < p`` (in float64), so every code's value bounds its cell from above."""
     h, w = prob.shape
-    q = np.empty((h, w), dtype=np.uint8)
-    for i in range(h):
-        for j in range(w):
-            p = np.float64(prob[i, j])
-            k = max(math.ceil((p - lo) / step), 0)
-            while k < 255 and lo + k * step < p:
-                k += 1
-            q[i, j] = k
-    return q
+    flat = prob.ravel()
+    q = np.empty(h * w, dtype=np.uint8)
+    inv = 1.0 / step
+    for i in range(h * w):
+        k = math.ceil(min(max((np.float64(flat[i]) - lo) * inv, 0.0), 255.0))
+        q[i] = np.uint8(k)
+    for i in range(h * w):  # the check, apart so the first loop vectorises
+        p = np.float64(flat[i])
+        k = np.int64(q[i])
+        while k < 255 and lo + k * step < p:
+            k += 1
+        q[i] = np.uint8(k)
+    return q.reshape(h, w)
+
+
+@nb.njit(**_JIT)
+def _max2(dst, a, b):  # pragma: no cover - compiled
+    """dst = max(a, b) elementwise (slices: the loop vectorises)."""
+    for j in range(dst.size):
+        u, v = a[j], b[j]
+        dst[j] = u if u > v else v
+
+
+@nb.njit(**_JIT)
+def _max1(dst, a, q_out):  # pragma: no cover - compiled
+    """dst = max(a, q_out) elementwise."""
+    for j in range(dst.size):
+        u = a[j]
+        dst[j] = u if u > q_out else q_out
 
 
 @nb.njit(**_JIT)
 def _pool(src, hs, ws, half, q_out, tmp, dst):  # pragma: no cover - compiled
     """One doubling step: src (hs x ws, flat) -> dst ((hs + half) x (ws + half), flat), through tmp
-    (hs x (ws + half)): each cell the max of the cell and the one ``half`` before it, columns then rows."""
+    (hs x (ws + half)): each cell the max of the cell and the one ``half`` before it (cells outside count
+    q_out), along rows then columns."""
     wd = ws + half
-    for i in range(hs):
-        for j in range(wd):
-            a = src[i * ws + j - half] if j >= half else q_out
-            b = src[i * ws + j] if j < ws else q_out
-            tmp[i * wd + j] = a if a > b else b
-    for i in range(hs + half):
-        for j in range(wd):
-            a = tmp[(i - half) * wd + j] if i >= half else q_out
-            b = tmp[i * wd + j] if i < hs else q_out
-            dst[i * wd + j] = a if a > b else b
+    for i in range(hs):  # column j: src[j - half] (if j >= half) and src[j] (if j < ws)
+        s, t = src[i * ws:(i + 1) * ws], tmp[i * wd:(i + 1) * wd]
+        if half <= ws:
+            _max1(t[:half], s[:half], q_out)
+            _max2(t[half:ws], s[:ws - half], s[half:])
+            _max1(t[ws:], s[ws - half:], q_out)
+        else:
+            _max1(t[:ws], s, q_out)
+            t[ws:half] = q_out
+            _max1(t[half:], s, q_out)
+    for i in range(hs + half):  # row i: tmp row i - half (if i >= half) and row i (if i < hs)
+        d = dst[i * wd:(i + 1) * wd]
+        if half <= i < hs:
+            _max2(d, tmp[(i - half) * wd:(i - half + 1) * wd], tmp[i * wd:(i + 1) * wd])
+        elif i < hs:
+            _max1(d, tmp[i * wd:(i + 1) * wd], q_out)
+        elif i >= half:
+            _max1(d, tmp[(i - half) * wd:(i - half + 1) * wd], q_out)
+        else:
+            d[:] = q_out
 
 
 @nb.njit(**_JIT)
@@ -82,10 +114,15 @@ def pool_levels(q0, depth, q_out):  # pragma: no cover - compiled
 
 
 @nb.njit(**_JIT, inline="always")
-def _exact(prob, rows, cols, a, x, y, p_out):  # pragma: no cover - compiled
-    """Sum over the points of angle a of the cell at offset (x, y) (float64, in point order)."""
+def _exact(prob, rows, cols, bb, a, x, y, p_out):  # pragma: no cover - compiled
+    """Sum over the points of angle a of the cell at offset (x, y) (float64, in point order); bb[a] = the
+    points' (row min, row max, col min, col max) at angle a: all inside, no bounds tests."""
     h, w = prob.shape
     s = 0.0
+    if bb[a, 0] + y >= 0 and bb[a, 1] + y < h and bb[a, 2] + x >= 0 and bb[a, 3] + x < w:
+        for i in range(rows.shape[1]):
+            s += np.float64(prob[np.uint64(rows[a, i] + y), np.uint64(cols[a, i] + x)])
+        return s
     for i in range(rows.shape[1]):
         r = rows[a, i] + y
         c = cols[a, i] + x
@@ -97,10 +134,15 @@ def _exact(prob, rows, cols, a, x, y, p_out):  # pragma: no cover - compiled
 
 
 @nb.njit(**_JIT, inline="always")
-def _bound(levels, start, hd, wd, sh, rows, cols, a, x, y, q_out):  # pragma: no cover - compiled
+def _bound(levels, start, hd, wd, sh, rows, cols, bb, a, x, y, q_out):  # pragma: no cover - compiled
     """Integer sum over the points of angle a of the level cells (padded dims hd x wd, shift sh = w - 1)."""
     s = 0
     ys, xs = y + sh, x + sh
+    if bb[a, 0] + ys >= 0 and bb[a, 1] + ys < hd and bb[a, 2] + xs >= 0 and bb[a, 3] + xs < wd:
+        base = start + ys * wd + xs
+        for i in range(rows.shape[1]):
+            s += levels[np.uint64(base + rows[a, i] * wd + cols[a, i])]
+        return s
     for i in range(rows.shape[1]):
         r = rows[a, i] + ys
         c = cols[a, i] + xs
@@ -112,36 +154,33 @@ def _bound(levels, start, hd, wd, sh, rows, cols, a, x, y, q_out):  # pragma: no
 
 
 @nb.njit(**_JIT)
-def _score(prob, levels, starts, d, rows, cols, a, x, y, quant):  # pragma: no cover - compiled
+def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: no cover - compiled
     """The exact sum (d = 0) or the bound (d >= 1) of candidate (a, x, y); quant = (lo, step, q_out, p_out,
     slack)."""
     lo, step, q_out, p_out, slack = quant
     if d == 0:
-        return _exact(prob, rows, cols, a, x, y, p_out)
+        return _exact(prob, rows, cols, bb, a, x, y, p_out)
     h, w = prob.shape
     sh = (1 << d) - 1
-    q = _bound(levels, starts[d], h + sh, w + sh, sh, rows, cols, a, x, y, np.int64(q_out))
+    q = _bound(levels, starts[d], h + sh, w + sh, sh, rows, cols, bb, a, x, y, np.int64(q_out))
     return rows.shape[1] * lo + q * step + slack
 
 
 @nb.njit(**_JIT)
-def _push_children(prob, levels, starts, rows, cols, a, x, y, d, box, quant, best, st, sp):  # pragma: no cover
+def _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best, st, sp, cx, cy, cs):  # noqa: E501 # pragma: no cover
     """Score the (up to four) children of candidate (a, x, y) at level d - 1 and push those above ``best``
     onto the stack st (a, x, y, level, score arrays) from position sp, best child last: (new sp, children
-    scored)."""
+    scored). cx, cy, cs: scratch arrays of 4."""
     h = 1 << (d - 1)
     x_hi, y_hi = box[1], box[3]
     ns = scored = 0
-    cx = np.empty(4, dtype=np.int64)
-    cy = np.empty(4, dtype=np.int64)
-    cs = np.empty(4, dtype=np.float64)
     for dx in range(2):
         if x + dx * h > x_hi:
             break
         for dy in range(2):
             if y + dy * h > y_hi:
                 break
-            s = _score(prob, levels, starts, d - 1, rows, cols, a, x + dx * h, y + dy * h, quant)
+            s = _score(prob, levels, starts, d - 1, rows, cols, bb, a, x + dx * h, y + dy * h, quant)
             scored += 1
             if s > best:
                 k = ns  # insertion sort, ascending: the best child ends on top of the stack
@@ -157,6 +196,16 @@ def _push_children(prob, levels, starts, rows, cols, a, x, y, d, box, quant, bes
 
 
 @nb.njit(**_JIT)
+def _boxes(rows, cols):  # pragma: no cover - compiled
+    """Per angle a: (min row, max row, min col, max col) of the points' cells."""
+    bb = np.empty((rows.shape[0], 4), dtype=np.int64)
+    for a in range(rows.shape[0]):
+        bb[a, 0], bb[a, 1] = rows[a].min(), rows[a].max()
+        bb[a, 2], bb[a, 3] = cols[a].min(), cols[a].max()
+    return bb
+
+
+@nb.njit(**_JIT)
 def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0):  # pragma: no cover
     """Depth-first branch and bound (Hess et al. 2016, Alg. 3) over angles 0..A-1 (rows/cols (A, N): the
     points' cells at each angle) and integer offsets box = (x_lo, x_hi, y_lo, y_hi), from level d_top down.
@@ -166,16 +215,18 @@ def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0)
     w = 1 << d_top
     nx = (x_hi - x_lo) // w + 1
     ny = (y_hi - y_lo) // w + 1
+    bb = _boxes(rows, cols)
     top = np.empty(n_ang * nx * ny, dtype=np.float64)
     for a in range(n_ang):
         for ix in range(nx):
             for iy in range(ny):
-                top[(a * nx + ix) * ny + iy] = _score(prob, levels, starts, d_top, rows, cols, a,
+                top[(a * nx + ix) * ny + iy] = _score(prob, levels, starts, d_top, rows, cols, bb, a,
                                                       x_lo + ix * w, y_lo + iy * w, quant)
     order = np.argsort(-top, kind="mergesort")
     cap = 4 * d_top + 4
     st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
           np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
+    cx, cy, cs = np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64)
     best, ba, bx, by = best0, -1, 0, 0
     nodes = top.size
     for k in order:
@@ -193,9 +244,27 @@ def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0)
             if d == 0:
                 best, ba, bx, by = st[4][sp], a, x, y
                 continue
-            sp, scored = _push_children(prob, levels, starts, rows, cols, a, x, y, d, box, quant, best, st, sp)
+            sp, scored = _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best, st, sp,
+                                        cx, cy, cs)
             nodes += scored
     return best, ba, bx, by, nodes
+
+
+@nb.njit(**_JIT)
+def discretise(px, py, angles, x0, y0, ox, oy, res, lim):  # pragma: no cover - compiled
+    """The cells (rows, cols) (A, N) int32 of the points (px, py) rotated by each angle and moved to (x0, y0):
+    floor((x - ox) / res), clamped to +-lim."""
+    n_ang, n = angles.size, px.size
+    rows = np.empty((n_ang, n), dtype=np.int32)
+    cols = np.empty((n_ang, n), dtype=np.int32)
+    for a in range(n_ang):
+        c, s = math.cos(angles[a]), math.sin(angles[a])
+        for i in range(n):
+            x = (c * px[i] - s * py[i] + x0 - ox) / res
+            y = (s * px[i] + c * py[i] + y0 - oy) / res
+            cols[a, i] = int(math.floor(min(max(x, -lim), lim)))
+            rows[a, i] = int(math.floor(min(max(y, -lim), lim)))
+    return rows, cols
 
 
 @nb.njit(**_JIT)
@@ -204,10 +273,11 @@ def exhaustive(prob, rows, cols, box, p_out):  # pragma: no cover - compiled
     first best in (a, y, x) order."""
     x_lo, x_hi, y_lo, y_hi = box
     best, ba, bx, by = -np.inf, -1, 0, 0
+    bb = _boxes(rows, cols)
     for a in range(rows.shape[0]):
         for y in range(y_lo, y_hi + 1):
             for x in range(x_lo, x_hi + 1):
-                s = _exact(prob, rows, cols, a, x, y, p_out)
+                s = _exact(prob, rows, cols, bb, a, x, y, p_out)
                 if s > best:
                     best, ba, bx, by = s, a, x, y
     return best, ba, bx, by

@@ -183,12 +183,9 @@ def _candidates(grids: PrecomputedGrids, b_pts, seed_aTb, window_xy_m, window_th
     n = math.ceil(wt / step - 1e-9) if wt > 0 else 0
     k = np.arange(-n, n + 1, dtype=np.float64)
     angles = seed[2] + (k * (wt / n) if n else k)
-    c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
-    x = c * pts[:, 0] - s * pts[:, 1] + seed[0]
-    y = s * pts[:, 0] + c * pts[:, 1] + seed[1]
-    lim = float(_MAX_CELLS)
-    cols = np.clip(np.floor((x - grids.origin[0]) / grids.res), -lim, lim).astype(np.int32)
-    rows = np.clip(np.floor((y - grids.origin[1]) / grids.res), -lim, lim).astype(np.int32)
+    rows, cols = _kernels().discretise(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), angles,
+                                       seed[0], seed[1], grids.origin[0], grids.origin[1], grids.res,
+                                       float(_MAX_CELLS))
     wx, wy = _window_cells(window_xy_m, grids.res)
     return _Candidates(angles, rows, cols, (-wx, wx, -wy, wy), seed)
 
