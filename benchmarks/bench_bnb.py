@@ -2,20 +2,21 @@
 
     .venv/bin/python benchmarks/bench_bnb.py [--quick] [--repeat N] [--scans K]
 
-Worlds: a seeded building of rooms (interior walls with doorways, furniture boxes) filling a 0.05 m grid of
-400 x 400 (20 m) and 800 x 800 cells (40 m); the grid is what a well-filled submap looks like after blurring:
+Worlds: a seeded square building of rooms (interior walls with doorways, furniture boxes) of 18 m and 38 m in
+0.05 m grids of 400 x 400 (20 m) and 800 x 800 cells (40 m); the grid is what a well-filled submap looks like:
 0.1 + 0.8 exp(-d^2 / 2) at d cells from the nearest wall (unknown / free 0.1, walls 0.9). Scans: 360 beams,
 12 m range, ray-cast at K seeded free poses (--scans, default 5), no noise.
 
 Rows:
 - precompute: median ms of ``precompute(prob, 7)`` (levels 2^0..2^6), and the bytes it holds;
-- small (+-0.3 m, +-10 deg, seed 0.12 m / 4 deg off the truth) and loop (+-7 m, +-30 deg, seed 3-5 m and
-  20 deg off, min_score 0.5) windows: candidates per scan, median ms per scan of ``search`` (B&B), of the
+- small (+-0.3 m, +-10 deg, seed 0.12 m / 4 deg off the truth, min_score 0.1) and loop (+-7 m, +-30 deg,
+  seed 3-5 m and 20 deg off, min_score 0.5) windows: median candidates per scan (angles x offsets), median over the
+  scans of the per-scan median wall ms (and CPU ms) of ``search`` (B&B, --repeat calls), the wall ms of the
   compiled exhaustive search (``_bnb_fast.exhaustive``: the same scoring kernel over every candidate, the
-  fair measure of what the bounds save) and of the numpy ``brute_force`` (the loop window's numpy brute
-  force takes seconds: one scan, --quick skips it), the ratios exhaustive / B&B and numpy / B&B, and
-  whether every result's score equals the references' (``same``) and lies within a cell and an angular
-  step of the truth (``found``).
+  fair measure of what the bounds save) and of the numpy ``brute_force``, one call each (on the loop window
+  they take seconds: the compiled one runs on 2 scans, the numpy one on 1; --quick: 1 and none), the ratios
+  exhaustive / B&B and numpy / B&B, whether every result's score equals the references' (``same``), and how
+  many results lie within one cell and one angular step of the truth (``found``).
 The first call of each kernel (numba cache load or compile) is untimed.
 """
 
@@ -33,10 +34,12 @@ from holoslam.sim.world import raycast
 from holoslam.submaps import _bnb_fast, bnb
 
 RES = 0.05
+ORIGIN = (-1.0, -1.0)  # the grids start 1 m outside the building
 
 
 def building(size_m: float, seed: int) -> np.ndarray:
-    """Wall segments (M, 4) of a square building: outer walls, rooms of 4-7 m with 1 m doorways, boxes."""
+    """Wall segments (M, 4) of a square building [0, size_m]^2: outer walls, rooms of 4-7 m with 1 m
+    doorways, boxes."""
     rng = np.random.default_rng(seed)
     segs = [[0, 0, size_m, 0], [size_m, 0, size_m, size_m], [size_m, size_m, 0, size_m], [0, size_m, 0, 0]]
     for axis in range(2):
@@ -59,13 +62,14 @@ def building(size_m: float, seed: int) -> np.ndarray:
 
 
 def blurred_grid(segs: np.ndarray, cells: int) -> np.ndarray:
-    """prob (cells, cells) of the walls: 0.1 + 0.8 exp(-d^2 / 2), d in cells from the nearest wall cell."""
+    """prob (cells, cells) of the walls, origin (-1, -1): 0.1 + 0.8 exp(-d^2 / 2), d in cells from the
+    nearest wall cell."""
     wall = np.zeros((cells, cells), dtype=bool)
     for x0, y0, x1, y1 in segs:
         n = int(math.hypot(x1 - x0, y1 - y0) / (RES / 4)) + 2
         t = np.linspace(0.0, 1.0, n)
-        c = np.floor((x0 + t * (x1 - x0)) / RES).astype(int)
-        r = np.floor((y0 + t * (y1 - y0)) / RES).astype(int)
+        c = np.floor((x0 + t * (x1 - x0) - ORIGIN[0]) / RES).astype(int)
+        r = np.floor((y0 + t * (y1 - y0) - ORIGIN[1]) / RES).astype(int)
         ok = (r >= 0) & (r < cells) & (c >= 0) & (c < cells)
         wall[r[ok], c[ok]] = True
     d = ndimage.distance_transform_edt(~wall)
@@ -81,22 +85,26 @@ def scan(segs: np.ndarray, wTb: np.ndarray, beams: int = 360, max_range: float =
 
 def free_poses(prob: np.ndarray, k: int, rng: np.random.Generator) -> np.ndarray:
     """k poses in free space, at least 0.5 m from any wall and 2 m inside the building."""
-    cells = prob.shape[0]
+    size_m = prob.shape[0] * RES - 2.0
     out = []
     while len(out) < k:
-        x, y = rng.uniform(2.0, cells * RES - 2.0, 2)
-        r, c = int(y / RES), int(x / RES)
+        x, y = rng.uniform(2.0, size_m - 2.0, 2)
+        r, c = int((y - ORIGIN[1]) / RES), int((x - ORIGIN[0]) / RES)
         if prob[max(r - 10, 0):r + 11, max(c - 10, 0):c + 11].max() < 0.11:
             out.append([x, y, rng.uniform(-math.pi, math.pi)])
     return np.array(out)
 
 
-def timed(fn, repeat: int) -> tuple[float, object]:
-    times, out = [], None
+def timed(fn, repeat: int, cpu: list | None = None) -> tuple[float, object]:
+    """Median wall seconds of ``repeat`` calls and the last result; the median CPU seconds appended to cpu."""
+    times, cpus, out = [], [], None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = fn()
         times.append(time.perf_counter() - t)
+        cpus.append(time.process_time() - c)
+    if cpu is not None:
+        cpu.append(statistics.median(cpus))
     return statistics.median(times), out
 
 
@@ -107,22 +115,26 @@ def seeds(truth: np.ndarray, loop: bool, rng: np.random.Generator) -> np.ndarray
     return truth + [0.12 * rng.choice([-1, 1]), -0.09, math.radians(4)]
 
 
-def case(grids, segs, poses, loop: bool, repeat: int, numpy_scans: int, rng) -> dict:
+def case(grids, segs, poses, loop: bool, repeat: int, ref_scans: tuple[int, int], rng) -> dict:
+    """One window over the scans at ``poses``; the references run on the first ref_scans = (compiled,
+    numpy) scans."""
     wxy, wth, min_score = (7.0, math.radians(30), 0.5) if loop else (0.3, math.radians(10), 0.1)
-    t_bnb, t_exh, t_np, same, found, ncand = [], [], [], [], [], 0
+    t_bnb, c_bnb, t_exh, t_np, same, found, ncand = [], [], [], [], [], [], []
     for k, truth in enumerate(poses):
         pts = scan(segs, truth)
         seed = seeds(truth, loop, rng)
         args = (grids, pts, seed, wxy, wth, min_score)
-        t, m = timed(lambda a=args: bnb.search(*a), repeat)
+        t, m = timed(lambda a=args: bnb.search(*a), repeat, c_bnb)
         t_bnb.append(t)
         cand = bnb._candidates(grids, pts, seed, wxy, wth, None)
-        ncand = cand.angles.size * (cand.box[1] * 2 + 1) * (cand.box[3] * 2 + 1)
-        t, e = timed(lambda c=cand: _bnb_fast.exhaustive(grids.prob, c.rows, c.cols, c.box, float(bnb.OUTSIDE)),
-                     1)
-        t_exh.append(t)
-        ref = [e[0] / pts.shape[0]]
-        if k < numpy_scans:
+        ncand.append(cand.angles.size * (cand.box[1] * 2 + 1) * (cand.box[3] * 2 + 1))
+        ref = []
+        if k < ref_scans[0]:
+            t, e = timed(lambda c=cand: _bnb_fast.exhaustive(grids.prob, c.rows, c.cols, c.box,
+                                                             float(bnb.OUTSIDE)), 1)
+            t_exh.append(t)
+            ref.append(e[0] / pts.shape[0])
+        if k < ref_scans[1]:
             t, b = timed(lambda a=args: bnb.brute_force(*a), 1)
             t_np.append(t)
             ref.append(b.score if b else -1.0)
@@ -134,7 +146,7 @@ def case(grids, segs, poses, loop: bool, repeat: int, numpy_scans: int, rng) -> 
     ms = 1e3 * statistics.median(t_bnb)
     exh = 1e3 * statistics.median(t_exh)
     npy = 1e3 * statistics.median(t_np) if t_np else float("nan")
-    return {"cand": ncand, "bnb": ms, "exh": exh, "np": npy, "same": all(same), "found": sum(found),
+    return {"cand": int(statistics.median(ncand)), "bnb": ms, "cpu": 1e3 * statistics.median(c_bnb), "exh": exh, "np": npy, "same": all(same), "found": sum(found),
             "n": len(found)}
 
 
@@ -152,18 +164,18 @@ def main() -> None:
     _bnb_fast.exhaustive(warm.prob, c.rows, c.cols, c.box, 0.1)
     print(f"branch and bound vs brute force: {RES} m grids, 360-beam scans, medians of {args.repeat} "
           f"(B&B) over {args.scans} scans; ms per call")
-    print(f"{'grid':<9}{'precompute_ms':>14}{'MB':>7}  {'window':<7}{'candidates':>11}{'bnb_ms':>9}"
+    print(f"{'grid':<9}{'precompute_ms':>14}{'MB':>7}  {'window':<7}{'candidates':>11}{'bnb_ms':>9}{'cpu_ms':>8}"
           f"{'exhaustive_ms':>14}{'ratio':>8}{'numpy_ms':>10}{'ratio':>8}  same  found")
     for cells in sizes:
-        segs = building(cells * RES, seed=cells)
+        segs = building(cells * RES - 2.0, seed=cells)
         prob = blurred_grid(segs, cells)
-        t_pre, grids = timed(lambda p=prob: bnb.precompute(p, 7, origin=(0.0, 0.0), res=RES), args.repeat)
+        t_pre, grids = timed(lambda p=prob: bnb.precompute(p, 7, origin=ORIGIN, res=RES), args.repeat)
         poses = free_poses(prob, args.scans, rng)
         for loop in (False, True):
-            n_np = 0 if (loop and args.quick) else (1 if loop else args.scans)
-            r = case(grids, segs, poses, loop, args.repeat, n_np, rng)
+            refs = ((1, 0) if args.quick else (2, 1)) if loop else (args.scans, args.scans)
+            r = case(grids, segs, poses, loop, args.repeat, refs, rng)
             print(f"{cells}x{cells:<5}{1e3 * t_pre:>14.2f}{grids.nbytes / 1e6:>7.2f}  "
-                  f"{'loop' if loop else 'small':<7}{r['cand']:>11,}{r['bnb']:>9.2f}{r['exh']:>14.1f}"
+                  f"{'loop' if loop else 'small':<7}{r['cand']:>11,}{r['bnb']:>9.2f}{r['cpu']:>8.2f}{r['exh']:>14.1f}"
                   f"{r['exh'] / r['bnb']:>8.0f}{r['np']:>10.0f}{r['np'] / r['bnb']:>8.0f}  "
                   f"{'yes' if r['same'] else 'NO':<6}{r['found']}/{r['n']}")
 

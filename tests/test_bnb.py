@@ -93,6 +93,11 @@ def test_precompute_copies_and_freezes_and_counts_its_bytes():
     assert g.levels.nbytes == sum((50 + (1 << d) - 1) * (30 + (1 << d) - 1) for d in range(1, 7))
     assert g.nbytes == g.prob.nbytes + g.levels.nbytes + g.starts.nbytes
     assert bnb.precompute(prob, 1, origin=(0, 0), res=1.0).levels.size == 0
+    frozen = g.prob  # a grid nothing can write is shared, not copied; a read-only view of a writable one is not
+    assert bnb.precompute(frozen, 3, origin=(0, 0), res=1.0).prob is frozen
+    view = np.ones((5, 5), dtype=np.float32)[:]
+    view.flags.writeable = False
+    assert not np.shares_memory(bnb.precompute(view, 3, origin=(0, 0), res=1.0).prob, view)
 
 
 @pytest.mark.parametrize("bad", [np.zeros((0, 3)), np.zeros(5), np.array([[0.1, np.nan]])])
@@ -226,3 +231,14 @@ def test_a_scan_from_elsewhere_scores_below_the_true_place(house, case):
     rejected = bnb.search(g, pts * [1.0, -1.0], seed_aTb, 7.0, math.radians(30), 0.6) is None
     assert rejected == (case in (0, 1))
     assert bnb.search(g, pts * [1.0, -1.0], seed_aTb, 7.0, math.radians(30), 0.7) is None
+
+
+@pytest.mark.parametrize("value", [0.1, 0.5, 0.05])
+def test_constant_grids_and_values_below_the_outside_value(value):
+    g = bnb.precompute(np.full((30, 20), value), 5, origin=(0.0, 0.0), res=0.1)
+    pts = np.array([[0.5, 0.5], [1.0, 0.2], [9.0, 9.0]])  # the last one always off the grid
+    m = bnb.search(g, pts, [0.5, 0.5, 0.0], 1.0, 0.2, 0.0)
+    b = bnb.brute_force(g, pts, [0.5, 0.5, 0.0], 1.0, 0.2, 0.0)
+    assert m.score == b.score
+    top = max(value, 0.1)
+    assert m.score == pytest.approx((2 * np.float32(top) + np.float32(0.1)) / 3)
