@@ -10,13 +10,13 @@ Worlds: a seeded square building of rooms (interior walls with doorways, furnitu
 Rows:
 - precompute: median ms of ``precompute(prob, 7)`` (levels 2^0..2^6), and the bytes it holds;
 - small (+-0.3 m, +-10 deg, seed 0.12 m / 4 deg off the truth, min_score 0.1) and loop (+-7 m, +-30 deg,
-  seed 3-5 m and 20 deg off, min_score 0.5) windows: median candidates per scan (angles x offsets), median over the
-  scans of the per-scan median wall ms (and CPU ms) of ``search`` (B&B, --repeat calls), the wall ms of the
-  compiled exhaustive search (``_bnb_fast.exhaustive``: the same scoring kernel over every candidate, the
-  fair measure of what the bounds save) and of the numpy ``brute_force``, one call each (on the loop window
-  they take seconds: the compiled one runs on 2 scans, the numpy one on 1; --quick: 1 and none), the ratios
-  exhaustive / B&B and numpy / B&B, whether every result's score equals the references' (``same``), and how
-  many results lie within one cell and one angular step of the truth (``found``).
+  seed 3-5 m and 20 deg off, min_score 0.5) windows: median candidates per scan (angles x offsets), median
+  over the scans of the per-scan median wall ms (and CPU ms) of ``search`` (B&B, --repeat calls), the wall
+  ms of the compiled exhaustive search (``_bnb_fast.exhaustive``: the same scoring kernel over every
+  candidate, the fair measure of what the bounds save) and of the numpy ``brute_force``, one call each (on
+  the loop window they take seconds: the compiled one runs on 2 scans, the numpy one on 1; --quick: 1 and
+  none), the ratios exhaustive / B&B and numpy / B&B, whether every result's score equals the references'
+  (``same``), and how many results lie within one cell and one angular step of the truth (``found``).
 The first call of each kernel (numba cache load or compile) is untimed.
 """
 
