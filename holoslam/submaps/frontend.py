@@ -75,6 +75,7 @@ class FrontEnd:
     skipped_observations: int = 0
     loops_tried: int = 0
     ambiguous_objects: tuple[str, ...] = ()
+    dead_reckoning_inflation: float = 1.0  # factor applied to the dead-reckoning covariances (_Graph)
 
 
 def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "base_link") -> np.ndarray:
@@ -135,17 +136,53 @@ class _Graph:
         self.cov: list[np.ndarray] = []
         self.kind: list[str] = []
         self.est: list[np.ndarray] = [np.asarray(first_wTa, np.float64)]
+        self.travel: list[float] = [0.0]  # odometer path length at each anchor
+        self._dist: tuple[int, int, np.ndarray] | None = None
+
+    def graph_distance(self, n: int) -> np.ndarray:
+        """Shortest path length from every anchor to anchor n: chain edges weigh the distance travelled
+        between their anchors, loop edges nothing (``loops`` module docstring). Cached until the graph grows."""
+        key = (n, len(self.i))
+        if self._dist is None or self._dist[:2] != key:
+            from scipy.sparse import coo_matrix
+            from scipy.sparse.csgraph import dijkstra
+
+            N = len(self.est)
+            ii, jj = np.array(self.i, np.int64), np.array(self.j, np.int64)
+            trav = np.array(self.travel)
+            loop = np.array([k == "loop" for k in self.kind], bool)
+            w = np.where(loop, 1e-6, np.abs(trav[jj] - trav[ii]) + 1e-6)
+            A = coo_matrix((w, (ii, jj)), shape=(N, N)).tocsr()
+            self._dist = (*key, dijkstra(A, directed=False, indices=n))
+        return self._dist[2]
 
     def add(self, i: int, j: int, T, cov, kind: str) -> None:
         self.i.append(i), self.j.append(j), self.T.append(np.asarray(T, float)), self.kind.append(kind)
         self.cov.append(np.asarray(cov, float) + np.eye(3) * 1e-10)
+
+    def dead_reckoning_inflation(self, min_pairs: int = 5) -> float:
+        """How much the dead-reckoning covariances must grow to explain their disagreement with the scan
+        matches between the same anchors: median(d^T (C_dr + C_sm)^-1 d) over the anchor pairs divided by the
+        chi-square(3) median (2.366), at least 1. Wheel odometry on real floors slips and drifts far more than
+        any fixed noise model says; the scan matches of the same log measure by how much ."""
+        kinds = np.array(self.kind, dtype=object)
+        dr, sm = np.flatnonzero(kinds == "dead_reckoning"), np.flatnonzero(kinds == "scan_match")
+        if len(dr) < min_pairs or len(dr) != len(sm):
+            return 1.0
+        T, C = np.array(self.T), np.array(self.cov)
+        d = g.between(T[dr], T[sm])
+        m2 = np.einsum("ni,ni->n", d, np.linalg.solve(C[dr] + C[sm], d[..., None])[..., 0])
+        return max(1.0, float(np.median(m2)) / 2.366)
 
     def measurements(self):
         from holoslam.graph.problem import RelativePoseMeasurements
 
         if not self.i:
             return RelativePoseMeasurements.empty()
-        return RelativePoseMeasurements(np.array(self.i), np.array(self.j), np.array(self.T), np.array(self.cov),
+        cov = np.array(self.cov)
+        dr = np.array(self.kind, dtype=object) == "dead_reckoning"
+        cov[dr] *= self.dead_reckoning_inflation()
+        return RelativePoseMeasurements(np.array(self.i), np.array(self.j), np.array(self.T), cov,
                                         np.array(self.kind, dtype=object))
 
     def reoptimise(self, optimize: Callable[[object], np.ndarray] | None) -> None:
@@ -203,7 +240,7 @@ def build_problem(
     loops = LoopSearch(cfg.loops, cfg.local.match)
     graph = _Graph(dr_wTb[0])
     closed: list[Submap] = []
-    n_arrivals, last_t, n_nodes, last_closure = 0, t_first, 0, float(travelled[0])
+    n_arrivals, last_t, n_nodes = 0, t_first, 0
     every = max(1, -(-len(scans) // 50))
     for k, scan in enumerate(scans):
         if progress is not None and k % every == 0:
@@ -222,6 +259,7 @@ def build_problem(
             graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
             graph.add(m, n, mTn, cov_mTn, "scan_match")
             graph.est.append(g.compose(graph.est[m], mTn))
+            graph.travel.append(float(travelled[k]))
         n_arrivals = len(slam.arrivals)
         while len(closed) < len(slam.finished):
             sm = slam.finished[len(closed)]
@@ -230,11 +268,10 @@ def build_problem(
                 loops.add_submap(sm.index, closed[-1].grid)
         if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
-                                 float(travelled[k]) - last_closure)
+                                 graph.graph_distance(node.submap))
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found:
-                last_closure = float(travelled[k])
                 graph.reoptimise(optimize)
     slam.close()
     while len(closed) < len(slam.finished):
@@ -258,7 +295,7 @@ def build_problem(
                           headings=headings if headings is not None else HeadingMeasurements.empty(),
                           landmarks=landmarks, initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
     return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops.tried,
-                    tuple(sorted(drop)))
+                    tuple(sorted(drop)), graph.dead_reckoning_inflation())
 
 
 def graph_stamp(slam: LocalSlam, index: int) -> int:

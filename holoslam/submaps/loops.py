@@ -3,9 +3,11 @@
 For a node r of submap n at the current world estimate wTr, every finished submap m (not n's own neighbours in
 the chain) whose anchor lies within ``max_constraint_distance`` of wTr is searched by branch-and-bound over its
 precomputed multi-resolution grids (``bnb``, Hess et al. 2016) in a window around the estimate mTr that grows
-with the uncertainty of the estimate: ``window_xy = min(max_window_xy, base + rate * d)``, d the distance
-travelled since the last accepted closure (odometry plus scan matching drift a few per cent of the distance
-on real robots; the estimate is re-optimised after every closure, so d restarts there). A match counts when
+with the uncertainty of that estimate: ``window_xy = min(max_window_xy, base + rate * d)``, d the length of the
+shortest path from m to n in the graph found so far, chain edges weighing the distance the robot travelled
+between their anchors and closures nothing (the relative pose of m and n is as uncertain as the drift along
+the best-constrained way from one to the other; drift of odometry plus scan matching is a few per cent of the
+distance on real robots). The estimate is re-optimised after every closure. A match counts when
 its score (mean probability of the points) reaches ``min_score`` (``min_score_wide`` for windows beyond
 ``wide_window_xy``: a wide search has more chances of a wrong match), is refined by the continuous matcher
 against m's grid, and gives the ``loop`` relative pose of Eq. 15, mTn = mTr ∘ (nTr)^-1, with the refined
@@ -61,9 +63,10 @@ class LoopSearch:
 
     def __init__(self, cfg: LoopConfig, match_cfg: MatchConfig) -> None:
         self.cfg = cfg
-        # the refinement against an old map starts from the branch-and-bound pose (a cell, an angular step)
+        # the refinement against an old map starts from the branch-and-bound pose; its window (for the score
+        # surface, hence the covariance) is wide enough to show a corridor's ambiguity along its length
         self.refine_cfg = MatchConfig(
-            linear_window=0.05, angular_window_deg=1.0, occupied_weight=match_cfg.occupied_weight,
+            linear_window=0.5, angular_window_deg=3.0, translation_delta_weight=1e3, rotation_delta_weight=1e3, occupied_weight=match_cfg.occupied_weight,
             translation_weight=match_cfg.translation_weight, rotation_weight=match_cfg.rotation_weight,
             iterations=match_cfg.iterations, kappa=match_cfg.kappa, min_score=0.0)
         self.grids: dict[int, ProbGrid] = {}
@@ -82,28 +85,32 @@ class LoopSearch:
             self.pre[m] = bnb.precompute(gr.prob, self.cfg.depth, origin=gr.origin, res=gr.resolution)
         return self.pre[m]
 
-    def window(self, since_closure_m: float) -> tuple[float, float]:
+    def window(self, graph_distance_m: float) -> tuple[float, float]:
+        """Search window half-widths (m, rad) for a pair this far apart in the graph."""
         c = self.cfg
-        xy = min(c.max_window_xy, c.base_window_xy + c.window_rate * since_closure_m)
-        deg = min(c.max_window_deg, c.base_window_deg + c.window_deg_rate * since_closure_m)
+        xy = min(c.max_window_xy, c.base_window_xy + c.window_rate * graph_distance_m)
+        deg = min(c.max_window_deg, c.base_window_deg + c.window_deg_rate * graph_distance_m)
         return xy, math.radians(deg)
 
     def search(self, n: int, nTr: np.ndarray, cov_nTr: np.ndarray, b_pts: np.ndarray, est_wTa: np.ndarray,
-               since_closure_m: float) -> list[LoopCandidate]:
-        """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps."""
+               graph_distance: np.ndarray) -> list[LoopCandidate]:
+        """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps;
+        ``graph_distance[m]`` is the graph path length from m to n (see the module docstring)."""
         from holoslam.submaps import bnb
 
         c = self.cfg
         wTr = g.compose(est_wTa[n], nTr)
-        wxy, wth = self.window(since_closure_m)
-        min_score = c.min_score_wide if wxy > c.wide_window_xy else c.min_score
         olds = [m for m in self.grids if m < n - c.skip_recent and self.pairs.get((m, n), 0) < c.max_per_pair]
         if not olds:
             return []
         olds_arr = np.array(olds)
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
-        for m in olds_arr[dist <= c.max_constraint_distance + wxy].tolist():
+        for m, d in zip(olds_arr.tolist(), dist.tolist(), strict=True):
+            wxy, wth = self.window(float(graph_distance[m]))
+            if d > c.max_constraint_distance + wxy:
+                continue
+            min_score = c.min_score_wide if wxy > c.wide_window_xy else c.min_score
             seed = g.between(est_wTa[m], wTr)
             self.tried += 1
             hit = bnb.search(self._precomputed(m), b_pts, seed, wxy, wth, min_score)

@@ -7,9 +7,10 @@
    mean probability at the cells its points fall in; the best score, discounted for its distance from the
    prediction (Cartographer's real-time matcher), seeds the next step. Odometry that is metres off is the
    loop-closure search's job (``bnb``); this window covers a scan-to-scan prediction error.
-2. **Continuous refinement**: Gauss-Newton with Levenberg damping over (x, y, theta) on
-   sum_i (w_occ/sqrt(N) (1 - P(aTb p_i)))^2 + w_t^2 |t - t_seed|^2 + w_r^2 (theta - theta_seed)^2, P the
-   bicubic interpolation of the grid (Hess et al. 2016).
+2. **Continuous refinement**: Gauss-Newton with Levenberg damping over (x, y, theta), started at the
+   correlative seed, on sum_i (w_occ/sqrt(N) (1 - P(aTb p_i)))^2 + w_t^2 |t - t_pred|^2
+   + w_r^2 (theta - theta_pred)^2, P the bicubic interpolation of the grid (Hess et al. 2016); the weak priors
+   hold the prediction where the map does not constrain the pose (along a corridor).
 3. **Covariance from the score surface** (Olson 2009, §IV): the window's scores, as weights
    exp(kappa (s - s_best)) over the poses, give the weighted second moment about the refined pose, floored by
    the discretisation (a cell and an angular step, uniform). ``kappa`` turns mean probabilities into a
@@ -95,8 +96,10 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
                               + cfg.rotation_delta_weight * angles[:, None, None] ** 2))
     a, j, i = np.unravel_index(int(np.argmax(discounted)), S.shape)
     seed = np.array([pred[0] + off[i], pred[1] + off[j], g.wrap(pred[2] + angles[a])])
+    # the priors pull toward the prediction, not the correlative seed: along a corridor the window's best cell
+    # is noise, and a prior at it would let the estimate random-walk along the corridor scan after scan
     x, y, t, _cost, _occ, _H, _it = fast.lsq_match(
-        prob, origin[0], origin[1], res, px, py, seed[0], seed[1], seed[2], seed[0], seed[1], seed[2],
+        prob, origin[0], origin[1], res, px, py, seed[0], seed[1], seed[2], pred[0], pred[1], pred[2],
         cfg.occupied_weight, cfg.translation_weight, cfg.rotation_weight, cfg.iterations, outside)
     aTb = np.array([x, y, t])
     score = float(fast.mean_bicubic(prob, origin[0], origin[1], res, px, py, x, y, t, outside))
