@@ -196,8 +196,19 @@ def reestimate_anchors(problem: Any) -> np.ndarray:
     from holoslam.solve import SolveOptions, solve
 
     opts = SolveOptions(reject_outliers=True, max_rounds=0, final_gaussian=False, detect_moved=False,
-                        max_iterations=50)
+                        max_iterations=50, build=_run_build_options())
     return solve(problem, opts).wTa
+
+
+def _run_build_options() -> Any:
+    """Robust kernels of a run: loops under Huber (3 sigma), not DCS. On real logs the chain of scan matches is
+    less certain than its covariances say, and DCS (redescending) drops the very closures that correct it;
+    Huber keeps their pull linear beyond 3 sigma (Cartographer uses Huber on loops for the same reason). The
+    chi-square rounds of the final solve remove what is still inconsistent."""
+    from holoslam.graph import factors as fac
+    from holoslam.graph.build import BuildOptions
+
+    return BuildOptions(loop_kernel=fac.Kernel(fac.RobustKernel.HUBER, 3.0))
 
 
 def optimised_trajectory(
@@ -235,9 +246,12 @@ def _feature_attrs(f: Any) -> dict[str, Any]:
 
 def keyframe_poses(submaps: Sequence[Any], wTa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every submap keyframe's base pose in the world, sorted by stamp: wTb = wTa_k ∘ aTb (the keyframes are
-    registered in their submap by scan matching, so they are more accurate than dead reckoning between anchors)."""
-    stamps = [np.asarray(sm.scan_stamps_ns, dtype=np.int64) for sm in submaps]
-    poses = [g.compose(np.broadcast_to(wTa[sm.index], np.shape(sm.aTb)), sm.aTb) for sm in submaps]
+    registered in their submap by scan matching, so they are more accurate than dead reckoning between anchors),
+    with the scans localised in a submap without being inserted (``Submap.track_*``)."""
+    stamps = [np.concatenate([np.asarray(sm.scan_stamps_ns, np.int64), np.asarray(sm.track_stamps_ns, np.int64)])
+              for sm in submaps]
+    rel = [np.vstack([np.reshape(sm.aTb, (-1, 3)), np.reshape(sm.track_aTb, (-1, 3))]) for sm in submaps]
+    poses = [g.compose(np.broadcast_to(wTa[sm.index], r.shape), r) for sm, r in zip(submaps, rel, strict=True)]
     if not stamps:
         return np.zeros(0, np.int64), np.zeros((0, 3))
     s, p = np.concatenate(stamps), np.concatenate(poses).reshape(-1, 3)
@@ -374,6 +388,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             covariances=CovarianceScope.ALL if cfg.solver.covariances else CovarianceScope.NONE,
             max_iterations=cfg.solver.max_iterations,
             isam2_relinearize_threshold=cfg.solver.isam2_relinearize_threshold,
+            build=_run_build_options(),
         )
         sol = solve(fe.problem, options)
 

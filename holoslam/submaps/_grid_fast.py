@@ -93,16 +93,16 @@ def bicubic(prob, u, v, outside):  # pragma: no cover
     r = int(math.floor(v))
     tu = u - c
     tv = v - r
-    col_v = np.empty(4)
-    col_d = np.empty(4)
-    for i in range(4):
-        rr = r - 1 + i
-        val, der = _cubic(_cell(prob, rr, c - 1, outside), _cell(prob, rr, c, outside),
-                          _cell(prob, rr, c + 1, outside), _cell(prob, rr, c + 2, outside), tu)
-        col_v[i] = val
-        col_d[i] = der
-    value, dv = _cubic(col_v[0], col_v[1], col_v[2], col_v[3], tv)
-    du, _ = _cubic(col_d[0], col_d[1], col_d[2], col_d[3], tv)
+    v0, d0 = _cubic(_cell(prob, r - 1, c - 1, outside), _cell(prob, r - 1, c, outside),
+                    _cell(prob, r - 1, c + 1, outside), _cell(prob, r - 1, c + 2, outside), tu)
+    v1, d1 = _cubic(_cell(prob, r, c - 1, outside), _cell(prob, r, c, outside),
+                    _cell(prob, r, c + 1, outside), _cell(prob, r, c + 2, outside), tu)
+    v2, d2 = _cubic(_cell(prob, r + 1, c - 1, outside), _cell(prob, r + 1, c, outside),
+                    _cell(prob, r + 1, c + 1, outside), _cell(prob, r + 1, c + 2, outside), tu)
+    v3, d3 = _cubic(_cell(prob, r + 2, c - 1, outside), _cell(prob, r + 2, c, outside),
+                    _cell(prob, r + 2, c + 1, outside), _cell(prob, r + 2, c + 2, outside), tu)
+    value, dv = _cubic(v0, v1, v2, v3, tv)
+    du, _ = _cubic(d0, d1, d2, d3, tv)
     return value, du, dv
 
 

@@ -122,8 +122,10 @@ def _submap_record(sm: ActiveSubmap, cfg: FrontEndConfig, reason: str) -> Submap
     pts = np.vstack([g.transform_points(T, b) for T, b in zip(P, sm.b_points, strict=True)])
     pts, nrm = voxel_downsample(pts, np.zeros_like(pts), cfg.point_voxel)
     grid = sm.grid() if cfg.build_grids else None
+    tr_t = np.array([t for t, _ in sm.tracked], np.int64)
+    tr_T = np.array([T for _, T in sm.tracked]).reshape(-1, 3)
     return Submap(sm.index, sm.anchor_stamp_ns, np.array(sm.stamps, np.int64), P, np.array(sm.cov).reshape(-1, 3, 3),
-                  tuple(sm.b_points), pts, nrm, features, grid, reason)
+                  tuple(sm.b_points), pts, nrm, features, grid, reason, tr_t, tr_T)
 
 
 class _Graph:
@@ -246,7 +248,11 @@ def build_problem(
         if progress is not None and k % every == 0:
             progress(k, len(scans))
         t = int(scan.stamp_ns)
-        if np.count_nonzero(scan.valid) < cfg.local.match.min_points or not slam.wants(t, odo_at_scans[k]):
+        if np.count_nonzero(scan.valid) < cfg.local.match.min_points:
+            continue
+        if not slam.wants(t, odo_at_scans[k]):
+            if cfg.local.match_every_scan:
+                slam.track(t, odo_at_scans[k], scan.points())
             continue
         lt = last_t
         node = slam.add(t, odo_at_scans[k],
@@ -268,7 +274,7 @@ def build_problem(
                 loops.add_submap(sm.index, closed[-1].grid)
         if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
-                                 graph.graph_distance(node.submap))
+                                 graph.graph_distance(node.submap), float(travelled[k]))
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found:

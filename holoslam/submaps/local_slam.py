@@ -40,6 +40,7 @@ class LocalSlamConfig:
     motion_turn_deg: float = 1.0
     motion_time_s: float = 5.0
     scans_per_submap: int = 90
+    match_every_scan: bool = True  # localise the scans between nodes too (a matched pose at every scan stamp)
     map_drift_per_m: float = 0.005  # m of map error per m travelled inside a submap (1 sigma)
     map_drift_deg_per_m: float = 0.05  # deg per m
 
@@ -68,6 +69,7 @@ class ActiveSubmap:
         self.aTb: list[np.ndarray] = []
         self.cov: list[np.ndarray] = []
         self.b_points: list[np.ndarray] = []
+        self.tracked: list[tuple[int, np.ndarray]] = []  # (stamp, aTb) of scans localised, not inserted
 
     @property
     def count(self) -> int:
@@ -120,10 +122,7 @@ class LocalSlam:
         else:
             host = self.active[0]
             last = self.nodes[-1]
-            # the last node in the host's frame (it was matched into the submap finished just before)
-            prev = last.aTb if last.submap == host.index else g.compose(
-                g.inverse(self._arrival(last.submap, host.index)), last.aTb)
-            pred = g.compose(prev, g.between(self._last_odo, odo))
+            pred = self._predict(host, odo)
             m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred, self.cfg.match)
             drift = self._drift(travelled - host.travelled0)
             if m.ok:
@@ -136,6 +135,26 @@ class LocalSlam:
         self.nodes.append(node)
         self._last_odo, self._last_stamp = np.asarray(odo, np.float64), int(stamp)
         return node
+
+    def track(self, stamp: int, odo: np.ndarray, s_points: np.ndarray) -> None:
+        """Localise a scan that is not a node (the motion filter let it pass) in the host submap, without
+        inserting it: every scan gets a matched pose (``ActiveSubmap.tracked``), not an odometry guess."""
+        if not self.active or not self.nodes:
+            return
+        host = self.active[0]
+        pred = self._predict(host, odo)
+        m = match_scan(host.builder.prob, host.builder.origin, host.builder.res,
+                       g.transform_points(self.bTs, s_points), pred, self.cfg.match)
+        if m.ok:
+            host.tracked.append((int(stamp), m.aTb))
+
+    def _predict(self, host: ActiveSubmap, odo: np.ndarray) -> np.ndarray:
+        """The base pose in the host's frame predicted from the last node by the odometry increment."""
+        last = self.nodes[-1]
+        # the last node in the host's frame (it may have been matched into the submap finished just before)
+        prev = last.aTb if last.submap == host.index else g.compose(
+            g.inverse(self._arrival(last.submap, host.index)), last.aTb)
+        return g.compose(prev, g.between(self._last_odo, odo))
 
     def close(self) -> None:
         """Finish every active submap (end of the log)."""

@@ -46,6 +46,7 @@ class LoopConfig:
     depth: int = 7
     skip_recent: int = 2  # the submaps this many before the current one are its chain neighbours
     max_per_pair: int = 4  # closures kept between one old submap and one new submap
+    wide_search_spacing: float = 2.0  # m travelled between two wide searches of one old submap
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,6 +73,7 @@ class LoopSearch:
         self.grids: dict[int, ProbGrid] = {}
         self.pre: dict[int, object] = {}
         self.pairs: dict[tuple[int, int], int] = {}
+        self.last_wide: dict[int, float] = {}
         self.tried = 0
 
     def add_submap(self, index: int, grid: ProbGrid) -> None:
@@ -93,9 +95,11 @@ class LoopSearch:
         return xy, math.radians(deg)
 
     def search(self, n: int, nTr: np.ndarray, cov_nTr: np.ndarray, b_pts: np.ndarray, est_wTa: np.ndarray,
-               graph_distance: np.ndarray) -> list[LoopCandidate]:
+               graph_distance: np.ndarray, travelled: float = 0.0) -> list[LoopCandidate]:
         """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps;
-        ``graph_distance[m]`` is the graph path length from m to n (see the module docstring)."""
+        ``graph_distance[m]`` is the graph path length from m to n (see the module docstring); ``travelled``
+        the odometer reading, which spaces wide searches of one old submap ``wide_search_spacing`` apart (a
+        wide window costs ~10 ms; one every couple of metres finds a revisit as surely as one per node)."""
         from holoslam.submaps import bnb
 
         c = self.cfg
@@ -110,7 +114,12 @@ class LoopSearch:
             wxy, wth = self.window(float(graph_distance[m]))
             if d > c.max_constraint_distance + wxy:
                 continue
-            min_score = c.min_score_wide if wxy > c.wide_window_xy else c.min_score
+            wide = wxy > c.wide_window_xy
+            if wide and travelled - self.last_wide.get(m, -np.inf) < c.wide_search_spacing:
+                continue
+            if wide:
+                self.last_wide[m] = travelled
+            min_score = c.min_score_wide if wide else c.min_score
             seed = g.between(est_wTa[m], wTr)
             self.tried += 1
             hit = bnb.search(self._precomputed(m), b_pts, seed, wxy, wth, min_score)

@@ -57,7 +57,8 @@ class Match:
 
 
 def angular_step(b_pts: np.ndarray, resolution: float, quantile: float = 0.9) -> float:
-    """The rotation that moves a far point (the ``quantile`` of the ranges) by about one cell."""
+    """The rotation that moves a far point (the ``quantile`` of the ranges) by about one cell (the median
+    instead was measured worse on aces: 4.3 cm / 0.39 deg local relation error against 3.8 cm / 0.32 deg)."""
     d = float(np.quantile(np.hypot(b_pts[:, 0], b_pts[:, 1]), quantile)) if len(b_pts) else 1.0
     d = max(d, 2.0 * resolution)
     return math.acos(max(-1.0, 1.0 - resolution**2 / (2.0 * d * d)))

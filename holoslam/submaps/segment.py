@@ -31,6 +31,7 @@ from holoslam import geometry as g
 from holoslam.maps.grid import OccupancyGrid
 from holoslam.submaps.features import FeatureConfig, ScanFeatures
 from holoslam.submaps.localize import IcpConfig
+from holoslam.submaps.probgrid import ProbGrid
 
 __all__ = [
     "SegmentConfig", "Submap", "side_width", "split_reason", "local_grid", "voxel_downsample", "voxel_append",
@@ -60,7 +61,8 @@ class Submap:
     keyframes' base poses in the anchor frame (the first is the anchor, the identity); ``points`` (M, 2) and
     ``normals`` (M, 2) the decimated scan points in the anchor frame; ``scan_points`` the keyframes' points in
     the base frame; ``features`` H in the anchor frame; ``grid`` its local occupancy grid (anchor frame);
-    ``reason`` why it was started ("start", "distance", "turn", "time", "doorway")."""
+    ``reason`` why it was started ("start", "distance", "turn", "time", "doorway", "scans");
+    ``track_stamps_ns`` / ``track_aTb`` the base poses of the scans localised in it but not inserted."""
 
     index: int
     anchor_stamp_ns: int
@@ -71,8 +73,10 @@ class Submap:
     points: np.ndarray
     normals: np.ndarray
     features: ScanFeatures
-    grid: OccupancyGrid | None
+    grid: OccupancyGrid | ProbGrid | None
     reason: str
+    track_stamps_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    track_aTb: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
 
 def side_width(b_points: np.ndarray, half_length: float = 0.5) -> float:
