@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import heapq
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,6 +13,9 @@ from holoslam.cli import main
 from holoslam.config import from_mapping
 from holoslam.errors import ConfigError, IngestError
 from holoslam.pipeline import RunConfig, load_run_config, run
+from holoslam.submaps.frontend import FrontEndConfig
+from holoslam.submaps.loops import LoopConfig
+from holoslam.submaps.scanmatch import MatchConfig
 
 pytestmark = pytest.mark.slow
 
@@ -76,10 +80,18 @@ def test_many_logs_in_parallel_one_failing(short_run, tmp_path, capsys):
 
 def test_run_config_from_yaml(tmp_path):
     p = tmp_path / "run.yaml"
-    p.write_text("grid:\n  resolution: 0.1\nsolver:\n  method: isam2\nfrontend:\n  revisit_radius: 2.0\n")
+    p.write_text("grid:\n  resolution: 0.1\nsolver:\n  method: isam2\nfrontend:\n  loops: {max_window_xy: 5.0}\n"
+                 "  local: {scans_per_submap: 60, grid: {resolution: 0.04}}\n")
     cfg = load_run_config(p)
     assert cfg.grid.resolution == 0.1 and cfg.solver.method.value == "isam2"
-    assert cfg.frontend.revisit_radius == 2.0
+    # nested front-end sections: the keys given change, every other field keeps its default
+    assert cfg.frontend.loops.max_window_xy == 5.0 and cfg.frontend.loops == replace(LoopConfig(), max_window_xy=5.0)
+    assert cfg.frontend.local.scans_per_submap == 60 and cfg.frontend.local.grid.resolution == 0.04
+    assert cfg.frontend.local.match == MatchConfig() and cfg.frontend.dead_reckoning == FrontEndConfig().dead_reckoning
+    bad = tmp_path / "old.yaml"
+    bad.write_text("frontend:\n  revisit_radius: 2.0\n")  # a key of the old front end is refused by name
+    with pytest.raises(ConfigError, match="frontend: unknown key 'revisit_radius'"):
+        load_run_config(bad)
     assert load_run_config(None) == RunConfig()
     with pytest.raises(ConfigError, match="planning.robot_radius_m: expected a number"):
         from_mapping(RunConfig, {"planning": {"robot_radius_m": "wide"}})

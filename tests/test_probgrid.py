@@ -1,0 +1,134 @@
+"""Submap probability grids (holoslam.submaps.probgrid): insertion raises returns and lowers the cells a beam
+crosses, unknown cells read p_min, growth keeps the lattice, freeze crops to the known cells."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from holoslam.sim.world import raycast
+from holoslam.submaps.probgrid import GridBuilder, GridConfig, ProbGrid, scan_endpoints
+
+CFG = GridConfig()
+# a 4 x 3 m room whose walls run through cell centres (x = 0.025, 4.025; y = 0.025, 3.025), so every return
+# lies in one cell whatever the rounding
+ROOM = np.array([[0, 0, 4, 0], [4, 0, 4, 3], [4, 3, 0, 3], [0, 3, 0, 0]], float) + 0.025
+
+
+def at(prob: np.ndarray, origin, res: float, x: float, y: float) -> float:
+    """The value of the cell holding (x, y); p_min off the grid."""
+    c = int(math.floor((x - origin[0]) / res))
+    r = int(math.floor((y - origin[1]) / res))
+    if 0 <= r < prob.shape[0] and 0 <= c < prob.shape[1]:
+        return float(prob[r, c])
+    return CFG.p_min
+
+
+def room_scan(wTs, beams: int = 360):
+    ang = np.linspace(-math.pi, math.pi, beams, endpoint=False)
+    r = raycast(ROOM, np.asarray(wTs, float)[None, :2], (ang + wTs[2])[None], 10.0)[0]
+    return r, ang
+
+
+def test_single_beam_return_above_half_beam_below_half_unknown_at_p_min():
+    b = GridBuilder(CFG)
+    b.insert(np.array([2.0]), np.array([0.0]), np.array([0.0, 0.0, 0.0]))
+    res, o = b.res, b.origin
+    assert at(b.prob, o, res, 2.01, 0.01) == pytest.approx(CFG.hit_probability)  # the return: > 0.5
+    for x in (0.01, 0.5, 1.0, 1.5, 1.96):  # every cell the beam crosses before it
+        assert at(b.prob, o, res, x, 0.01) == pytest.approx(CFG.miss_probability)  # < 0.5
+    # everything else was never seen: p_min, and not "known"
+    assert at(b.prob, o, res, 1.0, 0.5) == pytest.approx(CFG.p_min)
+    assert at(b.prob, o, res, -1.0, 0.01) == pytest.approx(CFG.p_min)
+    assert at(b.prob, o, res, 2.1, 0.01) == pytest.approx(CFG.p_min)  # behind the return
+    assert b.known.sum() == 41
+    np.testing.assert_allclose(np.unique(b.prob), [CFG.p_min, CFG.miss_probability, CFG.hit_probability], rtol=1e-6)
+    assert b.count == 1
+
+
+def test_repeated_scans_saturate_at_the_clamps_and_returns_are_not_cleared_by_their_own_scan():
+    b = GridBuilder(CFG)
+    r, ang = room_scan(np.array([2.0, 1.5, 0.3]))
+    for _ in range(60):
+        b.insert(r, ang, np.array([2.0, 1.5, 0.3]))
+    res, o = b.res, b.origin
+    # walls at x = 0 and x = 4 (cells just inside the room hold the returns), interior free
+    assert at(b.prob, o, res, 4.025, 1.5) == pytest.approx(CFG.p_max, abs=1e-6)
+    assert at(b.prob, o, res, 0.025, 1.5) == pytest.approx(CFG.p_max, abs=1e-6)
+    assert at(b.prob, o, res, 2.5, 1.0) == pytest.approx(CFG.p_min, abs=1e-6)  # free after 60 misses
+    assert b.known[int((1.0 - o[1]) / res), int((2.5 - o[0]) / res)] == 1  # free: known, at p_min
+    # behind the walls nothing was ever seen: unknown, at p_min
+    for x, y in ((-0.5, 1.5), (4.5, 1.5), (2.0, -0.5), (2.0, 3.5)):
+        assert at(b.prob, o, res, x, y) == pytest.approx(CFG.p_min)
+        assert b.known[int((y - o[1]) / res), int((x - o[0]) / res)] == 0
+    assert b.prob.min() >= CFG.p_min - 1e-7 and b.prob.max() <= CFG.p_max + 1e-7
+    # each cell is updated once per scan: a wall cell that other beams cross at a grazing angle stays a wall
+    wall = np.array([[x, 0.025] for x in np.arange(0.3, 3.7, 0.1)] + [[x, 3.025] for x in np.arange(0.3, 3.7, 0.1)])
+    vals = np.array([at(b.prob, o, res, x, y) for x, y in wall])
+    assert (vals > 0.5).mean() > 0.9, vals
+
+
+def test_beams_without_return_clear_missing_ray_length_and_far_returns_are_not_hits():
+    cfg = GridConfig(max_range=3.0, missing_ray_length=1.0)
+    ranges = np.array([np.inf, 3.5, 2.0, np.nan, 0.0])
+    angles = np.array([0.0, math.pi / 2, math.pi, -math.pi / 2, 0.3])
+    ex, ey, hit = scan_endpoints(ranges, angles, np.zeros(3), cfg)
+    np.testing.assert_array_equal(hit, [False, False, True, False, False])
+    np.testing.assert_allclose(np.hypot(ex, ey), [1.0, 1.0, 2.0, 1.0, 1.0])
+    b = GridBuilder(cfg)
+    b.insert(ranges, angles, np.zeros(3))
+    res, o = b.res, b.origin
+    assert at(b.prob, o, res, 0.5, 0.01) == pytest.approx(cfg.miss_probability)
+    assert at(b.prob, o, res, 1.2, 0.01) == pytest.approx(cfg.p_min)  # cleared only 1 m, no return there
+    assert at(b.prob, o, res, 0.01, 3.49) == pytest.approx(cfg.p_min)  # beyond max_range: not a hit
+    assert at(b.prob, o, res, -1.99, 0.01) == pytest.approx(cfg.hit_probability)
+
+
+def test_growth_keeps_every_existing_cell_in_place():
+    b = GridBuilder(GridConfig(grow_margin=0.5))
+    r, ang = room_scan(np.array([1.0, 1.0, 0.0]))
+    b.insert(r, ang, np.array([1.0, 1.0, 0.0]))
+    o0, p0, k0 = b.origin, b.prob.copy(), b.known.copy()
+    # a scan from 20 m away (a long corridor): the grid must grow down-left and up-right
+    far = np.array([25.0, 20.0, 0.0])
+    b.insert(np.array([0.5, 0.5, 0.5, 0.5]), np.array([0.0, math.pi / 2, math.pi, -math.pi / 2]), far)
+    o1 = b.origin
+    assert b.prob.shape[0] > p0.shape[0] and b.prob.shape[1] > p0.shape[1]
+    # the new origin lies on the old lattice (an integer number of cells away)
+    dc, dr = (o0[0] - o1[0]) / b.res, (o0[1] - o1[1]) / b.res
+    assert abs(dc - round(dc)) < 1e-6 and abs(dr - round(dr)) < 1e-6 and dc >= 0 and dr >= 0
+    dc, dr = int(round(dc)), int(round(dr))
+    h, w = p0.shape
+    np.testing.assert_array_equal(b.prob[dr:dr + h, dc:dc + w], p0)
+    np.testing.assert_array_equal(b.known[dr:dr + h, dc:dc + w], k0)
+    assert at(b.prob, o1, b.res, 25.51, 20.01) == pytest.approx(CFG.hit_probability)
+    # a scan inside the grid does not move it
+    b.insert(r, ang, np.array([1.0, 1.0, 0.0]))
+    assert b.origin == o1
+
+
+def test_freeze_crops_to_the_known_cells():
+    b = GridBuilder(CFG)
+    r, ang = room_scan(np.array([2.0, 1.5, 0.0]))
+    for _ in range(3):
+        b.insert(r, ang, np.array([2.0, 1.5, 0.0]))
+    g = b.freeze()
+    assert isinstance(g, ProbGrid) and g.resolution == b.res and g.p_min == CFG.p_min
+    # the builder grew 5 m around the scan; the frozen grid is the room plus a 2-cell border
+    assert b.prob.shape[0] > 100 and g.prob.shape == (int(round(3.0 / b.res)) + 4 + 1,
+                                                      int(round(4.0 / b.res)) + 4 + 1)
+    assert g.prob.shape[0] * g.prob.shape[1] < b.prob.size / 4
+    # same values at the same places, nothing known lost
+    dc, dr = (g.origin[0] - b.origin[0]) / b.res, (g.origin[1] - b.origin[1]) / b.res
+    dc, dr = int(round(dc)), int(round(dr))
+    h, w = g.prob.shape
+    np.testing.assert_array_equal(g.prob, b.prob[dr:dr + h, dc:dc + w])
+    assert (g.prob > CFG.p_min).sum() == (b.prob > CFG.p_min).sum()
+    x0, y0, x1, y1 = g.known_bounds()
+    assert x0 == pytest.approx(-0.0, abs=1e-6) and y0 == pytest.approx(-0.0, abs=1e-6)
+    assert x1 == pytest.approx(4.0 + b.res, abs=1e-6) and y1 == pytest.approx(3.0 + b.res, abs=1e-6)
+    # an empty builder freezes to an empty grid
+    empty = GridBuilder(CFG).freeze()
+    assert empty.prob.size == 0 and empty.known_bounds()[0] == empty.known_bounds()[2]

@@ -1,0 +1,227 @@
+"""Scan-to-grid matching (holoslam.submaps.scanmatch, seed 002 Eq. 12) on scans ray-cast in small synthetic
+worlds: accuracy from an odometry-like prediction, the covariance's 95 % coverage, corridors.
+
+As in the front end, a submap's grid lives in the frame of a node (its anchor), so the room's walls are not
+aligned with the lattice; ``in_frame`` puts a world in that frame, where poses are then compared. (A world whose
+walls lie on cell boundaries, axis-aligned, is the quantisation's worst case: see the last test.) Two sensors: a
+360-beam scanner and the household's LMS-200-like laser (181 beams over -90..+90 deg, 8 m, ranges rounded to
+1 mm)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from holoslam import geometry as g
+from holoslam.sim.world import raycast
+from holoslam.submaps.probgrid import GridBuilder, GridConfig, ProbGrid
+from holoslam.submaps.scanmatch import MatchConfig, match_scan
+
+# a 5 x 4 m room with a box and a half wall, so every pose is constrained
+ROOM = np.array([
+    [0, 0, 5, 0], [5, 0, 5, 4], [5, 4, 0, 4], [0, 4, 0, 0],
+    [3.0, 1.0, 3.6, 1.0], [3.6, 1.0, 3.6, 1.5], [3.6, 1.5, 3.0, 1.5], [3.0, 1.5, 3.0, 1.0],
+    [0.0, 2.5, 1.2, 2.5],
+], float)
+# a corridor 2 m wide and 60 m long along x: nothing in range fixes a position along it
+CORRIDOR = np.array([[-30.0, 0.012, 30.0, 0.012], [-30.0, 2.012, 30.0, 2.012]])
+BEAMS_360 = np.linspace(-math.pi, math.pi, 360, endpoint=False)
+BEAMS_LMS = np.radians(np.arange(-90.0, 91.0, 1.0))
+CHI2_3_95 = chi2.ppf(0.95, 3)
+
+
+def ray_scan(segs, wTs, beams, rng=None, sigma=0.0, max_range=8.0) -> np.ndarray:
+    """Ranges of a scan cast from wTs (inf: no return), with N(0, sigma) noise rounded to 1 mm."""
+    r = raycast(segs, np.asarray(wTs, float)[None, :2], (beams + wTs[2])[None], max_range)[0]
+    if rng is not None and sigma > 0:
+        r = np.round(r + rng.normal(0.0, sigma, r.shape), 3)
+    return r
+
+
+def points(ranges, beams) -> np.ndarray:
+    ok = np.isfinite(ranges)
+    return np.column_stack([ranges[ok] * np.cos(beams[ok]), ranges[ok] * np.sin(beams[ok])])
+
+
+def grid_from(segs, poses, beams, rng=None, sigma=0.0) -> ProbGrid:
+    b = GridBuilder(GridConfig())
+    for p in poses:
+        b.insert(ray_scan(segs, p, beams, rng, sigma), beams, p)
+    return b.freeze()
+
+
+def match(grid: ProbGrid, b_pts, pred):
+    """The default matcher (local SLAM's settings)."""
+    return match_scan(grid.prob, grid.origin, grid.resolution, b_pts, pred, MatchConfig())
+
+
+def in_frame(segs: np.ndarray, wTa) -> np.ndarray:
+    """Wall segments (M, 4) of the world expressed in the frame a at wTa."""
+    aTw = g.inverse(np.asarray(wTa, float))
+    return np.hstack([g.transform_points(aTw, segs[:, :2]), g.transform_points(aTw, segs[:, 2:])])
+
+
+ANCHOR = np.array([2.0, 2.0, 0.2])  # the known pose of the first scan, the submap's anchor
+ROOM_A = in_frame(ROOM, ANCHOR)
+A = np.zeros(3)  # the anchor in its own frame
+
+
+def _steps():
+    """Eight second-scan poses 0.05 m / 3 deg from A, and odometry-like predictions of each: 1 cm and 1 deg off
+    (a wheel slip), in eight directions."""
+    for k in range(8):
+        a = k * math.pi / 4
+        inc = np.array([0.05 * math.cos(a + 0.3), 0.05 * math.sin(a + 0.3), math.radians(3.0) * (1 if k % 2 else -1)])
+        slip = np.array([0.01 * math.cos(a), 0.01 * math.sin(a), math.radians(1.0) * (-1 if k % 3 else 1)])
+        true = g.compose(A, inc)
+        yield true, g.compose(true, slip)
+
+
+@pytest.mark.parametrize(
+    "case, max_mm, max_deg",
+    [
+        # measured (this commit): 3.7 mm / 0.28 deg worst of eight
+        ("one noiseless 360-beam scan", 5.0, 0.3),
+        # measured: 7.1 mm / 0.24 deg worst of eight
+        ("ten LMS-200 scans, 1 cm noise", 9.0, 0.25),
+    ],
+)
+def test_second_scan_matched_from_an_odometry_prediction(case, max_mm, max_deg):
+    rng = np.random.default_rng(0)
+    if case.startswith("one"):
+        beams, sigma = BEAMS_360, 0.0
+        grid = grid_from(ROOM_A, [A], beams)
+    else:  # a submap as local SLAM fills it: ten scans over the 0.27 m before A
+        beams, sigma = BEAMS_LMS, 0.01
+        grid = grid_from(ROOM_A, [g.compose(A, np.array([-0.03 * (9 - j), 0.0, 0.0])) for j in range(10)], beams,
+                         rng, sigma)
+    errs, pred_errs = [], []
+    for true, pred in _steps():
+        m = match(grid, points(ray_scan(ROOM_A, true, beams, rng, sigma), beams), pred)
+        assert m.ok and m.score >= MatchConfig().min_score
+        e, ep = g.between(true, m.aTb), g.between(true, pred)
+        errs.append([math.hypot(e[0], e[1]) * 1e3, abs(math.degrees(e[2]))])
+        pred_errs.append([math.hypot(ep[0], ep[1]) * 1e3, abs(math.degrees(ep[2]))])
+    errs, pred_errs = np.array(errs), np.array(pred_errs)
+    assert errs[:, 0].max() <= max_mm and errs[:, 1].max() <= max_deg, errs.max(axis=0)
+    # the prediction alone is outside those bounds: the match did the work
+    assert pred_errs[:, 0].min() > max_mm and pred_errs[:, 1].min() > max_deg
+
+
+# --- the covariance: 95 % coverage over 200 random scans with range noise ---
+
+
+@pytest.fixture(scope="module")
+def coverage_run():
+    """200 LMS-200 scans (1 cm noise) from random poses 0.05 m / 3 deg from the last node of a ten-scan submap,
+    each matched from a prediction off by N(0, 1 cm) per axis and N(0, 0.5 deg): (Mahalanobis d^2, errors)."""
+    room = in_frame(ROOM, np.array([1.0, 1.2, 0.5]))
+    rng0 = np.random.default_rng(1234)
+    grid = grid_from(room, [np.array([0.03 * j, 0.0, 0.0]) for j in range(10)], BEAMS_LMS, rng0, 0.01)
+    last = np.array([0.27, 0.0, 0.0])
+    d2, errs = [], []
+    for k in range(200):
+        rng = np.random.default_rng(k)
+        a = rng.uniform(0, 2 * math.pi)
+        true = g.compose(last, np.array([0.05 * math.cos(a), 0.05 * math.sin(a),
+                                         math.radians(3.0) * rng.choice([-1, 1])]))
+        pred = g.compose(true, np.array([rng.normal(0, 0.01), rng.normal(0, 0.01), math.radians(rng.normal(0, 0.5))]))
+        m = match(grid, points(ray_scan(room, true, BEAMS_LMS, rng, 0.01), BEAMS_LMS), pred)
+        e = g.between(true, m.aTb)  # in the pose's own frame, as the covariance
+        d2.append(float(e @ np.linalg.solve(m.cov_aTb, e)))
+        errs.append(e)
+    return np.array(d2), np.array(errs)
+
+
+def test_match_covariance_is_not_overconfident(coverage_run):
+    d2, errs = coverage_run
+    coverage = float(np.mean(d2 < CHI2_3_95))
+    assert coverage >= 0.8, coverage  # measured (this commit): 1.0
+    assert np.sqrt(np.mean(errs[:, :2] ** 2)) < 0.006  # measured 4.3 mm rms per axis
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured coverage 1.0 (200/200), median d^2 0.19 against chi2(3)'s 2.37: on a well-filled submap the "
+    "score surface (kappa 200) is a single pose, and the covariance is the lattice floor res^2/12 "
+    "(14.4 mm sigma) while the refined pose errs 4.3 mm rms (scanmatch._surface_covariance)"))
+def test_match_covariance_is_not_overly_conservative(coverage_run):
+    d2, _ = coverage_run
+    assert float(np.mean(d2 < CHI2_3_95)) <= 0.999
+
+
+# --- corridors ---
+
+
+def _corridor_grid(heading: float, seed: int) -> ProbGrid:
+    """A submap of 21 scans along 2 m of the corridor, lateral and heading wobble, 1 cm noise."""
+    rng = np.random.default_rng(seed)
+    poses = [np.array([x, 0.9 + rng.normal(0, 0.05), heading + rng.normal(0, 0.05)])
+             for x in np.arange(-1.0, 1.01, 0.1)]
+    return grid_from(CORRIDOR, poses, BEAMS_360, rng, 0.01)
+
+
+@pytest.mark.parametrize("heading", [0.0, 0.3, -0.3, math.pi - 0.2])
+def test_corridor_covariance_is_longest_along_the_corridor(heading):
+    grid = _corridor_grid(heading, 1)
+    true = np.array([0.03, 0.95, heading + math.radians(3.0)])
+    rng = np.random.default_rng(11)
+    pred = g.compose(true, np.array([0.01, -0.01, math.radians(0.5)]))
+    m = match(grid, points(ray_scan(CORRIDOR, true, BEAMS_360, rng, 0.01), BEAMS_360), pred)
+    assert m.ok
+    # the covariance is in the pose's own frame: rotate its x-y block into the world (corridor along x)
+    R = g.rot2(m.aTb[2])
+    w, V = np.linalg.eigh(R @ m.cov_aTb[:2, :2] @ R.T)
+    major = V[:, 1]
+    off_axis = math.degrees(math.acos(min(1.0, abs(major[0]))))
+    assert off_axis < 10.0, off_axis  # measured 0.0-6.7 deg
+    assert math.sqrt(w[1]) > 2.5 * math.sqrt(w[0]), np.sqrt(w)  # measured 59-83 mm along, 15-23 mm across
+    assert abs(m.aTb[1] - true[1]) < 0.02  # across the corridor the walls fix the pose
+
+
+def test_corridor_match_stays_at_the_prediction_along_the_corridor():
+    """Nothing in range fixes a position along the corridor: the translation prior holds the prediction there
+    (no random walk scan after scan), so the along-corridor error is the prediction's, not larger."""
+    along, pred_along = [], []
+    for trial in range(20):
+        heading = (0.0, 0.3, -0.3, math.pi - 0.2)[trial % 4]
+        grid = _corridor_grid(heading, trial)
+        rng = np.random.default_rng(100 + trial)
+        true = np.array([0.03, 0.95, heading + math.radians(3.0)])
+        pred = g.compose(true, np.array([rng.normal(0, 0.01), rng.normal(0, 0.01), math.radians(rng.normal(0, 0.5))]))
+        m = match(grid, points(ray_scan(CORRIDOR, true, BEAMS_360, rng, 0.01), BEAMS_360), pred)
+        along.append(m.aTb[0] - true[0])
+        pred_along.append(pred[0] - true[0])
+    rms, rms_pred = float(np.sqrt(np.mean(np.square(along)))), float(np.sqrt(np.mean(np.square(pred_along))))
+    assert rms < 1.3 * rms_pred, (rms, rms_pred)  # measured 9.9 mm against the prediction's 10.1 mm
+
+
+# --- when a match is not trusted ---
+
+
+def test_scan_off_the_map_or_too_short_is_not_trusted():
+    grid = grid_from(ROOM_A, [A], BEAMS_360)
+    pts = points(ray_scan(ROOM_A, A, BEAMS_360), BEAMS_360)
+    assert match(grid, pts, A).ok
+    # the same scan predicted 3 m away, outside the room: it scores as unknown space, kept at the prediction
+    far = A + np.array([3.0, 3.0, 0.0])
+    m = match(grid, pts, far)
+    assert not m.ok and m.score < MatchConfig().min_score and np.hypot(*(m.aTb[:2] - far[:2])) < 0.15
+    # fewer points than min_points: the prediction back, untrusted
+    few = match(grid, pts[:5], A + 0.01)
+    assert not few.ok and np.array_equal(few.aTb, A + 0.01)
+
+
+def test_walls_on_cell_boundaries_bias_a_match_by_at_most_half_a_cell():
+    """The quantisation's worst case: a grid in the world frame of an axis-aligned room whose walls lie exactly
+    on cell boundaries. A return at a wall goes to the cell beyond the boundary, whose value stands for its
+    centre, so each wall's peak sits half a cell off and a scan matched into the grid of itself lands up to
+    half a cell away (measured 17.6 / 19.4 mm in x / y with 5 cm cells; the tests above keep walls oblique to
+    the lattice, as a node-anchored submap does)."""
+    wTs = np.array([2.0, 2.0, 0.2])
+    grid = grid_from(ROOM, [wTs], BEAMS_360)
+    m = match(grid, points(ray_scan(ROOM, wTs, BEAMS_360), BEAMS_360), wTs)
+    e = m.aTb - wTs
+    assert m.ok and np.all(np.abs(e[:2]) <= grid.resolution / 2) and abs(e[2]) < math.radians(0.2), e
