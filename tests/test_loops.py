@@ -1,0 +1,237 @@
+"""Revisits (holoslam.submaps.loops): the search window grows with the graph distance, a node is closed against
+an old submap however far its estimate has drifted within that window, chain neighbours and saturated pairs are
+not searched; and the whole front end closes loops on a synthetic log whose odometry drifts by metres."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from holoslam import geometry as g
+from holoslam.sim.world import raycast, reference_household
+from holoslam.submaps.deadreckon import integrate
+from holoslam.submaps.loops import LoopConfig, LoopSearch
+from holoslam.submaps.probgrid import GridBuilder, GridConfig
+from holoslam.submaps.scanmatch import MatchConfig
+from holoslam.types import LogData, Odometry, Pose2, Scan
+
+BEAMS = np.radians(np.arange(-90.0, 91.0, 1.0))  # the household's LMS-200-like laser, 8 m
+
+
+def ray_scan(segs, wTb, rng, sigma=0.01, max_range=8.0):
+    r = raycast(segs, np.asarray(wTb, float)[None, :2], (BEAMS + wTb[2])[None], max_range)[0]
+    return np.round(r + rng.normal(0.0, sigma, r.shape), 3)
+
+
+def points(r):
+    ok = np.isfinite(r)
+    return np.column_stack([r[ok] * np.cos(BEAMS[ok]), r[ok] * np.sin(BEAMS[ok])])
+
+
+# --- LoopSearch on the simulated household ---
+
+
+@pytest.fixture(scope="module")
+def household_place():
+    """An old submap (index 0) of 20 scans over 1 m and 40 deg from its anchor wTm in the household, and a node
+    r seen later from 0.7 m away; submap n = 5 is anchored 1 m before r."""
+    segs = reference_household().obstacle_segments()
+    rng = np.random.default_rng(0)
+    wTm = np.array([2.0, 3.0, 0.3])
+    b = GridBuilder(GridConfig())
+    for k in range(20):
+        mTb = np.array([0.05 * k, 0.0, math.radians(2.0 * k)])
+        b.insert(ray_scan(segs, g.compose(wTm, mTb), rng), BEAMS, mTb)
+    wTr = np.array([2.6, 3.4, 1.2])
+    wTn = g.compose(wTr, np.array([-1.0, 0.2, -0.3]))
+    return segs, b.freeze(), wTm, wTn, wTr
+
+
+def _search(household_place, drift_m: float, graph_distance_m: float):
+    """Search node r against the old submap with submap n's world estimate off by ``drift_m`` (and 10 deg)."""
+    segs, grid, wTm, wTn, wTr = household_place
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls.add_submap(0, grid)
+    drift = np.array([drift_m * math.cos(1.0), drift_m * math.sin(1.0), math.radians(10.0)])
+    est = np.zeros((6, 3))
+    est[0], est[5] = wTm, g.compose(drift, wTn)
+    nTr = g.between(wTn, wTr)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(int(drift_m * 10))))
+    found = ls.search(5, nTr, np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.full(6, graph_distance_m))
+    return ls, found, g.between(wTm, wTn)
+
+
+def test_window_grows_with_the_graph_distance_and_is_capped():
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    xy, th = ls.window(0.0)
+    assert xy == pytest.approx(1.0) and th == pytest.approx(math.radians(10.0))
+    xy, th = ls.window(40.0)  # 5 cm and 1 deg per metre of graph path
+    assert xy == pytest.approx(3.0) and th == pytest.approx(math.radians(30.0))  # the angle is capped at 30 deg
+    assert ls.window(1000.0) == pytest.approx((7.0, math.radians(30.0)))
+
+
+@pytest.mark.parametrize("drift_m", [1.0, 2.5, 4.0])
+def test_a_node_is_closed_against_an_old_submap_however_far_its_estimate_drifted(household_place, drift_m):
+    # the estimate of submap n is off by drift_m and 10 deg about the world origin (~3-4 m at the node); 60 m of
+    # graph path since the old submap give a 4 m / 30 deg window
+    ls, found, true_mTn = _search(household_place, drift_m, 60.0)
+    assert ls.tried == 1 and len(found) == 1
+    c = found[0]
+    assert (c.old, c.new) == (0, 5) and c.window_xy == pytest.approx(4.0)
+    assert c.score >= LoopConfig().min_score_wide
+    e = g.between(true_mTn, c.mTn)
+    # measured 8.7, 15.3, 9.1 mm and 0.1 deg: the loop is the truth, not the drifted estimate
+    assert math.hypot(e[0], e[1]) < 0.025 and abs(e[2]) < math.radians(0.3), e
+    # its covariance covers the error (mTn is composed with nTr, whose covariance is tiny here)
+    assert e @ np.linalg.solve(c.cov_mTn, e) < chi2.ppf(0.999, 3)
+    assert ls.pairs == {(0, 5): 1}
+
+
+def test_the_window_bounds_the_search(household_place):
+    # 5 m of graph path: a 1.25 m / 15 deg window, and the estimate is 2.5 m and 10 deg off: nothing is found
+    ls, found, _ = _search(household_place, 2.5, 5.0)
+    assert ls.tried == 1 and found == []
+    # the same drift with no prior closure along 60 m is found (previous test); with no drift a small window does
+    ls, found, true_mTn = _search(household_place, 0.0, 5.0)
+    assert len(found) == 1 and math.hypot(*g.between(true_mTn, found[0].mTn)[:2]) < 0.01
+
+
+def test_chain_neighbours_saturated_pairs_and_wide_windows_are_spaced(household_place):
+    segs, grid, wTm, wTn, wTr = household_place
+    cfg = LoopConfig(max_per_pair=2)
+    ls = LoopSearch(cfg, MatchConfig())
+    ls.add_submap(0, grid)
+    est = np.zeros((6, 3))
+    est[0] = wTm
+    est[1:] = wTn
+    nTr = g.between(wTn, wTr)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(3)))
+    near = np.full(6, 2.0)
+    # submap 0 is a chain neighbour of submaps 1 and 2 (skip_recent = 2): never searched from them
+    for n in (1, 2):
+        assert ls.search(n, nTr, np.eye(3) * 1e-6, b_pts, est, near) == [] and ls.tried == 0
+    # from submap 5: closures until max_per_pair, then the pair is not searched again
+    found = [len(ls.search(5, nTr, np.eye(3) * 1e-6, b_pts, est, near)) for _ in range(4)]
+    assert found == [1, 1, 0, 0] and ls.tried == 2 and ls.pairs[(0, 5)] == 2
+    # a wide window (beyond wide_window_xy) searches one old submap again only after wide_search_spacing metres
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls.add_submap(0, grid)
+    far = np.full(6, 60.0)
+    for travelled, tried in ((10.0, 1), (11.0, 1), (11.9, 1), (12.0, 2)):
+        ls.search(5, nTr, np.eye(3) * 1e-6, b_pts, est, far, travelled)
+        assert ls.tried == tried, travelled
+
+
+# --- the front end on a synthetic log whose odometry drifts by metres ---
+
+# two rooms 4 x 4 m side by side joined by a 1 m doorway, a box in each room (as tests/test_frontend.py)
+WALLS = np.array([
+    [0, 0, 8, 0], [8, 0, 8, 4], [8, 4, 0, 4], [0, 4, 0, 0], [4, 0, 4, 1.5], [4, 2.5, 4, 4],
+    [1.0, 3.0, 1.6, 3.0], [1.6, 3.0, 1.6, 3.4], [1.6, 3.4, 1.0, 3.4], [1.0, 3.4, 1.0, 3.0],
+    [6.0, 0.6, 6.8, 0.6], [6.8, 0.6, 6.8, 1.0], [6.8, 1.0, 6.0, 1.0], [6.0, 1.0, 6.0, 0.6],
+], float)
+
+
+def drifting_log(seed=0, laps=2, scale=0.03, turn_bias=0.03, drift_deg_per_m=2.0):
+    """Two laps through both rooms at 0.4 m/s; wheel odometry with a 3 % scale error, 3 % turn error and a
+    heading drift of 2 deg per metre (no compass): several metres off by the end. Laser at 5 Hz, 1 cm noise.
+    Returns (log, truth stamps, truth wTb)."""
+    rng = np.random.default_rng(seed)
+    lap = [[1.0, 1.0], [3.0, 2.0], [5.0, 2.0], [7.0, 1.5], [7.0, 3.0], [5.5, 3.2], [5.0, 2.0], [3.0, 2.0],
+           [1.5, 2.5], [1.0, 1.2]]
+    way = np.array(lap * laps + [[3.0, 2.0]])
+    pts = [way[:1]]
+    for a, b in zip(way[:-1], way[1:], strict=True):
+        n = max(1, int(np.ceil(np.hypot(*(b - a)) / 0.02)))
+        pts.append(a + (b - a) * np.linspace(0, 1, n + 1)[1:, None])
+    xy = np.vstack(pts)
+    head = np.arctan2(np.gradient(xy[:, 1]), np.gradient(xy[:, 0]))
+    head = np.convolve(np.unwrap(head), np.ones(15) / 15, mode="same")
+    head[:8], head[-8:] = head[8], head[-9]
+    t = (np.arange(len(xy)) * 0.05e9).astype(np.int64) + 10**9
+    wTb = np.column_stack([xy, g.wrap(head)])
+    d = np.hypot(*np.diff(xy, axis=0).T)
+    s = d * (1 + scale) + rng.normal(0, 0.001, d.size)
+    dth = g.wrap(np.diff(wTb[:, 2])) * (1 + turn_bias) + math.radians(drift_deg_per_m) * d
+    odo = integrate(np.zeros(3), s, dth + rng.normal(0, 0.001, d.size))
+    st = t[::4]
+    R = raycast(WALLS, wTb[::4, :2], wTb[::4, 2:3] + BEAMS[None], 8.0)
+    R = R + rng.normal(0, 0.01, R.shape)
+    scans = tuple(Scan(int(k), "base_link", -math.pi / 2, math.radians(1.0), 0.05, 8.0, r.astype(np.float32),
+                       np.isfinite(r)) for k, r in zip(st, R, strict=True))
+    odometry = tuple(Odometry(int(k), Pose2(*p)) for k, p in zip(t, odo, strict=True))
+    return LogData("drifting", odometry=odometry, scans=scans), t, wTb
+
+
+@pytest.fixture(scope="module")
+def drifting_run():
+    from holoslam.evaluate import truth_at
+    from holoslam.pipeline import reestimate_anchors
+    from holoslam.submaps.frontend import FrontEndConfig, build_problem
+    from holoslam.submaps.local_slam import LocalSlamConfig
+
+    log, t, wTb = drifting_log()
+    calls = []
+
+    def optimize(problem):
+        calls.append(problem)
+        return reestimate_anchors(problem)
+
+    # small rooms, few nodes: 20 scans per submap (instead of 90) for enough submaps to revisit
+    fe = build_problem(log, (), FrontEndConfig(local=LocalSlamConfig(scans_per_submap=20)), optimize=optimize)
+    return fe, calls, truth_at(fe.anchor_stamps_ns, t, wTb), t, wTb
+
+
+def test_odometry_drifts_by_metres_and_loops_close_across_laps(drifting_run):
+    from holoslam.evaluate import truth_at
+
+    fe, calls, truth, t, wTb = drifting_run
+    dr = truth_at(t, fe.dr_stamps_ns, fe.dr_wTb)
+    dr_err = np.hypot(*(g.compose(np.broadcast_to(g.compose(wTb[0], g.inverse(dr[0])), dr.shape), dr)[:, :2]
+                        - wTb[:, :2]).T)
+    assert dr_err.max() > 3.0  # measured 4.3 m: dead reckoning is metres off
+    P = fe.problem
+    loop = P.relative.kind == "loop"
+    i, j = P.relative.i[loop], P.relative.j[loop]
+    assert np.all(i < j - LoopConfig().skip_recent)
+    # closures between the laps: an old submap of lap 1 and a new one of lap 2
+    half = fe.anchor_stamps_ns[0] + (fe.anchor_stamps_ns[-1] - fe.anchor_stamps_ns[0]) // 2
+    across = (fe.anchor_stamps_ns[i] < half) & (fe.anchor_stamps_ns[j] > half)
+    assert across.sum() >= 10  # measured 143 of 188
+    # most loops are the truth (a few alias the similar rooms; see the xfail below)
+    err = np.array([g.between(g.between(truth[a], truth[b]), T) for a, b, T in
+                    zip(i, j, P.relative.iTj[loop], strict=True)])
+    dist = np.hypot(err[:, 0], err[:, 1])
+    assert np.median(dist) < 0.03 and np.mean(dist < 0.1) > 0.85, (np.median(dist), np.mean(dist < 0.1))  # 17 mm, 92 %
+    # every closure found re-estimated the anchors through the optimize callback, loops included
+    assert calls and all(np.any(c.relative.kind == "loop") for c in calls)
+    assert [c.num_poses for c in calls] == sorted(c.num_poses for c in calls)
+
+
+def test_the_graph_recovers_the_truth_from_metres_of_drift(drifting_run):
+    from holoslam.evaluate import trajectory_errors, truth_at
+    from holoslam.pipeline import _run_build_options
+    from holoslam.solve import SolveOptions, solve
+
+    fe, _, truth, *_ = drifting_run
+    sol = solve(fe.problem, SolveOptions(build=_run_build_options()))
+    err = trajectory_errors(sol.wTa, truth)
+    dr = trajectory_errors(truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb), truth)
+    assert err.rmse_m < 0.03 and err.rmse_m < 0.05 * dr.rmse_m, (err.rmse_m, dr.rmse_m)  # measured 0.017 vs 1.03
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured: 15 of 188 loops are more than 0.3 m off the truth (most ~1 m, aliasing the two similar rooms), "
+    "8 of them with covariances that put them at d^2 26-231 (loops.LoopSearch accepts a branch-and-bound match "
+    "by score alone; the solver's Huber kernel and chi2 rounds are left to absorb them)"))
+def test_every_loop_that_misses_the_truth_says_so_in_its_covariance(drifting_run):
+    fe, _, truth, *_ = drifting_run
+    P = fe.problem
+    loop = P.relative.kind == "loop"
+    for a, b, T, C in zip(P.relative.i[loop], P.relative.j[loop], P.relative.iTj[loop], P.relative.cov_iTj[loop],
+                          strict=True):
+        e = g.between(g.between(truth[a], truth[b]), T)
+        assert e @ np.linalg.solve(C, e) < chi2.ppf(0.9999, 3), (a, b, e)
