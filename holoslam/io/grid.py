@@ -176,7 +176,7 @@ def grid_to_image(grid: OccupancyGrid, mode: str = "trinary", negate: bool = Fal
         raise MapError(f"writing supports mode trinary or raw, got {mode!r}")
     o = grid.occupancy
     if mode == "raw":
-        img = np.where(o < 0, 255, o).astype(np.uint8)
+        img = np.where(o < 0, 255, o.astype(np.int16)).astype(np.uint8)  # 255 does not fit int8 (numpy >= 2.5 raises)
     else:
         unknown = _UNKNOWN
         if not grid.free_thresh <= (255 - _UNKNOWN) / 255 <= grid.occupied_thresh:

@@ -62,7 +62,7 @@ def _grid_msg(grid, stamp_ns: int):
     from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 
     occ = np.asarray(grid.occupancy)
-    cells = np.where(occ < 0, 255, np.clip(occ, 0, 100)).astype(np.uint8)
+    cells = np.where(occ < 0, 255, np.clip(occ, 0, 100).astype(np.int16)).astype(np.uint8)  # 255: not int8
     h, w = cells.shape
     msg = Grid(frame_id="map", column_count=w, row_stride=w, cell_stride=1, data=cells.tobytes())
     _timestamp(msg.timestamp, stamp_ns)
