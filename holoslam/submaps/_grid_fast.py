@@ -170,14 +170,15 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
         if ncost < cost:
             x, y, t = nx, ny, nt
             lam = max(lam * 0.3, 1e-7)
-            small = abs(cost - ncost) < 1e-10 * max(cost, 1e-12) or (
-                abs(step[0]) < 1e-6 and abs(step[1]) < 1e-6 and abs(step[2]) < 1e-7)
+            # converged: a step under 0.1 mm and 0.006 deg, or a relative decrease under 1e-6
+            small = abs(cost - ncost) < 1e-6 * max(cost, 1e-12) or (
+                abs(step[0]) < 1e-4 and abs(step[1]) < 1e-4 and abs(step[2]) < 1e-4)
             cost, cost_occ = evaluate(x, y, t, H, g, Hocc, True)
             if small:
                 break
         else:
             lam *= 10.0
-            if lam > 1e6:
+            if lam > 1e6 or (abs(step[0]) < 1e-4 and abs(step[1]) < 1e-4 and abs(step[2]) < 1e-4):
                 break
     t = math.atan2(math.sin(t), math.cos(t))
     return x, y, t, cost, cost_occ, Hocc, used
