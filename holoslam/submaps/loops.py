@@ -47,6 +47,7 @@ class LoopConfig:
     skip_recent: int = 2  # the submaps this many before the current one are its chain neighbours
     max_per_pair: int = 4  # closures kept between one old submap and one new submap
     wide_search_spacing: float = 2.0  # m travelled between two wide searches of one old submap
+    max_searches_per_node: int = 3  # the nearest old submaps first: bounds the cost where many overlap
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,9 +111,11 @@ class LoopSearch:
         olds_arr = np.array(olds)
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
-        for m, d in zip(olds_arr.tolist(), dist.tolist(), strict=True):
+        searched = 0
+        for q in np.argsort(dist, kind="stable").tolist():  # nearest first
+            m, d = int(olds_arr[q]), float(dist[q])
             wxy, wth = self.window(float(graph_distance[m]))
-            if d > c.max_constraint_distance + wxy:
+            if d > c.max_constraint_distance + wxy or searched >= c.max_searches_per_node:
                 continue
             wide = wxy > c.wide_window_xy
             if wide and travelled - self.last_wide.get(m, -np.inf) < c.wide_search_spacing:
@@ -122,6 +125,7 @@ class LoopSearch:
             min_score = c.min_score_wide if wide else c.min_score
             seed = g.between(est_wTa[m], wTr)
             self.tried += 1
+            searched += 1
             hit = bnb.search(self._precomputed(m), b_pts, seed, wxy, wth, min_score)
             if hit is None:
                 continue
