@@ -266,14 +266,13 @@ def build_problem(
                         scan.angles, float(travelled[k]))
         last_t, n_nodes = t, n_nodes + 1
         for m, n, mTn, cov_mTn in slam.arrivals[n_arrivals:]:
-            dr = dead_reckon(ost, opose, graph_stamp(slam, m), graph_stamp(slam, n), **hargs)
+            dr = dead_reckon(ost, opose, slam.anchor_stamps[m], slam.anchor_stamps[n], **hargs)
             graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
             graph.add(m, n, mTn, cov_mTn, "scan_match")
             graph.est.append(g.compose(graph.est[m], mTn))
             graph.travel.append(float(travelled[k]))
         n_arrivals = len(slam.arrivals)
-        while len(closed) < len(slam.finished):
-            sm = slam.finished[len(closed)]
+        for sm in slam.pop_finished():  # the growing grids are dropped here: only the cropped ones are kept
             closed.append(_submap_record(sm, cfg, "scans"))
             if closed[-1].grid is not None:
                 loops.add_submap(sm.index, closed[-1].grid)
@@ -285,8 +284,7 @@ def build_problem(
             if found:
                 graph.reoptimise(optimize)
     slam.close()
-    while len(closed) < len(slam.finished):
-        closed.append(_submap_record(slam.finished[len(closed)], cfg, "scans"))
+    closed.extend(_submap_record(sm, cfg, "scans") for sm in slam.pop_finished())
     closed.sort(key=lambda sm: sm.index)
     anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
     N = len(closed)
@@ -307,13 +305,6 @@ def build_problem(
                           landmarks=landmarks, initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
     return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops.tried,
                     tuple(sorted(drop)), graph.dead_reckoning_inflation())
-
-
-def graph_stamp(slam: LocalSlam, index: int) -> int:
-    for sm in (*slam.finished, *slam.active):
-        if sm.index == index:
-            return sm.anchor_stamp_ns
-    raise KeyError(index)
 
 
 def _headings(hst, hyaw, hsig, anchors):

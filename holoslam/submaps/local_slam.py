@@ -94,7 +94,8 @@ class LocalSlam:
         self.cfg = cfg
         self.bTs = np.asarray(bTs, np.float64)
         self.active: list[ActiveSubmap] = []
-        self.finished: list[ActiveSubmap] = []
+        self.finished: list[ActiveSubmap] = []  # handed out (and forgotten) by pop_finished
+        self.anchor_stamps: dict[int, int] = {}  # every submap's anchor stamp, by index
         self.nodes: list[Node] = []
         self.next_index = 0
         self._last_odo: np.ndarray | None = None
@@ -174,7 +175,13 @@ class LocalSlam:
                 return mTn
         raise KeyError((m, n))
 
+    def pop_finished(self) -> list[ActiveSubmap]:
+        """The submaps finished since the last call (the caller keeps what it needs of them)."""
+        out, self.finished = self.finished, []
+        return out
+
     def _start(self, stamp: int, travelled: float) -> None:
+        self.anchor_stamps[self.next_index] = int(stamp)
         self.active.append(ActiveSubmap(self.next_index, int(stamp), self.cfg, travelled))
         self.next_index += 1
 

@@ -19,6 +19,7 @@ here does not bend the map. Defaults: Cartographer's published constraint-builde
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +48,7 @@ class LoopConfig:
     skip_recent: int = 2  # the submaps this many before the current one are its chain neighbours
     max_per_pair: int = 4  # closures kept between one old submap and one new submap
     wide_search_spacing: float = 2.0  # m travelled between two wide searches of one old submap
+    precomputed_cache: int = 64  # submaps whose max-pooled grids stay in memory (a few ms to rebuild one)
     max_searches_per_node: int = 3  # the nearest old submaps first: bounds the cost where many overlap
 
 
@@ -72,7 +74,7 @@ class LoopSearch:
             translation_weight=match_cfg.translation_weight, rotation_weight=match_cfg.rotation_weight,
             iterations=match_cfg.iterations, kappa=match_cfg.kappa, min_score=0.0)
         self.grids: dict[int, ProbGrid] = {}
-        self.pre: dict[int, object] = {}
+        self.pre: OrderedDict[int, object] = OrderedDict()
         self.pairs: dict[tuple[int, int], int] = {}
         self.last_wide: dict[int, float] = {}
         self.tried = 0
@@ -83,9 +85,13 @@ class LoopSearch:
     def _precomputed(self, m: int):
         from holoslam.submaps import bnb
 
-        if m not in self.pre:
-            gr = self.grids[m]
-            self.pre[m] = bnb.precompute(gr.prob, self.cfg.depth, origin=gr.origin, res=gr.resolution)
+        if m in self.pre:
+            self.pre.move_to_end(m)
+            return self.pre[m]
+        gr = self.grids[m]
+        self.pre[m] = bnb.precompute(gr.prob, self.cfg.depth, origin=gr.origin, res=gr.resolution)
+        if len(self.pre) > self.cfg.precomputed_cache:  # least recently searched out: memory stays bounded
+            self.pre.popitem(last=False)
         return self.pre[m]
 
     def window(self, graph_distance_m: float) -> tuple[float, float]:
