@@ -100,7 +100,7 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
     """Front end + solve + errors for one log and observation list -> dict of numbers."""
     from holoslam import geometry as g
     from holoslam.evaluate import object_errors, trajectory_errors, truth_at
-    from holoslam.pipeline import _run_build_options, reestimate_anchors
+    from holoslam.pipeline import reestimate_anchors, run_build_options
     from holoslam.solve import CovarianceScope, SolveOptions, solve
     from holoslam.submaps.frontend import build_problem
 
@@ -108,7 +108,7 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
     t0 = time.perf_counter()
     fe = build_problem(log, obs, optimize=reestimate_anchors)
     t1 = time.perf_counter()
-    sol = solve(fe.problem, SolveOptions(covariances=CovarianceScope.ANCHORS, build=_run_build_options()))
+    sol = solve(fe.problem, SolveOptions(covariances=CovarianceScope.ANCHORS, build=run_build_options()))
     gt_t, gt_wTb = log.ground_truth_arrays()
     true = truth_at(fe.anchor_stamps_ns, gt_t, gt_wTb)
     te = trajectory_errors(sol.wTa, true, sol.cov_wTa)

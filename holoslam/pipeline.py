@@ -196,11 +196,11 @@ def reestimate_anchors(problem: Any) -> np.ndarray:
     from holoslam.solve import SolveOptions, solve
 
     opts = SolveOptions(reject_outliers=True, max_rounds=0, final_gaussian=False, detect_moved=False,
-                        max_iterations=50, build=_run_build_options())
+                        max_iterations=50, build=run_build_options())
     return solve(problem, opts).wTa
 
 
-def _run_build_options() -> Any:
+def run_build_options() -> Any:
     """Robust kernels of a run: loops under Huber (3 sigma), not DCS. On real logs the chain of scan matches is
     less certain than its covariances say, and DCS (redescending) drops the very closures that correct it;
     Huber keeps their pull linear beyond 3 sigma (Cartographer uses Huber on loops for the same reason). The
@@ -388,7 +388,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             covariances=CovarianceScope.ALL if cfg.solver.covariances else CovarianceScope.NONE,
             max_iterations=cfg.solver.max_iterations,
             isam2_relinearize_threshold=cfg.solver.isam2_relinearize_threshold,
-            build=_run_build_options(),
+            build=run_build_options(),
         )
         sol = solve(fe.problem, options)
 

@@ -242,12 +242,14 @@ def test_without_compass_and_camera_scan_only_loops_recover_truth():
 
     log, _, t, wTb = make_log(seed=1)
     bare = dataclasses.replace(log, headings=(), images=(), camera_infos=(), tags=())
-    fe = build_problem(bare, (), FrontEndConfig(local=LOCAL))
+    from holoslam.pipeline import reestimate_anchors, run_build_options
+
+    fe = build_problem(bare, (), FrontEndConfig(local=LOCAL), optimize=reestimate_anchors)
     P = fe.problem
     assert len(P.headings) == 0 and len(P.landmarks) == 0
     assert "loop" in set(P.relative.kind.tolist())
     solve = pytest.importorskip("holoslam.solve")
-    sol = solve.solve(P)
+    sol = solve.solve(P, solve.SolveOptions(build=run_build_options()))  # as the pipeline solves (Huber loops)
     truth = truth_at(fe.anchor_stamps_ns, t, wTb)
     err = trajectory_errors(sol.wTa, truth)
     dr = trajectory_errors(truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb), truth)

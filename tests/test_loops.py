@@ -213,11 +213,11 @@ def test_odometry_drifts_by_metres_and_loops_close_across_laps(drifting_run):
 
 def test_the_graph_recovers_the_truth_from_metres_of_drift(drifting_run):
     from holoslam.evaluate import trajectory_errors, truth_at
-    from holoslam.pipeline import _run_build_options
+    from holoslam.pipeline import run_build_options
     from holoslam.solve import SolveOptions, solve
 
     fe, _, truth, *_ = drifting_run
-    sol = solve(fe.problem, SolveOptions(build=_run_build_options()))
+    sol = solve(fe.problem, SolveOptions(build=run_build_options()))
     err = trajectory_errors(sol.wTa, truth)
     dr = trajectory_errors(truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb), truth)
     assert err.rmse_m < 0.03 and err.rmse_m < 0.05 * dr.rmse_m, (err.rmse_m, dr.rmse_m)  # measured 0.017 vs 1.03

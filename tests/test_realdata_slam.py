@@ -21,7 +21,7 @@ def aces_cut(tmp_path_factory):
     from holoslam.io.mcap import read_log
     from holoslam.io.mcap_cut import cut_log
     from holoslam.io.relations import cut_relations, read_relations
-    from holoslam.pipeline import _run_build_options, keyframe_poses, optimised_trajectory, reestimate_anchors
+    from holoslam.pipeline import keyframe_poses, optimised_trajectory, reestimate_anchors, run_build_options
     from holoslam.solve import SolveOptions, solve
     from holoslam.submaps.frontend import build_problem
 
@@ -29,7 +29,7 @@ def aces_cut(tmp_path_factory):
     cut_log(REALDATA / "aces.mcap", path, 0.0, 150.0)
     log, _ = read_log(path, require=["odometry", "scan"])
     fe = build_problem(log, optimize=reestimate_anchors)
-    sol = solve(fe.problem, SolveOptions(build=_run_build_options()))
+    sol = solve(fe.problem, SolveOptions(build=run_build_options()))
     stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
     ost, opose = log.odometry_arrays()
     ks, wTk = keyframe_poses(fe.submaps, sol.wTa)

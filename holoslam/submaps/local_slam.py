@@ -17,6 +17,7 @@ travelled since the anchor (a submap is built from matched scans, each with its 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -101,6 +102,7 @@ class LocalSlam:
         self._last_odo: np.ndarray | None = None
         self._last_stamp = 0
         self._turn = math.radians(cfg.motion_turn_deg)
+        self._scores: deque[float] = deque(maxlen=200)
         self.arrivals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (m, n, mTn, cov) of new anchors
 
     def wants(self, stamp: int, odo: np.ndarray) -> bool:
@@ -124,7 +126,7 @@ class LocalSlam:
             host = self.active[0]
             last = self.nodes[-1]
             pred = self._predict(host, odo)
-            m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred, self.cfg.match)
+            m = self._match(host, b_pts, pred)
             drift = self._drift(travelled - host.travelled0)
             if m.ok:
                 node = Node(int(stamp), host.index, m.aTb, m.cov_aTb + drift, b_pts, m.score, True)
@@ -144,10 +146,18 @@ class LocalSlam:
             return
         host = self.active[0]
         pred = self._predict(host, odo)
-        m = match_scan(host.builder.prob, host.builder.origin, host.builder.res,
-                       g.transform_points(self.bTs, s_points), pred, self.cfg.match)
+        m = self._match(host, g.transform_points(self.bTs, s_points), pred)
         if m.ok:
             host.tracked.append((int(stamp), m.aTb))
+
+    def _match(self, host: ActiveSubmap, b_pts: np.ndarray, pred: np.ndarray):
+        """Match into the host; the running median of recent scores tells the matcher what is usual."""
+        usual = float(np.median(self._scores)) if len(self._scores) >= 20 else None
+        m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred, self.cfg.match,
+                       expected_score=usual)
+        if m.ok:
+            self._scores.append(m.score)
+        return m
 
     def _predict(self, host: ActiveSubmap, odo: np.ndarray) -> np.ndarray:
         """The base pose in the host's frame predicted from the last node by the odometry increment."""

@@ -50,6 +50,12 @@ class MatchConfig:
     iterations: int = 20
     kappa: float = 200.0  # 1 / score units: weights exp(kappa (s - s_best)) of the score surface
     min_score: float = 0.3  # mean probability below which a match is not trusted (p_min = 0.1 is no overlap)
+    # a wide search when the window's best score falls this far below the usual (fr079: the wheel odometry
+    # says +0.4 m where the laser and the benchmark's ground truth say -0.4 m, for seconds at a time)
+    wide_trigger: float = 0.1
+    wide_linear_window: float = 1.0  # m
+    wide_margin: float = 0.05  # score the wide result must gain over the window's best
+    wide_depth: int = 4
     min_points: int = 20
 
 
@@ -80,8 +86,15 @@ def score_pose(prob: np.ndarray, origin, resolution: float, b_pts: np.ndarray, a
 
 
 def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float, b_pts: np.ndarray,
-               predicted_aTb: np.ndarray, cfg: MatchConfig = MatchConfig(), outside: float = 0.1) -> Match:
-    """Register scan points ``b_pts`` (N, 2, base frame) into the grid around ``predicted_aTb``."""
+               predicted_aTb: np.ndarray, cfg: MatchConfig = MatchConfig(), outside: float = 0.1,
+               expected_score: float | None = None) -> Match:
+    """Register scan points ``b_pts`` (N, 2, base frame) into the grid around ``predicted_aTb``.
+
+    ``expected_score``: the score matches usually reach here (the caller's running median). When the best
+    score of the window falls more than ``wide_trigger`` below it, the prediction is taken to be wrong (wheel
+    odometry that slipped, or that disagrees with the laser for a moment) and a branch-and-bound search over
+    ``wide_linear_window`` runs; its pose replaces the prediction when it scores ``wide_margin`` higher. A
+    wide window is never searched routinely: along a corridor it would jump between equally good places."""
     from holoslam.submaps import _grid_fast as fast
 
     pred = np.asarray(predicted_aTb, np.float64)
@@ -96,6 +109,12 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     nxy = int(math.ceil(cfg.linear_window / res))
     S = fast.window_scores(prob, origin[0], origin[1], res, px, py, pred[0], pred[1], pred[2], nxy, angles,
                            outside)
+    if expected_score is not None and S.max() < expected_score - cfg.wide_trigger:
+        wide = _wide_search(prob, origin, res, pts, pred, cfg, float(S.max()))
+        if wide is not None:
+            pred = wide
+            S = fast.window_scores(prob, origin[0], origin[1], res, px, py, pred[0], pred[1], pred[2], nxy,
+                                   angles, outside)
     off = np.arange(-nxy, nxy + 1) * res
     d2 = off[None, :, None] ** 2 + off[None, None, :] ** 2
     discounted = S * np.exp(-(cfg.translation_delta_weight * d2
@@ -111,6 +130,16 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     score = float(fast.mean_bicubic(prob, origin[0], origin[1], res, px, py, x, y, t, outside))
     cov = _surface_covariance(S, pred, off, angles, aTb, cfg.kappa, res, step)
     return Match(aTb, cov, score, bool(score >= cfg.min_score))
+
+
+def _wide_search(prob, origin, res, pts, pred, cfg: MatchConfig, near_best: float) -> np.ndarray | None:
+    """Branch-and-bound over the wide window (a shallow pyramid: the window is a few dozen cells)."""
+    from holoslam.submaps import bnb
+
+    grids = bnb.precompute(prob, cfg.wide_depth, origin=origin, res=res)
+    hit = bnb.search(grids, pts, pred, cfg.wide_linear_window, math.radians(cfg.angular_window_deg),
+                     near_best + cfg.wide_margin)
+    return None if hit is None else np.asarray(hit.aTb, np.float64)
 
 
 def _surface_covariance(S, pred, off, angles, aTb, kappa, res, step) -> np.ndarray:
