@@ -200,12 +200,12 @@ def test_odometry_drifts_by_metres_and_loops_close_across_laps(drifting_run):
     # closures between the laps: an old submap of lap 1 and a new one of lap 2
     half = fe.anchor_stamps_ns[0] + (fe.anchor_stamps_ns[-1] - fe.anchor_stamps_ns[0]) // 2
     across = (fe.anchor_stamps_ns[i] < half) & (fe.anchor_stamps_ns[j] > half)
-    assert across.sum() >= 10  # measured 143 of 188
+    assert across.sum() >= 10  # measured 38 of 62 (317a541; 143 of 188 before at most 3 searches per node)
     # most loops are the truth (a few alias the similar rooms; see the xfail below)
     err = np.array([g.between(g.between(truth[a], truth[b]), T) for a, b, T in
                     zip(i, j, P.relative.iTj[loop], strict=True)])
     dist = np.hypot(err[:, 0], err[:, 1])
-    assert np.median(dist) < 0.03 and np.mean(dist < 0.1) > 0.85, (np.median(dist), np.mean(dist < 0.1))  # 17 mm, 92 %
+    assert np.median(dist) < 0.03 and np.mean(dist < 0.1) > 0.85, (np.median(dist), np.mean(dist < 0.1))  # 22 mm, 92 %
     # every closure found re-estimated the anchors through the optimize callback, loops included
     assert calls and all(np.any(c.relative.kind == "loop") for c in calls)
     assert [c.num_poses for c in calls] == sorted(c.num_poses for c in calls)
@@ -220,13 +220,14 @@ def test_the_graph_recovers_the_truth_from_metres_of_drift(drifting_run):
     sol = solve(fe.problem, SolveOptions(build=run_build_options()))
     err = trajectory_errors(sol.wTa, truth)
     dr = trajectory_errors(truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb), truth)
-    assert err.rmse_m < 0.03 and err.rmse_m < 0.05 * dr.rmse_m, (err.rmse_m, dr.rmse_m)  # measured 0.017 vs 1.03
+    assert err.rmse_m < 0.03 and err.rmse_m < 0.05 * dr.rmse_m, (err.rmse_m, dr.rmse_m)  # measured 0.019 vs 1.01
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "measured: 15 of 188 loops are more than 0.3 m off the truth (most ~1 m, aliasing the two similar rooms), "
-    "8 of them with covariances that put them at d^2 26-231 (loops.LoopSearch accepts a branch-and-bound match "
-    "by score alone; the solver's Huber kernel and chi2 rounds are left to absorb them)"))
+    "measured at 317a541: 5 of 62 loops are more than 0.3 m off the truth (~1 m, aliasing the two similar "
+    "rooms), one with a covariance that puts it at d^2 36 (7ef252d: 15 of 188, eight at d^2 26-231); "
+    "loops.LoopSearch accepts a branch-and-bound match by score alone, the solver's Huber kernel and chi2 rounds "
+    "are left to absorb it"))
 def test_every_loop_that_misses_the_truth_says_so_in_its_covariance(drifting_run):
     fe, _, truth, *_ = drifting_run
     P = fe.problem
