@@ -49,7 +49,7 @@ class LoopConfig:
     max_per_pair: int = 4  # closures kept between one old submap and one new submap
     wide_search_spacing: float = 2.0  # m travelled between two wide searches of one old submap
     precomputed_cache: int = 64  # submaps whose max-pooled grids stay in memory (a few ms to rebuild one)
-    max_searches_per_node: int = 3  # the nearest old submaps first: bounds the cost where many overlap
+    max_searches_per_node: int = 3  # narrow searches per node, nearest old submaps first (cost where many overlap)
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,8 +121,10 @@ class LoopSearch:
         for q in np.argsort(dist, kind="stable").tolist():  # nearest first
             m, d = int(olds_arr[q]), float(dist[q])
             wxy, wth = self.window(float(graph_distance[m]))
-            if d > c.max_constraint_distance + wxy or searched >= c.max_searches_per_node:
+            if d > c.max_constraint_distance + wxy:
                 continue
+            if wxy <= c.wide_window_xy and searched >= c.max_searches_per_node:
+                continue  # narrow (near in the graph): the nearest few suffice; wide ones are spaced instead
             wide = wxy > c.wide_window_xy
             if wide and travelled - self.last_wide.get(m, -np.inf) < c.wide_search_spacing:
                 continue
@@ -131,7 +133,7 @@ class LoopSearch:
             min_score = c.min_score_wide if wide else c.min_score
             seed = g.between(est_wTa[m], wTr)
             self.tried += 1
-            searched += 1
+            searched += not wide
             hit = bnb.search(self._precomputed(m), b_pts, seed, wxy, wth, min_score)
             if hit is None:
                 continue

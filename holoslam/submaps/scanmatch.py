@@ -54,7 +54,8 @@ class MatchConfig:
     # says +0.4 m where the laser and the benchmark's ground truth say -0.4 m, for seconds at a time)
     wide_trigger: float = 0.1
     wide_linear_window: float = 1.0  # m
-    wide_margin: float = 0.05  # score the wide result must gain over the window's best
+    wide_margin: float = 0.1  # score the wide result must gain over the window's best
+    wide_tolerance: float = 0.05  # and it must come this close to the usual score
     wide_depth: int = 4
     min_points: int = 20
 
@@ -110,7 +111,10 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     S = fast.window_scores(prob, origin[0], origin[1], res, px, py, pred[0], pred[1], pred[2], nxy, angles,
                            outside)
     if expected_score is not None and S.max() < expected_score - cfg.wide_trigger:
-        wide = _wide_search(prob, origin, res, pts, pred, cfg, float(S.max()))
+        # the wide pose must score like a usual match (not merely better than a poor window: a scan that sees
+        # unexplored space scores low wherever it is put, and a wide window then finds a corridor's alias)
+        need = max(float(S.max()) + cfg.wide_margin, expected_score - cfg.wide_tolerance)
+        wide = _wide_search(prob, origin, res, pts, pred, cfg, need)
         if wide is not None:
             pred = wide
             S = fast.window_scores(prob, origin[0], origin[1], res, px, py, pred[0], pred[1], pred[2], nxy,
@@ -132,13 +136,13 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     return Match(aTb, cov, score, bool(score >= cfg.min_score))
 
 
-def _wide_search(prob, origin, res, pts, pred, cfg: MatchConfig, near_best: float) -> np.ndarray | None:
+def _wide_search(prob, origin, res, pts, pred, cfg: MatchConfig, min_score: float) -> np.ndarray | None:
     """Branch-and-bound over the wide window (a shallow pyramid: the window is a few dozen cells)."""
     from holoslam.submaps import bnb
 
     grids = bnb.precompute(prob, cfg.wide_depth, origin=origin, res=res)
     hit = bnb.search(grids, pts, pred, cfg.wide_linear_window, math.radians(cfg.angular_window_deg),
-                     near_best + cfg.wide_margin)
+                     min_score)
     return None if hit is None else np.asarray(hit.aTb, np.float64)
 
 
