@@ -41,6 +41,7 @@ class LocalSlamConfig:
     motion_turn_deg: float = 1.0
     motion_time_s: float = 5.0
     scans_per_submap: int = 90
+    min_scans_to_match: int = 3  # a map of fewer scans is too sparse to match into: odometry until then
     match_every_scan: bool = True  # localise the scans between nodes too (a matched pose at every scan stamp)
     map_drift_per_m: float = 0.005  # m of map error per m travelled inside a submap (1 sigma)
     map_drift_deg_per_m: float = 0.05  # deg per m
@@ -126,14 +127,14 @@ class LocalSlam:
             host = self.active[0]
             last = self.nodes[-1]
             pred = self._predict(host, odo)
-            m = self._match(host, b_pts, pred)
+            m = self._match(host, b_pts, pred) if host.count >= self.cfg.min_scans_to_match else None
             drift = self._drift(travelled - host.travelled0)
-            if m.ok:
+            if m is not None and m.ok:
                 node = Node(int(stamp), host.index, m.aTb, m.cov_aTb + drift, b_pts, m.score, True)
             else:
                 prev_cov = last.cov_aTb if last.submap == host.index else np.zeros((3, 3))
-                node = Node(int(stamp), host.index, pred, prev_cov + cov_odo_step() + drift, b_pts, m.score,
-                            False)
+                node = Node(int(stamp), host.index, pred, prev_cov + cov_odo_step() + drift, b_pts,
+                            0.0 if m is None else m.score, False)
         self._insert(node, ranges, angles, travelled)
         self.nodes.append(node)
         self._last_odo, self._last_stamp = np.asarray(odo, np.float64), int(stamp)
@@ -145,6 +146,8 @@ class LocalSlam:
         if not self.active or not self.nodes:
             return
         host = self.active[0]
+        if host.count < self.cfg.min_scans_to_match:
+            return
         pred = self._predict(host, odo)
         m = self._match(host, g.transform_points(self.bTs, s_points), pred)
         if m.ok:
