@@ -41,6 +41,10 @@ class LocalSlamConfig:
     motion_turn_deg: float = 1.0
     motion_time_s: float = 5.0
     scans_per_submap: int = 90
+    # m; > 0: each node's grid match refined by point-to-line ICP against the submap's points kept at this spacing.
+    # Off by default, by measurement: on the simulated household it takes anchors from 10 to 6 mm, but on real
+    # logs (first 300 s, local relation error) ACES goes 3.4 -> 3.7 cm and fr079 2.9 -> 4.3 cm
+    polish_voxel: float = 0.0
     min_scans_to_match: int = 3  # a map of fewer scans is too sparse to match into: odometry until then
     match_every_scan: bool = True  # localise the scans between nodes too (a matched pose at every scan stamp)
     map_drift_per_m: float = 0.005  # m of map error per m travelled inside a submap (1 sigma)
@@ -72,6 +76,10 @@ class ActiveSubmap:
         self.cov: list[np.ndarray] = []
         self.b_points: list[np.ndarray] = []
         self.tracked: list[tuple[int, np.ndarray]] = []  # (stamp, aTb) of scans localised, not inserted
+        self.pts = np.zeros((0, 2))  # the inserted scans' points, one per voxel, with normals (ICP polish)
+        self.nrm = np.zeros((0, 2))
+        self.codes = np.zeros(0, np.int64)
+        self.voxel = cfg.polish_voxel
 
     @property
     def count(self) -> int:
@@ -84,6 +92,15 @@ class ActiveSubmap:
         self.cov.append(np.asarray(cov, np.float64))
         self.b_points.append(b_points)
         self.builder.insert(ranges, angles, g.compose(aTb, bTs))
+        if self.voxel > 0:
+            from holoslam.submaps.localize import scan_normals
+            from holoslam.submaps.segment import voxel_append
+
+            n, ok = scan_normals(b_points)
+            R = g.rot2(aTb[2])
+            self.pts, self.nrm, self.codes = voxel_append(self.pts, self.nrm, self.codes,
+                                                          g.transform_points(aTb, b_points[ok]), n[ok] @ R.T,
+                                                          self.voxel)
 
     def grid(self) -> ProbGrid:
         return self.builder.freeze()
@@ -130,7 +147,8 @@ class LocalSlam:
             m = self._match(host, b_pts, pred) if host.count >= self.cfg.min_scans_to_match else None
             drift = self._drift(travelled - host.travelled0)
             if m is not None and m.ok:
-                node = Node(int(stamp), host.index, m.aTb, m.cov_aTb + drift, b_pts, m.score, True)
+                node = Node(int(stamp), host.index, self._polish(host, b_pts, m.aTb), m.cov_aTb + drift, b_pts,
+                            m.score, True)
             else:
                 prev_cov = last.cov_aTb if last.submap == host.index else np.zeros((3, 3))
                 node = Node(int(stamp), host.index, pred, prev_cov + cov_odo_step() + drift, b_pts,
@@ -187,6 +205,19 @@ class LocalSlam:
             if mm == m and nn == n:
                 return mTn
         raise KeyError((m, n))
+
+    def _polish(self, host: ActiveSubmap, b_pts: np.ndarray, aTb: np.ndarray) -> np.ndarray:
+        """The grid match refined by point-to-line ICP against the host's points (``polish_voxel`` > 0): a
+        grid match is biased by up to half a cell where walls meet cell boundaries, the points are not. Kept
+        only when ICP passes its quality gate and moves the pose less than a cell."""
+        if host.voxel <= 0 or len(host.pts) < 50:
+            return aTb
+        from holoslam.submaps.localize import register_points
+
+        reg = register_points(b_pts, host.pts, host.nrm, aTb)
+        if reg.ok and np.hypot(*(reg.aTb[:2] - aTb[:2])) < self.cfg.grid.resolution:
+            return reg.aTb
+        return aTb
 
     def pop_finished(self) -> list[ActiveSubmap]:
         """The submaps finished since the last call (the caller keeps what it needs of them)."""
