@@ -626,6 +626,11 @@ def _report(
             "split_reasons": _count(str(sm.reason) for sm in fe.submaps),
             "loops_tried": int(fe.loops_tried),
             "observations_before_first_anchor": int(fe.skipped_observations),
+            "nodes": int(sum(len(sm.scan_stamps_ns) for sm in fe.submaps)),
+            "scans_localised_between_nodes": int(sum(len(sm.track_stamps_ns) for sm in fe.submaps)),
+            # the dead-reckoning noise model's covariances were multiplied by this to agree with the log's own
+            # scan matches (1: the model already did)
+            "dead_reckoning_inflation": round(float(fe.dead_reckoning_inflation), 3),
         },
         "factors": factors,
         "solver": {
@@ -718,6 +723,12 @@ def format_run_report(report: dict[str, Any]) -> str:
         f"  submaps: {sm['count']} ({', '.join(f'{k} {n}' for k, n in sm['split_reasons'].items())}); "
         f"{sm['loops_tried']} revisit registrations tried"
     )
+    if "nodes" in sm:
+        lines.append(
+            f"  local SLAM: {sm['nodes']} nodes matched into submaps, {sm['scans_localised_between_nodes']} scans "
+            f"localised between them; dead-reckoning covariance x{sm['dead_reckoning_inflation']} (calibrated "
+            "against the scan matches)"
+        )
     lines.append("  factors: " + ", ".join(f"{k} {n}" for k, n in report["factors"].items()))
     s = report["solver"]
     lines.append(
