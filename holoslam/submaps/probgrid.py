@@ -94,6 +94,9 @@ class GridBuilder:
         if rows:
             x0, y0 = min(x0, ox), min(y0, oy)
             x1, y1 = max(x1, ox + cols * res), max(y1, oy + rows * res)
+            # grow by at least a quarter of the current extent: amortised, a grid is copied a few times, not
+            # once per scan that reaches a little further (that cost a tenth of the front end on ACES)
+            m = max(m, 0.25 * max(cols, rows) * res)
         # new origin on the old lattice so existing cells keep their place
         nox = ox - math.ceil((ox - (x0 - m)) / res) * res if rows else math.floor((x0 - m) / res) * res
         noy = oy - math.ceil((oy - (y0 - m)) / res) * res if rows else math.floor((y0 - m) / res) * res
