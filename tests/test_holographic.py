@@ -326,3 +326,155 @@ def test_cluttered_balcony_is_one_room_behind_its_door():
     balcony = next(n for n in rooms if G.nodes[n]["y"] < 1.5)
     assert G.nodes[balcony]["area_m2"] > 3.5
     assert nx.is_connected(G.subgraph(env))
+
+
+def _cluttered_offices(seed: int, res: float = RES) -> np.ndarray:
+    """Free mask of a floor of 4-6 m rooms in a 3 x 3 layout, 0.9-1.2 m doors, and random furniture boxes
+    (0.2-1.2 m): the clutter that makes every merging rule fire."""
+    rng = np.random.default_rng(seed)
+    h = w = int(round(16.0 / res))
+    free = np.ones((h, w), dtype=bool)
+    t = 3
+    free[:t], free[-t:], free[:, :t], free[:, -t:] = False, False, False, False
+    cuts = np.sort(rng.uniform(4.5, 5.8, 2)).cumsum()
+    walls = [int(round(x / res)) for x in cuts]
+    for k in walls:
+        free[k : k + t, :] = False
+        free[:, k : k + t] = False
+    bounds = [t, *[k + t for k in walls], h - t]
+    for k in walls:
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+            door = int(round(rng.uniform(0.9, 1.2) / res))
+            s = int(rng.integers(a + 5, max(b - door - 5, a + 6)))
+            free[k : k + t, s : s + door] = True
+            s = int(rng.integers(a + 5, max(b - door - 5, a + 6)))
+            free[s : s + door, k : k + t] = True
+    for _ in range(40):
+        r, c = rng.integers(0, h, 2)
+        dr, dc = (rng.uniform(0.2, 1.2, 2) / res).astype(int)
+        free[r : r + dr, c : c + dc] = False
+    return free
+
+
+def _segment_by_redrawing(cands, cut_lines, nav, free, clr, res, p):
+    """The region merging as first written: every round redraws every remaining cut into the robot space and
+    labels the whole map again (the reference of the incremental ``doorways.segment_regions``)."""
+    import cv2
+
+    from holoslam.maps.doorways import _cut_segments, _side_walks
+
+    fragment_cells = max(p.fragment_area_m2, p.min_room_area_m2) / (res * res)
+
+    def draw(cs):
+        m = nav.astype(np.uint8)
+        for rc, d in cs:
+            line = cut_lines.get((int(rc[0]), int(rc[1])))
+            for a, b in _cut_segments(rc, d, clr[rc[0], rc[1]] / res + 2.0, free, line):
+                cv2.line(m, a, b, 0, 1, cv2.LINE_8)
+        n_l, lb = cv2.connectedComponents(m, connectivity=4)
+        ar = np.bincount(lb.ravel(), minlength=n_l).astype(np.float64)
+        mx = np.zeros(n_l)
+        np.maximum.at(mx, lb.ravel(), clr.ravel())
+        merge_ar = ar.copy()
+        thin = mx < p.min_room_clearance_m
+        merge_ar[thin] = np.minimum(merge_ar[thin], fragment_cells - 0.5)
+        sd = []
+        for rc, d in cs:
+            two = []
+            for walk in _side_walks(rc, d, int(clr[rc[0], rc[1]] / res) + 8, free):
+                v = lb.ravel()[walk]
+                v = v[v > 0]
+                two.append(int(v[0]) if v.shape[0] else 0)
+            sd.append(tuple(two))
+        return n_l, lb, ar, merge_ar, mx, sd
+
+    while True:
+        n_lab, lab, area, merge_area, mx, sides = draw(cands)
+        keep = [a != b and a > 0 and b > 0 for a, b in sides]
+        if all(keep):
+            pairs: dict[tuple[int, int], list[int]] = {}
+            for i, (a, b) in enumerate(sides):
+                pairs.setdefault((min(a, b), max(a, b)), []).append(i)
+            parallel = [ii for ii in pairs.values() if len(ii) > 1]
+            small = {k for k in range(1, n_lab) if merge_area[k] < fragment_cells}
+            touching = [i for i, (a, b) in enumerate(sides) if a in small or b in small]
+            if parallel:
+                for i in min(parallel, key=lambda ii: min(merge_area[k] for k in sides[ii[0]])):
+                    keep[i] = False
+            elif touching:
+                k_small = min(
+                    (k for i in touching for k in sides[i] if k in small), key=lambda k: merge_area[k]
+                )
+                opening = [
+                    (
+                        clr[cands[i][0][0], cands[i][0][1]]
+                        / max(mx[sides[i][0] + sides[i][1] - k_small], 1e-9),
+                        -i,
+                    )
+                    for i in touching
+                    if k_small in sides[i]
+                ]
+                keep[-max(opening)[1]] = False
+            else:
+                weak = [
+                    (min(mx[a], mx[b]) / max(clr[cands[i][0][0], cands[i][0][1]], 1e-9), i)
+                    for i, (a, b) in enumerate(sides)
+                ]
+                weak = [q for q in weak if q[0] < p.room_to_doorway_clearance]
+                if not weak:
+                    break
+                keep[min(weak)[1]] = False
+        cands = [c for c, k in zip(cands, keep, strict=True) if k]
+    return cands, n_lab, lab, area, sides
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+@pytest.mark.parametrize("compiled", [True, False])
+def test_incremental_region_merging_equals_redrawing(seed, compiled):
+    """doorways.segment_regions (cuts drawn once, cells given back per dropped cut, union-find) gives the
+    partition of redrawing all cuts and relabelling the map every round: same doorways, labels, areas and
+    sides, with the numba kernel and with its Python fallback."""
+    from unittest import mock
+
+    import cv2
+
+    from holoslam.maps import doorways
+    from holoslam.maps.holographic import PlaceParams
+    from holoslam.maps.topology import clearance_map
+
+    free = _cluttered_offices(seed)
+    grid = OccupancyGrid.from_free_mask(free, RES)
+    topo = topology_from_grid(grid, close_cells=1)
+    p, rr = PlaceParams(), 0.25
+    clr = clearance_map(free, RES)
+    cands, lines = doorways.orient_cuts(
+        doorways.doorway_candidates(topo, clr, RES, p, 2 * rr), free, clr, RES
+    )
+    rad = int(np.floor(rr / RES))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1))
+    nav = cv2.dilate((clr >= rr).astype(np.uint8), disc).view(bool) & free
+    with mock.patch.object(doorways, "kernels", doorways.kernels if compiled else (lambda: None)):
+        seg = doorways.segment_regions(cands, lines, nav, free, clr, RES, p)
+    ref_cuts, n_lab, lab, area, sides = _segment_by_redrawing(cands, lines, nav, free, clr, RES, p)
+    assert len(cands) > len(ref_cuts) > 0  # rules dropped cuts and some doorways remain
+    assert [c[0].tolist() for c in seg.cuts] == [c[0].tolist() for c in ref_cuts]
+    assert seg.n_labels == n_lab and np.array_equal(seg.labels, lab) and np.array_equal(seg.area, area)
+    assert seg.sides == sides
+
+
+def test_passages_compiled_and_scipy_agree():
+    """The compiled targeted Dijkstra and scipy's give passages of the same lengths (equally short paths may
+    differ) on a cluttered floor with many cycles."""
+    from unittest import mock
+
+    from holoslam.maps import passages
+
+    grid = OccupancyGrid.from_free_mask(_cluttered_offices(5), RES)
+    topo = topology_from_grid(grid, close_cells=1)
+    fast = build_holographic(grid, topo)
+    with mock.patch.object(passages, "kernels", lambda: None):
+        slow = build_holographic(grid, topo)
+    assert dict(fast.nodes(data="place")) == dict(slow.nodes(data="place"))
+    assert sorted(map(sorted, fast.edges())) == sorted(map(sorted, slow.edges()))
+    for u, v, e in fast.edges(data=True):
+        assert e["length"] == pytest.approx(slow.edges[u, v]["length"], abs=1e-9)

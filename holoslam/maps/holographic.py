@@ -10,7 +10,8 @@ anchors), ``submap`` (its submap id), ``frame_x``, ``frame_y``, ``frame_theta`` 
 anchors the frame is the node's position with theta 0). L_m is summarised by scalars: ``submap``, ``area_m2``
 (rooms), ``clearance`` (m), and ``feat_<name>`` counts when the caller gives per-submap feature counts (H).
 
-How the places are found (all vectorised on the grid, Python loops only over places):
+How the places are found (vectorised on the grid, Python loops only over places and cuts; the doorway and
+region code is :mod:`holoslam.maps.doorways`, the passages :mod:`holoslam.maps.passages`):
 
 - *Doorways*: door-like constrictions of the free space. Candidates are skeleton cells (topology edge paths)
   whose free width (2 x clearance) lies between the robot's diameter and ``doorway_width_m`` and is the
@@ -26,6 +27,8 @@ How the places are found (all vectorised on the grid, Python loops only over pla
   belongs to rather than the one behind the door; (4) a cut between regions whose largest clearance is less
   than ``room_to_doorway_clearance`` x the cut's clearance is a constriction inside one room: the weakest
   goes. The cuts left are the doorways; rooms in a loop (each reachable through two doors) keep them all.
+  The merging is incremental (each dropped cut gives its cells back to the regions it touched), the same
+  partition round for round as redrawing every cut and relabelling the map (tested).
   Known limits: two real doors between the same two rooms count as one room around furniture (rule 2), and a
   room with less than ``fragment_area_m2`` of robot space joins a neighbour (both measured on the simulated
   households: true rooms have at least 3.8 m2 of robot space, clutter pockets at most 2.7 m2).
@@ -71,7 +74,9 @@ import numpy as np
 
 from holoslam.errors import MapError, PlanningError
 from holoslam.geometry import between, inverse, transform_points
+from holoslam.maps.doorways import doorway_candidates, orient_cuts, segment_regions
 from holoslam.maps.grid import OccupancyGrid
+from holoslam.maps.passages import EdgePaths, SkeletonPaths
 
 if TYPE_CHECKING:
     import networkx as nx
@@ -152,145 +157,6 @@ def _nearest_anchor(xy: np.ndarray, anchors: np.ndarray | None) -> np.ndarray:
     return np.argmin(d, axis=1)
 
 
-def _cut_line(
-    mask: np.ndarray,
-    rc: np.ndarray,
-    direction: np.ndarray,
-    half_len_cells: float,
-    free: np.ndarray | None = None,
-) -> None:
-    """Draw (0) the line across the passage at ``rc`` (perpendicular to ``direction``) into ``mask``: with
-    ``free``, on each side up to the first non-free cell (at most 2 x ``half_len_cells``) and one cell into it,
-    so the cut closes the gap even when the skeleton cell is off the gap's middle; else ``half_len_cells``."""
-    import cv2
-
-    d = direction / (np.hypot(*direction) or 1.0)
-    n = np.array([-d[1], d[0]])  # perpendicular, in (row, col)
-    ends = []
-    for sgn in (1.0, -1.0):
-        reach = half_len_cells
-        if free is not None:
-            t = np.arange(1, int(2 * half_len_cells) + 2, dtype=np.float64)
-            pts = np.rint(rc[None, :] + sgn * t[:, None] * n[None, :]).astype(np.int64)
-            h, w = free.shape
-            ok = (pts[:, 0] >= 0) & (pts[:, 0] < h) & (pts[:, 1] >= 0) & (pts[:, 1] < w)
-            blocked = ~ok
-            blocked[ok] = ~free[pts[ok, 0], pts[ok, 1]]
-            hit = np.nonzero(blocked)[0]
-            reach = float(t[hit[0]]) + 1.0 if hit.shape[0] else float(t[-1])
-        ends.append(rc + sgn * n * reach)
-    a, b = ends
-    cv2.line(
-        mask, (int(round(a[1])), int(round(a[0]))), (int(round(b[1])), int(round(b[0]))), 0, 1, cv2.LINE_8
-    )
-
-
-def _doorway_candidates(
-    topology, clr: np.ndarray, res: float, p: PlaceParams, min_width_m: float = 0.0
-) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges (node cells
-    included): a skeleton cell whose free width (2 x clearance) lies in [``min_width_m``,
-    ``doorway_width_m``] and is the narrowest within ``doorway_window_m`` along the skeleton (one per plateau,
-    one per place). Beyond a junction the skeleton goes on; towards an endpoint (a spur running into a wall or
-    a furniture corner, clearance falling to its tip) there is no candidate within half a window of the tip.
-    Whether a candidate separates anything is decided later by the regions it cuts."""
-    out = []
-    half = max(int(round(0.5 * p.doorway_window_m / res)), 1)
-    for u, v, data in topology.edges(data=True):
-        path = np.asarray(data.get("path", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
-        if path.shape[0] == 0:
-            continue
-        nu, nv = topology.nodes[u], topology.nodes[v]
-        if data.get("path_from", u) != u:
-            nu, nv = nv, nu
-        head, tail = [], []
-        if "row" in nu and "row" in nv:
-            head = [[int(nu["row"]), int(nu["col"])]]
-            tail = [[int(nv["row"]), int(nv["col"])]]
-        path = np.vstack(
-            [
-                np.array(head, dtype=np.int64).reshape(-1, 2),
-                path,
-                np.array(tail, dtype=np.int64).reshape(-1, 2),
-            ]
-        )
-        if path.shape[0] < 3:
-            continue
-        c = clr[path[:, 0], path[:, 1]]
-        narrow = (2.0 * c <= p.doorway_width_m) & (2.0 * c >= min_width_m)
-        if not narrow.any():
-            continue
-        pads = [np.full(half, -np.inf if nd.get("kind") == "endpoint" else np.inf) for nd in (nu, nv)]
-        win_min = np.lib.stride_tricks.sliding_window_view(
-            np.concatenate([pads[0], c, pads[1]]), 2 * half + 1
-        ).min(axis=1)
-        idx = np.nonzero(narrow & (c <= win_min))[0]
-        if idx.shape[0] == 0:
-            continue
-        groups = np.split(idx, np.nonzero(np.diff(idx) > 1)[0] + 1)
-        for g in groups:
-            i = int(g[g.shape[0] // 2])
-            lo, hi = max(i - 3, 0), min(i + 3, path.shape[0] - 1)
-            direction = (path[hi] - path[lo]).astype(np.float64)
-            if direction.any():
-                out.append((path[i], direction))
-    # one candidate per place (two edges meeting at a junction both find it): the narrowest wins
-    kept: list[tuple[np.ndarray, np.ndarray]] = []
-    sep = 0.5 * p.doorway_window_m / res
-    for rc, dvec in sorted(out, key=lambda q: float(clr[q[0][0], q[0][1]])):
-        if all(np.hypot(*(rc - k[0])) > sep for k in kept):
-            kept.append((rc, dvec))
-    return kept
-
-
-def _orient_cuts(cands, free: np.ndarray, clr: np.ndarray, res: float):
-    """The critical line of each candidate's gap: from the cell's nearest obstacle cell p1 to the nearest
-    obstacle cell p2 on the other side (``(p2 - rc) . (p1 - rc) < 0``), whatever way the skeleton bends there.
-    Returns ([(cell, direction along the passage = perpendicular to p1 p2)], {cell: (p1, p2)})."""
-    h, w = free.shape
-    out, lines = [], {}
-    for rc, d in cands:
-        k = int(np.ceil(2.0 * clr[rc[0], rc[1]] / res)) + 4
-        r0, r1, c0, c1 = max(rc[0] - k, 0), min(rc[0] + k + 1, h), max(rc[1] - k, 0), min(rc[1] + k + 1, w)
-        obs = np.argwhere(~free[r0:r1, c0:c1]) + np.array([r0, c0])
-        if obs.shape[0] == 0:
-            out.append((rc, d))
-            continue
-        v = (obs - rc).astype(np.float64)
-        d2 = (v**2).sum(1)
-        i1 = int(np.argmin(d2))
-        other = (v @ v[i1]) < 0
-        if not other.any() or d2[i1] == 0:
-            out.append((rc, d))
-            continue
-        i2 = int(np.argmin(np.where(other, d2, np.inf)))
-        p1, p2 = obs[i1].astype(np.float64), obs[i2].astype(np.float64)
-        n = p2 - p1
-        out.append((rc, np.array([n[1], -n[0]])))
-        lines[(int(rc[0]), int(rc[1]))] = (p1, p2)
-    return out, lines
-
-
-def _side_labels(lab: np.ndarray, free: np.ndarray, rc: np.ndarray, direction: np.ndarray, max_cells: int):
-    """Region labels on the two sides of a cut: walk from the cut along +-direction (stopping at the first
-    obstacle cell, so a thin wall is never crossed) and take the first labelled cell."""
-    d = direction / np.hypot(*direction)
-    h, w = lab.shape
-    sides = []
-    for sgn in (1.0, -1.0):
-        t = np.arange(1, max_cells + 1, dtype=np.float64)
-        pts = np.rint(rc[None, :] + sgn * t[:, None] * d[None, :]).astype(np.int64)
-        ok = (pts[:, 0] >= 0) & (pts[:, 0] < h) & (pts[:, 1] >= 0) & (pts[:, 1] < w)
-        stop = np.nonzero(~ok)[0]
-        pts = pts[: stop[0]] if stop.shape[0] else pts
-        blocked = np.nonzero(~free[pts[:, 0], pts[:, 1]])[0]
-        pts = pts[: blocked[0]] if blocked.shape[0] else pts
-        v = lab[pts[:, 0], pts[:, 1]] if pts.shape[0] else np.zeros(0, dtype=lab.dtype)
-        v = v[v > 0]
-        sides.append(int(v[0]) if v.shape[0] else 0)
-    return sides[0], sides[1]
-
-
 def build_holographic(
     grid: OccupancyGrid,
     topology,
@@ -328,8 +194,9 @@ def build_holographic(
 
     # ---- doorways and rooms -------------------------------------------------------------------------------
     rr_cells = reach_model.robot_radius_m / res
-    cands, cut_lines = _orient_cuts(
-        _doorway_candidates(topology, clr, res, p, min_width_m=2.0 * reach_model.robot_radius_m),
+    edge_paths = EdgePaths(topology)
+    cands, cut_lines = orient_cuts(
+        doorway_candidates(topology, clr, res, p, 2.0 * reach_model.robot_radius_m, edge_paths),
         free,
         clr,
         res,
@@ -338,89 +205,19 @@ def build_holographic(
     # opening); gaps in walls and between furniture narrower than the robot are not passages
     rad = max(int(np.floor(rr_cells)), 1)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1))
-    nav = cv2.dilate((clr >= reach_model.robot_radius_m).astype(np.uint8), disc) & free.astype(np.uint8)
-    free_u8 = nav
+    nav = cv2.dilate((clr >= reach_model.robot_radius_m).astype(np.uint8), disc).view(bool) & free
     min_room_cells = p.min_room_area_m2 / (res * res)
-    fragment_cells = max(p.fragment_area_m2, p.min_room_area_m2) / (res * res)
-
-    def draw(cs):
-        """Regions with the cuts ``cs`` drawn: (count, labels, true area in cells, merge area in cells, max
-        clearance per region, side labels per cut). The merge area of a region without room for a standing
-        robot (a strip between furniture and a wall) is below the fragment size whatever its true area."""
-        m = free_u8.copy()
-        for rc, d in cs:
-            ln = cut_lines.get((int(rc[0]), int(rc[1])))
-            if ln is None:
-                _cut_line(m, rc.astype(np.float64), d, clr[rc[0], rc[1]] / res + 2.0, free)
-            else:  # obstacle to obstacle through the cell
-                for q0, q1 in ((ln[0], rc), (rc, ln[1])):
-                    cv2.line(m, (int(q0[1]), int(q0[0])), (int(q1[1]), int(q1[0])), 0, 1, cv2.LINE_8)
-        n_l, lb = cv2.connectedComponents(m, connectivity=4)
-        ar = np.bincount(lb.ravel(), minlength=n_l).astype(np.float64)
-        mx = np.zeros(n_l)
-        np.maximum.at(mx, lb.ravel(), clr.ravel())
-        merge_ar = ar.copy()
-        thin = mx < p.min_room_clearance_m
-        merge_ar[thin] = np.minimum(merge_ar[thin], fragment_cells - 0.5)
-        sd = [
-            _side_labels(lb, free, rc.astype(np.float64), d, int(clr[rc[0], rc[1]] / res) + 8) for rc, d in cs
-        ]
-        return n_l, lb, ar, merge_ar, mx, sd
-
-    # Region merging (module docstring), one cut dropped per round, in this order of the rules:
-    # 1. a cut whose two sides are one region (or no region) separates nothing;
-    # 2. two regions joined by two or more cuts are one room around furniture (an island, a table);
-    # 3. a fragment (merge area < fragment_area_m2) joins a neighbour, smallest fragment first: the one its cut
-    #    opens into most widely relative to the neighbour's max clearance, so the pieces of a cluttered room
-    #    join each other (similar widths) rather than the wide room behind a doorway;
-    # 4. a cut between two regions hardly wider than the gap itself (max clearance < room_to_doorway_clearance
-    #    x the gap's half width) is a constriction inside one room: the weakest such cut goes.
-    while True:
-        n_lab, lab, area, merge_area, mx, sides = draw(cands)
-        keep = [a != b and a > 0 and b > 0 for a, b in sides]
-        if all(keep):
-            pairs: dict[tuple[int, int], list[int]] = {}
-            for i, (a, b) in enumerate(sides):
-                pairs.setdefault((min(a, b), max(a, b)), []).append(i)
-            parallel = [ii for ii in pairs.values() if len(ii) > 1]
-            small = {k for k in range(1, n_lab) if merge_area[k] < fragment_cells}
-            touching = [i for i, (a, b) in enumerate(sides) if a in small or b in small]
-            if parallel:
-                for i in min(parallel, key=lambda ii: min(merge_area[k] for k in sides[ii[0]])):
-                    keep[i] = False
-            elif touching:
-                k_small = min(
-                    (k for i in touching for k in sides[i] if k in small), key=lambda k: merge_area[k]
-                )
-                # through the cut that opens most widely relative to the neighbour's own width (the cut least
-                # like a doorway of that neighbour)
-                opening = [
-                    (
-                        clr[cands[i][0][0], cands[i][0][1]]
-                        / max(mx[sides[i][0] + sides[i][1] - k_small], 1e-9),
-                        -i,
-                    )
-                    for i in touching
-                    if k_small in sides[i]
-                ]
-                via = -max(opening)[1]
-                keep[via] = False
-            else:
-                weak = [
-                    (min(mx[a], mx[b]) / max(clr[cands[i][0][0], cands[i][0][1]], 1e-9), i)
-                    for i, (a, b) in enumerate(sides)
-                ]
-                weak = [q for q in weak if q[0] < p.room_to_doorway_clearance]
-                if not weak:
-                    break
-                keep[min(weak)[1]] = False
-        cands = [c for c, k in zip(cands, keep, strict=False) if k]
+    seg = segment_regions(cands, cut_lines, nav, free, clr, res, p)
+    cands, n_lab, lab, area, sides = seg.cuts, seg.n_labels, seg.labels, seg.area, seg.sides
     # rooms: labels with enough area; node at max clearance
     room_labels = [int(k) for k in np.nonzero(area >= min_room_cells)[0] if k != 0]
-    flat_lab = lab.ravel()
-    order = np.lexsort((clr.ravel(), flat_lab))
-    last = np.searchsorted(flat_lab[order], np.arange(n_lab), side="right") - 1
-    room_cell = {k: np.array(np.unravel_index(order[last[k]], lab.shape)) for k in room_labels}
+    flat_lab, flat_clr = lab.ravel(), clr.ravel()
+    mx = np.zeros(n_lab)
+    np.maximum.at(mx, flat_lab, flat_clr)
+    at_max = np.flatnonzero(flat_clr == mx[flat_lab])
+    last = np.full(n_lab, -1, dtype=np.int64)
+    np.maximum.at(last, flat_lab[at_max], at_max)  # the last cell (raster order) of the largest clearance
+    room_cell = {k: np.array(np.unravel_index(last[k], lab.shape)) for k in room_labels}
 
     # safe space for the base, and its components (reach model connectivity)
     safe = (clr >= reach_model.robot_radius_m).astype(np.uint8)
@@ -500,54 +297,64 @@ def build_holographic(
     room_of_label = {pl[3]: pl[0] for pl in places if pl[1] == "room"}
 
     # ---- passages along the skeleton ----------------------------------------------------------------------
-    sk_graph, sk_cells = _skeleton_cell_graph(topology, res)
+    sk = SkeletonPaths(topology, res, edge_paths)
+    sk_of = sk.nearest(cells) if len(sk) and len(places) else np.zeros(0, dtype=np.int64)
 
-    def passage(i: int, j: int) -> tuple[np.ndarray, float, bool]:
-        a, b = cells[i], cells[j]
-        if sk_cells.shape[0]:
-            ia = int(np.argmin(np.abs(sk_cells - a).sum(1)))
-            ib = int(np.argmin(np.abs(sk_cells - b).sum(1)))
-            try:
-                nodes = nx.shortest_path(sk_graph, ia, ib, weight="weight")
-                pts = np.vstack([pxy[i : i + 1], rc_to_xy(sk_cells[nodes]), pxy[j : j + 1]])
-                return pts, float(np.hypot(*np.diff(pts, axis=0).T).sum()), True
-            except nx.NetworkXNoPath:
-                pass
+    def passage(i: int, j: int, seq: list[int] | None) -> tuple[np.ndarray, float, bool]:
+        if seq is not None:
+            pts = np.vstack([pxy[i : i + 1], rc_to_xy(sk.cells[seq]), pxy[j : j + 1]])
+            return pts, float(np.hypot(*np.diff(pts, axis=0).T).sum()), True
         pts = np.vstack([pxy[i], pxy[j]])
         return pts, float(np.hypot(*(pxy[j] - pxy[i]))), False
 
-    def add_env_edge(ki: str, kj: str) -> None:
-        if ki == kj or G.has_edge(ki, kj):
-            return
-        i, j = index[ki], index[kj]
-        pts, length, on_sk = passage(i, j)
-        wij = between(frames[i], frames[j])
-        G.add_edge(
-            ki,
-            kj,
-            kind="passage",
-            w_from=ki,
-            w_to=kj,
-            passage=pts,
-            length=length,
-            passage_on_skeleton=on_sk,
-            w_x=float(wij[0]),
-            w_y=float(wij[1]),
-            w_theta=float(wij[2]),
-        )
+    def add_env_edges(pairs: list[tuple[str, str]]) -> None:
+        """Passages for the pairs (in order; a pair already joined is skipped), one skeleton search per
+        source place."""
+        todo, seen = [], set()
+        for ki, kj in pairs:
+            if ki == kj or G.has_edge(ki, kj) or frozenset((ki, kj)) in seen:
+                continue
+            seen.add(frozenset((ki, kj)))
+            todo.append((index[ki], index[kj]))
+        seqs: dict[tuple[int, int], list[int] | None] = {}
+        if len(sk):
+            by_source: dict[int, list[int]] = {}
+            for i, j in todo:
+                by_source.setdefault(int(sk_of[i]), []).append(int(sk_of[j]))
+            found = {}
+            for s, t in by_source.items():
+                reach = float(np.abs(sk.cells[t] - sk.cells[s]).sum(axis=1).max()) * res
+                found[s] = sk.paths_from(s, t, limit=3.0 * reach + 2.0)
+            seqs = {(i, j): found[int(sk_of[i])][int(sk_of[j])] for i, j in todo}
+        for i, j in todo:
+            pts, length, on_sk = passage(i, j, seqs.get((i, j)))
+            wij = between(frames[i], frames[j])
+            G.add_edge(
+                places[i][0],
+                places[j][0],
+                kind="passage",
+                w_from=places[i][0],
+                w_to=places[j][0],
+                passage=pts,
+                length=length,
+                passage_on_skeleton=on_sk,
+                w_x=float(wij[0]),
+                w_y=float(wij[1]),
+                w_theta=float(wij[2]),
+            )
 
-    for key, a, b in door_keys:
-        for lbl in (a, b):
-            if lbl in room_of_label:
-                add_env_edge(room_of_label[lbl], key)
-    for key, place, _cell, region in places:
-        if place in ("crossing", "dead_end") and region in room_of_label:
-            add_env_edge(room_of_label[region], key)
+    pairs = [(room_of_label[lbl], key) for key, a, b in door_keys for lbl in (a, b) if lbl in room_of_label]
+    pairs += [
+        (room_of_label[region], key)
+        for key, place, _cell, region in places
+        if place in ("crossing", "dead_end") and region in room_of_label
+    ]
+    add_env_edges(pairs)
 
     # every place without a passage yet (e.g. a doorway whose side is no room, a crossing outside the rooms)
     # and every component left apart are joined to the nearest place along the skeleton, so the environment
     # graph is connected wherever the skeleton is
-    _join_components(G, places, index, cells, sk_graph, sk_cells, add_env_edge)
+    _join_components(G, [pl[0] for pl in places], sk, sk_of, add_env_edges)
 
     # ---- objects ------------------------------------------------------------------------------------------
     rooms = [(pl[0], pl[3], index[pl[0]]) for pl in places if pl[1] == "room"]
@@ -587,6 +394,37 @@ def build_holographic(
                 reach_distance=float(dist),
             )
     return G
+
+
+def _join_components(G, keys: list[str], sk: SkeletonPaths, sk_of: np.ndarray, add_env_edges) -> None:
+    """Join the components of the environment graph: repeatedly, from the component of the first room, the
+    place of another component nearest along the skeleton (one multi-source search from the component's
+    skeleton cells; among equally near places the first) gets a passage to the place of the grown component
+    where that search started. Places off every skeleton component stay apart."""
+    import networkx as nx
+
+    if len(sk) == 0 or len(keys) < 2:
+        return
+    owner: dict[int, list[str]] = {}
+    for k, c in zip(keys, sk_of.tolist(), strict=True):
+        owner.setdefault(c, []).append(k)
+    cell_of = dict(zip(keys, sk_of.tolist(), strict=True))
+    while True:
+        comps = list(nx.connected_components(G.subgraph(keys)))
+        if len(comps) < 2:
+            return
+        comps.sort(key=lambda c: (not any(G.nodes[k]["place"] == "room" for k in c), -len(c)))
+        grown = comps[0]
+        dist, src = sk.multi_source({cell_of[k] for k in grown})
+        rest = [(float(dist[cell_of[k]]), n, k) for n, k in enumerate(keys) if k not in grown]
+        rest = [q for q in rest if np.isfinite(q[0])]
+        if not rest:
+            return  # the rest is on skeleton components of its own
+        _dd, _n, best = min(rest)
+        start = min((k for k in owner.get(int(src[cell_of[best]]), ()) if k in grown), default=None)
+        if start is None:
+            return
+        add_env_edges([(start, best)])
 
 
 def _reach(pos, rm: ReachModel, free, clr, lab, safe_lab, rooms, cells, res, ox, oy):
@@ -635,78 +473,6 @@ def _reach(pos, rm: ReachModel, free, clr, lab, safe_lab, rooms, cells, res, ox,
             j = int(np.argmin(np.where(m, dist, np.inf)))
             out.append((key, float(dist[j]), (float(sx[j]), float(sy[j])), lbl == home))
     return out
-
-
-def _join_components(G, places, index, cells, sk_graph, sk_cells, add_env_edge) -> None:
-    """Join the components of the environment graph: repeatedly, from the component of the first room, the
-    place of another component nearest along the skeleton (multi-source Dijkstra over skeleton cells) gets a
-    passage to the nearest place of the grown component. Places off every skeleton component stay apart."""
-    import networkx as nx
-
-    if sk_cells.shape[0] == 0 or len(places) < 2:
-        return
-    keys = [pl[0] for pl in places]
-    sk_of = {k: int(np.argmin(np.abs(sk_cells - cells[index[k]]).sum(1))) for k in keys}
-    owner: dict[int, list[str]] = {}
-    for k, c in sk_of.items():
-        owner.setdefault(c, []).append(k)
-    while True:
-        comps = list(nx.connected_components(G.subgraph(keys)))
-        if len(comps) < 2:
-            return
-        comps.sort(key=lambda c: (not any(G.nodes[k]["place"] == "room" for k in c), -len(c)))
-        grown = comps[0]
-        dist, paths = nx.multi_source_dijkstra(sk_graph, {sk_of[k] for k in grown}, weight="weight")
-        best = None
-        for c, dd in dist.items():
-            for k in owner.get(c, ()):
-                if k not in grown and (best is None or dd < best[0]):
-                    best = (dd, k, c)
-        if best is None:
-            return  # the rest is on skeleton components of its own
-        src_cell = paths[best[2]][0]
-        src = min((k for k in owner.get(src_cell, ()) if k in grown), default=None)
-        if src is None:
-            return
-        add_env_edge(src, best[1])
-
-
-def _skeleton_cell_graph(topology, res: float):
-    """A graph over the skeleton cells of the topology's edge paths (8-connected steps, weights in metres)."""
-    import networkx as nx
-
-    # each edge path with the cells of its two nodes (paths stop next to a junction cluster's representative
-    # cell, so without them the paths would not join)
-    paths = []
-    for u, v, d in topology.edges(data=True):
-        if "path" not in d:
-            continue
-        q = np.asarray(d["path"], dtype=np.int64).reshape(-1, 2)
-        nu, nv = topology.nodes[u], topology.nodes[v]
-        if d.get("path_from", u) != u:
-            nu, nv = nv, nu
-        if q.shape[0] and "row" in nu and "row" in nv:
-            q = np.vstack([[int(nu["row"]), int(nu["col"])], q, [int(nv["row"]), int(nv["col"])]])
-        paths.append(q)
-    if not paths:
-        return nx.Graph(), np.zeros((0, 2), dtype=np.int64)
-    allc = np.concatenate(paths)
-    key = allc[:, 0] * (int(allc[:, 1].max()) + 2) + allc[:, 1]
-    uk, inv = np.unique(key, return_inverse=True)
-    cells = np.zeros((uk.shape[0], 2), dtype=np.int64)
-    cells[inv] = allc
-    lens = np.array([q.shape[0] for q in paths])
-    ends = np.cumsum(lens)
-    a = inv[:-1]
-    b = inv[1:]
-    valid = np.ones(a.shape[0], dtype=bool)
-    valid[ends[:-1] - 1] = False  # no step between two different paths
-    a, b = a[valid], b[valid]
-    wgt = np.hypot(*(cells[a] - cells[b]).T) * res
-    G = nx.Graph()
-    G.add_nodes_from(range(cells.shape[0]))
-    G.add_weighted_edges_from(zip(a.tolist(), b.tolist(), wgt.tolist(), strict=False))
-    return G, cells
 
 
 # ---------------------------------------------------------------------------------------------------- queries

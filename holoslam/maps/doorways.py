@@ -1,0 +1,408 @@
+"""Doorways and rooms of the holographic graph (:mod:`holoslam.maps.holographic`, whose docstring states the
+rules): doorway candidates along the topology, the cut across each candidate's gap, and the region merging that
+drops cuts until the ones left are doorways.
+
+Region merging is incremental: every cut's cells are drawn once (each cut on a canvas of its own bounding box,
+so a cell knows how many cuts cover it), the robot space with all cuts drawn is labelled once (4-connected),
+and dropping a cut gives back the cells no other cut covers, which join the regions they touch (union-find
+with each region's area and largest clearance). The regions on the two sides of a cut are the first labelled
+cells of two fixed walks from the cut (precomputed), looked up in the current labels. That is the same
+partition, round for round, as redrawing every remaining cut and relabelling the whole map (what the rules
+were first written as, ``cuts x cells`` work per round: minutes on a real office floor); the work per round is
+now the cells of the dropped cut plus one gather over the walks. The last partition is labelled again by
+``cv2.connectedComponents`` so region numbers follow the map's raster order as before.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from holoslam.maps.passages import kernels
+
+__all__ = ["doorway_candidates", "orient_cuts", "segment_regions", "RegionSegmentation"]
+
+
+def doorway_candidates(topology, clr: np.ndarray, res: float, p, min_width_m: float = 0.0, edge_paths=None):
+    """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges (node cells
+    included): a skeleton cell whose free width (2 x clearance) lies in [``min_width_m``,
+    ``doorway_width_m``] and is the narrowest within ``doorway_window_m`` along the skeleton (one per plateau,
+    one per place). Beyond a junction the skeleton goes on; towards an endpoint (a spur running into a wall or
+    a furniture corner, clearance falling to its tip) there is no candidate within half a window of the tip.
+    Whether a candidate separates anything is decided later by the regions it cuts. All edges at once: their
+    paths concatenated with ``half`` a window of padding (+inf beyond a junction, -inf beyond an endpoint)
+    between them, one sliding minimum."""
+    from holoslam.maps.passages import EdgePaths
+
+    ep = edge_paths if edge_paths is not None else EdgePaths(topology)
+    if len(ep) == 0:
+        return []
+    half = max(int(round(0.5 * p.doorway_window_m / res)), 1)
+    cells, starts = ep.cells, ep.starts
+    lens = np.diff(starts)
+    n_edges, m = lens.shape[0], cells.shape[0]
+    c = clr[cells[:, 0], cells[:, 1]]
+    edge = np.repeat(np.arange(n_edges), lens)
+    local = np.arange(m) - starts[edge]
+    pstarts = np.concatenate([[0], np.cumsum(lens + 2 * half)])
+    buf = np.empty(int(pstarts[-1]))
+    pad = np.arange(half)
+    buf[(pstarts[:-1, None] + pad).ravel()] = np.repeat(np.where(ep.first_is_endpoint, -np.inf, np.inf), half)
+    buf[(pstarts[1:, None] - half + pad).ravel()] = np.repeat(
+        np.where(ep.last_is_endpoint, -np.inf, np.inf), half
+    )
+    body = pstarts[edge] + half + local
+    buf[body] = c
+    win_min = np.lib.stride_tricks.sliding_window_view(buf, 2 * half + 1).min(axis=1)[body - half]
+    narrow = (2.0 * c <= p.doorway_width_m) & (2.0 * c >= min_width_m)
+    idx = np.flatnonzero(narrow & (c <= win_min) & (lens[edge] >= 3))
+    if idx.shape[0] == 0:
+        return []
+    brk = np.flatnonzero((np.diff(idx) > 1) | (np.diff(edge[idx]) != 0)) + 1
+    gs = np.concatenate([[0], brk])
+    gl = np.diff(np.concatenate([gs, [idx.shape[0]]]))
+    mid = idx[gs + gl // 2]
+    e = edge[mid]
+    i = local[mid]
+    lo = starts[e] + np.maximum(i - 3, 0)
+    hi = starts[e] + np.minimum(i + 3, lens[e] - 1)
+    direction = (cells[hi] - cells[lo]).astype(np.float64)
+    ok = direction.any(axis=1)
+    out = [(cells[j].copy(), dv) for j, dv in zip(mid[ok].tolist(), direction[ok], strict=True)]
+    if not out:
+        return []
+    # one candidate per place (two edges meeting at a junction both find it): the narrowest wins
+    sep = 0.5 * p.doorway_window_m / res
+    pos = cells[mid[ok]].astype(np.float64)
+    order = np.argsort(c[mid[ok]], kind="stable")
+    kept_xy = np.empty((len(out), 2))
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    for i in order.tolist():
+        rc = pos[i]
+        k = len(kept)
+        if k and not np.all(np.hypot(kept_xy[:k, 0] - rc[0], kept_xy[:k, 1] - rc[1]) > sep):
+            continue
+        kept_xy[k] = rc
+        kept.append(out[i])
+    return kept
+
+
+def orient_cuts(cands, free: np.ndarray, clr: np.ndarray, res: float):
+    """The critical line of each candidate's gap: from the cell's nearest obstacle cell p1 to the nearest
+    obstacle cell p2 on the other side (``(p2 - rc) . (p1 - rc) < 0``), whatever way the skeleton bends there.
+    Returns ([(cell, direction along the passage = perpendicular to p1 p2)], {cell: (p1, p2)})."""
+    h, w = free.shape
+    out, lines = [], {}
+    for rc, d in cands:
+        k = int(np.ceil(2.0 * clr[rc[0], rc[1]] / res)) + 4
+        r0, r1, c0, c1 = max(rc[0] - k, 0), min(rc[0] + k + 1, h), max(rc[1] - k, 0), min(rc[1] + k + 1, w)
+        obs = np.argwhere(~free[r0:r1, c0:c1]) + np.array([r0, c0])
+        if obs.shape[0] == 0:
+            out.append((rc, d))
+            continue
+        v = (obs - rc).astype(np.float64)
+        d2 = (v**2).sum(1)
+        i1 = int(np.argmin(d2))
+        other = (v @ v[i1]) < 0
+        if not other.any() or d2[i1] == 0:
+            out.append((rc, d))
+            continue
+        i2 = int(np.argmin(np.where(other, d2, np.inf)))
+        p1, p2 = obs[i1].astype(np.float64), obs[i2].astype(np.float64)
+        n = p2 - p1
+        out.append((rc, np.array([n[1], -n[0]])))
+        lines[(int(rc[0]), int(rc[1]))] = (p1, p2)
+    return out, lines
+
+
+def _cut_segments(rc: np.ndarray, d: np.ndarray, half_len_cells: float, free: np.ndarray, line):
+    """The (x, y) integer end points of the segments that draw a cut: obstacle to obstacle through the cell
+    (``line`` = (p1, p2)), or, without one, the line across the passage at ``rc`` (perpendicular to ``d``) on
+    each side up to the first non-free cell (at most 2 x ``half_len_cells``) and one cell into it, so the cut
+    closes the gap even when the skeleton cell is off the gap's middle."""
+    if line is not None:
+        return [
+            ((int(q0[1]), int(q0[0])), (int(q1[1]), int(q1[0]))) for q0, q1 in ((line[0], rc), (rc, line[1]))
+        ]
+    rc = rc.astype(np.float64)
+    dn = d / (np.hypot(*d) or 1.0)
+    n = np.array([-dn[1], dn[0]])  # perpendicular, in (row, col)
+    h, w = free.shape
+    ends = []
+    for sgn in (1.0, -1.0):
+        t = np.arange(1, int(2 * half_len_cells) + 2, dtype=np.float64)
+        pts = np.rint(rc[None, :] + sgn * t[:, None] * n[None, :]).astype(np.int64)
+        ok = (pts[:, 0] >= 0) & (pts[:, 0] < h) & (pts[:, 1] >= 0) & (pts[:, 1] < w)
+        blocked = ~ok
+        blocked[ok] = ~free[pts[ok, 0], pts[ok, 1]]
+        hit = np.nonzero(blocked)[0]
+        reach = float(t[hit[0]]) + 1.0 if hit.shape[0] else float(t[-1])
+        ends.append(rc + sgn * n * reach)
+    a, b = ends
+    return [((int(round(a[1])), int(round(a[0]))), (int(round(b[1])), int(round(b[0]))))]
+
+
+def _segment_cells(segs, h: int, w: int) -> np.ndarray:
+    """Sorted flat indices of the cells ``cv2.line`` (LINE_8, thickness 1) draws for the segments on an (h, w)
+    image: drawn on a canvas of their bounding box when that lies inside the image (integer end points, so the
+    same cells), else on the whole image (clipped as the image clips them)."""
+    import cv2
+
+    xs = [q[0] for s in segs for q in s]
+    ys = [q[1] for s in segs for q in s]
+    x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
+    if not (x0 >= 0 and y0 >= 0 and x1 < w and y1 < h):
+        x0 = y0 = 0
+        x1, y1 = w - 1, h - 1
+    canvas = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
+    for a, b in segs:
+        cv2.line(canvas, (a[0] - x0, a[1] - y0), (b[0] - x0, b[1] - y0), 1, 1, cv2.LINE_8)
+    r, c = np.nonzero(canvas)
+    return np.unique((r + y0).astype(np.int64) * w + (c + x0))
+
+
+def _side_walks(rc: np.ndarray, d: np.ndarray, max_cells: int, free: np.ndarray) -> list[np.ndarray]:
+    """Flat indices of the cells walked from the cut along +-direction, stopping at the grid's edge and at the
+    first obstacle cell (a thin wall is never crossed); a side's region is its walk's first labelled cell."""
+    d = d / np.hypot(*d)
+    h, w = free.shape
+    rc = rc.astype(np.float64)
+    walks = []
+    for sgn in (1.0, -1.0):
+        t = np.arange(1, max_cells + 1, dtype=np.float64)
+        pts = np.rint(rc[None, :] + sgn * t[:, None] * d[None, :]).astype(np.int64)
+        ok = (pts[:, 0] >= 0) & (pts[:, 0] < h) & (pts[:, 1] >= 0) & (pts[:, 1] < w)
+        stop = np.nonzero(~ok)[0]
+        pts = pts[: stop[0]] if stop.shape[0] else pts
+        blocked = np.nonzero(~free[pts[:, 0], pts[:, 1]])[0]
+        pts = pts[: blocked[0]] if blocked.shape[0] else pts
+        walks.append(pts[:, 0] * w + pts[:, 1])
+    return walks
+
+
+class _Walks:
+    """All side walks concatenated: the first labelled cell of each, in one gather."""
+
+    def __init__(self, walks: list[np.ndarray]) -> None:
+        lens = np.array([x.shape[0] for x in walks], dtype=np.int64)
+        self.n = len(walks)
+        self.cells = np.concatenate(walks) if walks else np.zeros(0, np.int64)
+        self.group = np.repeat(np.arange(self.n), lens)
+
+    def first(self, lab_flat: np.ndarray) -> np.ndarray:
+        """(n,) label of each walk's first cell with a label > 0 (0 where none)."""
+        out = np.zeros(self.n, dtype=np.int64)
+        v = lab_flat[self.cells]
+        pos = np.flatnonzero(v > 0)
+        if pos.shape[0]:
+            g = self.group[pos]
+            head = np.ones(pos.shape[0], dtype=bool)
+            head[1:] = g[1:] != g[:-1]
+            out[g[head]] = v[pos[head]]
+        return out
+
+
+@dataclass(frozen=True)
+class RegionSegmentation:
+    """The merged partition: the doorway cuts left ([(cell, direction)]), region labels (H, W) int32 of the
+    robot space with those cuts drawn (``cv2.connectedComponents``, 4-connected, 0 = not robot space or on a
+    cut), their number, area per label in cells, and the (label, label) on the two sides of each cut."""
+
+    cuts: list
+    n_labels: int
+    labels: np.ndarray
+    area: np.ndarray
+    sides: list
+
+
+class _Regions:
+    """Union-find over region labels: the current partition of the robot space while cuts are dropped."""
+
+    def __init__(self, nav: np.ndarray, cover: np.ndarray, clr_flat: np.ndarray, extra: int) -> None:
+        import cv2
+
+        m = (nav & (cover == 0).reshape(nav.shape)).astype(np.uint8)
+        n, lab = cv2.connectedComponents(m, connectivity=4)
+        self.lab = lab.reshape(-1).astype(np.int64)
+        cap = n + extra + 1
+        self.parent = np.arange(cap, dtype=np.int64)
+        self.area = np.zeros(cap)
+        self.area[:n] = np.bincount(self.lab, minlength=n)
+        self.mx = np.zeros(cap)
+        np.maximum.at(self.mx, self.lab, clr_flat)
+        self.next = n
+        self.w = nav.shape[1]
+        self.size = self.lab.shape[0]
+
+    def find(self, x: int) -> int:
+        parent = self.parent
+        root = x
+        while parent[root] != root:
+            root = int(parent[root])
+        while parent[x] != root:  # path compression
+            nx_ = int(parent[x])
+            parent[x] = root
+            x = nx_
+        return root
+
+    def union(self, a: int, b: int) -> None:
+        ra, rb = self.find(a), self.find(b)
+        if ra == rb:
+            return
+        if ra > rb:
+            ra, rb = rb, ra
+        self.parent[rb] = ra
+        self.area[ra] += self.area[rb]
+        self.mx[ra] = max(self.mx[ra], self.mx[rb])
+
+    def restore(self, cells: np.ndarray, clr_flat: np.ndarray) -> None:
+        """Give back cells (robot space no cut covers any more): new regions of one cell each, joined to every
+        labelled 4-neighbour (compiled: ``_holographic_fast.restore``)."""
+        k = cells.shape[0]
+        if k == 0:
+            return
+        fast = kernels()
+        if fast is not None:
+            self.next = fast.restore(
+                cells, self.lab, self.parent, self.area, self.mx, clr_flat, self.next, self.w
+            )
+            return
+        ids = np.arange(self.next, self.next + k)
+        self.next += k
+        self.lab[cells] = ids
+        self.area[ids] = 1.0
+        self.mx[ids] = clr_flat[cells]
+        w, size = self.w, self.size
+        col = cells % w
+        for off, ok in ((-w, cells >= w), (w, cells < size - w), (-1, col > 0), (1, col < w - 1)):
+            nb = cells[ok] + off
+            lv = self.lab[nb]
+            sel = lv > 0
+            for a, b in zip(ids[ok][sel].tolist(), lv[sel].tolist(), strict=True):
+                self.union(a, b)
+
+    def roots(self, ids: np.ndarray) -> np.ndarray:
+        r = ids.copy()
+        while True:
+            pr = self.parent[r]
+            if np.array_equal(pr, r):
+                return r
+            r = pr
+
+
+def _merge_round(a, b, cut_clr, area, mx, fragment_cells: float, p) -> np.ndarray | None:
+    """Which of the cuts (region ids ``a``, ``b`` on their two sides, 0 = none; clearance at the cut) stay
+    after one round of the rules of :func:`segment_regions`; None when no rule drops anything."""
+    keep = (a != b) & (a > 0) & (b > 0)
+    if not keep.all():
+        return keep  # rule 1: all at once
+
+    def merge_area(k):
+        ar = area[k]
+        return np.where(mx[k] < p.min_room_clearance_m, np.minimum(ar, fragment_cells - 0.5), ar)
+
+    ma, mb = merge_area(a), merge_area(b)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    _u, first, inv, counts = np.unique(
+        lo * (int(hi.max(initial=0)) + 1) + hi, return_index=True, return_inverse=True, return_counts=True
+    )
+    par = np.flatnonzero(counts > 1)
+    if par.shape[0]:  # rule 2: the pair of regions (first found first) with the smallest merge area
+        order = np.argsort(first[par])
+        par = par[order]
+        fi = first[par]
+        keep[inv == par[np.argmin(np.minimum(ma[fi], mb[fi]))]] = False
+        return keep
+    sa, sb = ma < fragment_cells, mb < fragment_cells
+    touching = sa | sb
+    if touching.any():  # rule 3: the smallest fragment (first found first) through its widest opening
+        ks = np.column_stack([np.where(sa, a, -1), np.where(sb, b, -1)]).ravel()
+        kv = np.column_stack([ma, mb]).ravel()
+        sel = ks >= 0
+        k_small = ks[sel][np.argmin(kv[sel])]
+        hit = touching & ((a == k_small) | (b == k_small))
+        other = np.where(hit, a + b - k_small, 0)
+        opening = np.where(hit, cut_clr / np.maximum(mx[other], 1e-9), -np.inf)
+        keep[np.argmax(opening)] = False
+        return keep
+    ratio = np.minimum(mx[a], mx[b]) / np.maximum(cut_clr, 1e-9)
+    weak = ratio < p.room_to_doorway_clearance
+    if not weak.any():
+        return None
+    keep[np.argmin(np.where(weak, ratio, np.inf))] = False  # rule 4: the weakest constriction
+    return keep
+
+
+def segment_regions(
+    cands,
+    cut_lines: dict,
+    nav: np.ndarray,
+    free: np.ndarray,
+    clr: np.ndarray,
+    res: float,
+    p,
+) -> RegionSegmentation:
+    """Region merging of the module docstring of :mod:`holoslam.maps.holographic` on the robot space ``nav``
+    (bool (H, W)) cut by the candidates ``cands`` [(cell, direction)] (``cut_lines``: the obstacle-to-obstacle
+    line of each oriented cell), one cut dropped per round, in this order of the rules:
+
+    1. a cut whose two sides are one region (or no region) separates nothing (all such cuts go at once);
+    2. two regions joined by two or more cuts are one room around furniture (an island, a table);
+    3. a fragment (merge area < fragment_area_m2) joins a neighbour, smallest fragment first: the one its cut
+       opens into most widely relative to the neighbour's max clearance, so the pieces of a cluttered room
+       join each other (similar widths) rather than the wide room behind a doorway;
+    4. a cut between two regions hardly wider than the gap itself (max clearance < room_to_doorway_clearance
+       x the gap's half width) is a constriction inside one room: the weakest such cut goes.
+
+    The merge area of a region without room for a standing robot (max clearance below
+    ``min_room_clearance_m``: a strip between furniture and a wall) is below the fragment size whatever its
+    true area."""
+    import cv2
+
+    h, w = nav.shape
+    fragment_cells = max(p.fragment_area_m2, p.min_room_area_m2) / (res * res)
+    clr_flat = clr.reshape(-1)
+    nav_flat = nav.reshape(-1)
+    cut_cells, walks = [], []
+    for rc, d in cands:
+        line = cut_lines.get((int(rc[0]), int(rc[1])))
+        segs = _cut_segments(rc, d, clr[rc[0], rc[1]] / res + 2.0, free, line)
+        cut_cells.append(_segment_cells(segs, h, w))
+        walks.extend(_side_walks(rc, d, int(clr[rc[0], rc[1]] / res) + 8, free))
+    n_cuts = len(cands)
+    cover = np.zeros(h * w, dtype=np.int32)
+    for cc in cut_cells:
+        cover[cc] += 1
+    total = int(sum(cc.shape[0] for cc in cut_cells))
+    regions = _Regions(nav, cover, clr_flat, total)
+    side_walks = _Walks(walks)
+    cut_clr = np.array([clr[rc[0], rc[1]] for rc, _d in cands], dtype=np.float64)
+
+    def drop(j: int) -> None:
+        cc = cut_cells[j]
+        cover[cc] -= 1
+        back = cc[(cover[cc] == 0) & nav_flat[cc]]
+        regions.restore(back, clr_flat)
+
+    active = np.arange(n_cuts)
+    while True:
+        first = side_walks.first(regions.lab)
+        rt = regions.roots(first)
+        keep = _merge_round(
+            rt[2 * active], rt[2 * active + 1], cut_clr[active], regions.area, regions.mx, fragment_cells, p
+        )
+        if keep is None:
+            break
+        for j in active[~keep].tolist():
+            drop(j)
+        active = active[keep]
+    active = active.tolist()
+
+    # the final partition, labelled in raster order
+    m = (nav_flat & (cover == 0)).astype(np.uint8).reshape(h, w)
+    n_lab, lab = cv2.connectedComponents(m, connectivity=4)
+    area = np.bincount(lab.ravel(), minlength=n_lab).astype(np.float64)
+    first = side_walks.first(lab.reshape(-1))
+    sides = [(int(first[2 * j]), int(first[2 * j + 1])) for j in active]
+    return RegionSegmentation([cands[j] for j in active], int(n_lab), lab, area, sides)
