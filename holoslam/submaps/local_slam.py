@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -46,7 +46,9 @@ class LocalSlamConfig:
     # logs (first 300 s, local relation error) ACES goes 3.4 -> 3.7 cm and fr079 2.9 -> 4.3 cm
     polish_voxel: float = 0.0
     min_scans_to_match: int = 3  # a map of fewer scans is too sparse to match into: odometry until then
-    match_every_scan: bool = True  # localise the scans between nodes too (a matched pose at every scan stamp)
+    match_every_scan: bool = True
+    # between nodes the robot turned less than motion_turn_deg by its odometry: a narrower correlative window
+    track_angular_window_deg: float = 5.0  # localise the scans between nodes too (a matched pose at every scan stamp)
     map_drift_per_m: float = 0.005  # m of map error per m travelled inside a submap (1 sigma)
     map_drift_deg_per_m: float = 0.05  # deg per m
 
@@ -121,6 +123,7 @@ class LocalSlam:
         self._last_stamp = 0
         self._turn = math.radians(cfg.motion_turn_deg)
         self._scores: deque[float] = deque(maxlen=200)
+        self._track_cfg = replace(cfg.match, angular_window_deg=cfg.track_angular_window_deg)
         self.arrivals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (m, n, mTn, cov) of new anchors
 
     def wants(self, stamp: int, odo: np.ndarray) -> bool:
@@ -167,15 +170,15 @@ class LocalSlam:
         if host.count < self.cfg.min_scans_to_match:
             return
         pred = self._predict(host, odo)
-        m = self._match(host, g.transform_points(self.bTs, s_points), pred)
+        m = self._match(host, g.transform_points(self.bTs, s_points), pred, self._track_cfg)
         if m.ok:
             host.tracked.append((int(stamp), m.aTb))
 
-    def _match(self, host: ActiveSubmap, b_pts: np.ndarray, pred: np.ndarray):
+    def _match(self, host: ActiveSubmap, b_pts: np.ndarray, pred: np.ndarray, cfg: MatchConfig | None = None):
         """Match into the host; the running median of recent scores tells the matcher what is usual."""
         usual = float(np.median(self._scores)) if len(self._scores) >= 20 else None
-        m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred, self.cfg.match,
-                       expected_score=usual)
+        m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred,
+                       cfg or self.cfg.match, expected_score=usual)
         if m.ok:
             self._scores.append(m.score)
         return m
