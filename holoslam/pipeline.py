@@ -626,7 +626,7 @@ def _report(
             "split_reasons": _count(str(sm.reason) for sm in fe.submaps),
             "loops_tried": int(fe.loops_tried),
             "observations_before_first_anchor": int(fe.skipped_observations),
-            "nodes": int(sum(len(sm.scan_stamps_ns) for sm in fe.submaps)),
+            "nodes": int(np.unique(np.concatenate([sm.scan_stamps_ns for sm in fe.submaps])).size),
             "scans_localised_between_nodes": int(sum(len(sm.track_stamps_ns) for sm in fe.submaps)),
             # the dead-reckoning noise model's covariances were multiplied by this to agree with the log's own
             # scan matches (1: the model already did)
