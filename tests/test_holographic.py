@@ -478,3 +478,20 @@ def test_passages_compiled_and_scipy_agree():
     assert sorted(map(sorted, fast.edges())) == sorted(map(sorted, slow.edges()))
     for u, v, e in fast.edges(data=True):
         assert e["length"] == pytest.approx(slow.edges[u, v]["length"], abs=1e-9)
+
+
+def test_cut_cells_are_the_cells_cv2_draws_on_the_whole_map():
+    """A cut's cells (drawn on a canvas of its clipped bounding box) are those cv2.line draws on the whole
+    map, also for segments that leave the map (cut lines of free space at the map's edge)."""
+    import cv2
+
+    from holoslam.maps.doorways import _segment_cells
+
+    rng = np.random.default_rng(3)
+    h, w = 37, 53
+    for _ in range(3000):
+        segs = [tuple(tuple(int(v) for v in rng.integers(-30, 80, 2)) for _ in range(2)) for _ in range(2)]
+        full = np.zeros((h, w), np.uint8)
+        for a, b in segs:
+            cv2.line(full, a, b, 1, 1, cv2.LINE_8)
+        assert np.array_equal(_segment_cells(segs, h, w), np.flatnonzero(full))

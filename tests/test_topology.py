@@ -1,5 +1,9 @@
-"""Skeleton -> topology graph: invariants on random maps, geometry of edges, pruning, GraphML readiness."""
+"""Skeleton -> topology graph: invariants on random maps, geometry of edges, pruning, GraphML readiness; map
+cleaning before thinning (components and cycles of real maps)."""
 
+from pathlib import Path
+
+import cv2
 import networkx as nx
 import numpy as np
 import pytest
@@ -314,3 +318,155 @@ def test_compiled_graph_equals_the_numpy_path_on_rings_and_long_chains():
     G = skeleton_to_graph(m, resolution=0.1)
     assert sorted(nx.get_node_attributes(G, "kind").values()).count("loop") == 2
     assert _graph_lists(G) == _graph_lists(_numpy_graph(m, resolution=0.1))
+
+
+# ------------------------------------------------------------------------------------------ map cleaning
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+PUBLIC_MAPS = sorted((SHARED / "maps").glob("*.yaml")) + sorted((SHARED / "rooms").glob("*.yaml"))
+
+
+def significant(free: np.ndarray, res: float, min_free_m2: float = 0.25, min_obstacle_m2: float = 0.05):
+    """(free regions of at least min_free_m2, obstacle islands of at least min_obstacle_m2) as issue 14 counts
+    them, with scipy.ndimage: 8-connected free regions; islands = 4-connected components of the non-free
+    cells (after dropping the small regions) that do not touch the map's edge."""
+    from scipy import ndimage
+
+    lab, n = ndimage.label(free, structure=np.ones((3, 3)))
+    area = np.bincount(lab.ravel(), minlength=n + 1) * res * res
+    keep = area >= min_free_m2
+    keep[0] = False
+    kept = keep[lab]
+    olab, m = ndimage.label(np.pad(~kept, 1, constant_values=True))  # 4-connected by default
+    oarea = np.bincount(olab.ravel(), minlength=m + 1) * res * res
+    islands = [k for k in range(1, m + 1) if k != olab[0, 0] and oarea[k] >= min_obstacle_m2]
+    return int(keep.sum()), len(islands)
+
+
+def public_grid(path: Path) -> OccupancyGrid:
+    """A public map as ../shared/maps/README.md says to count it: nav2_depot's grey 205 is unknown (its YAML's
+    free_thresh 0.25 would make it free)."""
+    from holoslam.io.grid import read_grid
+
+    g = read_grid(path)
+    if path.stem == "nav2_depot":
+        img = cv2.imread(str(path.with_suffix(".pgm")), cv2.IMREAD_UNCHANGED)
+        occ = np.flipud(np.where(img >= 254, 0, np.where(img == 205, -1, 100))).astype(np.int8)
+        g = OccupancyGrid(occ, g.resolution, g.origin_x, g.origin_y, g.occupied_thresh, g.free_thresh)
+    return g
+
+
+@pytest.mark.skipif(not PUBLIC_MAPS, reason="../shared/maps and ../shared/rooms are not here")
+@pytest.mark.parametrize("path", PUBLIC_MAPS, ids=lambda p: p.stem)
+def test_cleaned_topology_of_public_maps_has_a_component_per_region_and_a_cycle_per_island(path):
+    """Issue 14: with the default cleaning the topology of a real map (Nav2, AWS house, the room-segmentation
+    benchmark's floors, plain and furnished) has one component per free region of at least 0.25 m^2 and one
+    independent cycle per obstacle island of at least 0.05 m^2; the graph reports the same counts."""
+    g = public_grid(path)
+    G = topology_from_grid(g)
+    regions, islands = significant(g.free, g.resolution)
+    assert (nx.number_connected_components(G), cycle_rank(G)) == (regions, islands)
+    assert (G.graph["cleaned_free_regions"], G.graph["cleaned_islands"]) == (regions, islands)
+    assert G.graph["cleaning_min_free_area_m2"] == 0.25 and G.graph["cleaning_min_obstacle_area_m2"] == 0.05
+    raw = topology_from_grid(g, cleaning=None)
+    assert raw.number_of_nodes() >= G.number_of_nodes()
+
+
+@pytest.mark.skipif(not PUBLIC_MAPS, reason="../shared/maps and ../shared/rooms are not here")
+@pytest.mark.parametrize("sizes", [(1.0, 0.5), (0.05, 0.01)])
+def test_cleaning_sizes_are_settings(sizes):
+    """Other minimum sizes give the counts of those sizes (two furnished floors and the depot)."""
+    from holoslam.maps.cleaning import MapCleaning
+
+    for stem in ("office_a_furnitures", "lab_c_scan_furnitures", "nav2_depot"):
+        path = next(p for p in PUBLIC_MAPS if p.stem == stem)
+        g = public_grid(path)
+        G = topology_from_grid(g, cleaning=MapCleaning(*sizes))
+        expected = significant(g.free, g.resolution, *sizes)
+        assert (nx.number_connected_components(G), cycle_rank(G)) == expected, stem
+
+
+def _cleaning_map():
+    """A 4 x 3 m room at 5 cm: a table leg (2 x 2 cells), a box (6 x 6), an unknown pocket (3 x 3) and a large
+    unknown patch (8 x 8) inside; a free speck (3 x 3) inside the wall block on the right."""
+    occ = np.full((60, 90), 100, dtype=np.int8)
+    occ[2:58, 2:70] = 0
+    occ[10:12, 10:12] = 100  # leg: 0.01 m^2
+    occ[30:36, 20:26] = 100  # box: 0.09 m^2
+    occ[15:18, 40:43] = -1  # unknown pocket: 0.0225 m^2
+    occ[35:43, 45:53] = -1  # unknown patch: 0.16 m^2
+    occ[20:23, 78:81] = 0  # free speck in the wall: 0.0225 m^2
+    return OccupancyGrid(occ, 0.05)
+
+
+def test_cleaning_rules_on_a_small_map():
+    from holoslam.maps.cleaning import MapCleaning, clean_free
+
+    g = _cleaning_map()
+    free, rep = clean_free(g)
+    assert rep.free_regions_dropped == 1 and rep.free_cells_dropped == 9 and not free[20:23, 78:81].any()
+    assert rep.islands_filled == 2 and rep.island_cells_filled == 4 + 9 and rep.unknown_islands_filled == 0
+    assert free[10:12, 10:12].all() and free[15:18, 40:43].all()
+    assert not free[30:36, 20:26].any() and not free[35:43, 45:53].any()
+    assert (rep.free_regions, rep.islands) == (1, 2)
+    G = topology_from_grid(g)
+    assert (nx.number_connected_components(G), cycle_rank(G)) == (1, 2)
+    raw = topology_from_grid(g, cleaning=None)
+    assert (nx.number_connected_components(raw), cycle_rank(raw)) == (2, 4)
+    # unknown islands as free: the large unknown patch is filled too, the box still makes a cycle
+    free, rep = clean_free(g, MapCleaning(unknown_islands="free"))
+    assert free[35:43, 45:53].all() and rep.unknown_islands_filled == 2 and (rep.islands) == 1
+    G = topology_from_grid(g, cleaning=MapCleaning(unknown_islands="free"))
+    assert cycle_rank(G) == 1
+    # zero sizes: nothing dropped or filled
+    free, rep = clean_free(g, MapCleaning(0.0, 0.0))
+    assert np.array_equal(free, g.free) and rep.free_regions_dropped == rep.islands_filled == 0
+
+
+def test_an_island_around_a_free_region_is_never_filled():
+    """An obstacle ring around a free room stays (filling it would merge two regions), whatever its size."""
+    from holoslam.maps.cleaning import MapCleaning, clean_free
+
+    m = np.zeros((40, 40), bool)
+    m[1:39, 1:39] = True
+    m[10:30, 10:30] = False
+    m[11:29, 11:29] = True  # a room inside a one-cell wall ring of 76 cells (0.19 m^2)
+    g = OccupancyGrid.from_free_mask(m, 0.05)
+    free, rep = clean_free(g, MapCleaning(min_free_area_m2=0.25, min_obstacle_area_m2=1.0))
+    assert np.array_equal(free, m) and rep.islands_filled == 0 and (rep.free_regions, rep.islands) == (2, 1)
+
+
+def test_cleaning_settings_are_checked_and_recorded():
+    from holoslam.maps.cleaning import MapCleaning
+
+    with pytest.raises(MapError, match="min_free_area_m2"):
+        MapCleaning(min_free_area_m2=-1.0)
+    with pytest.raises(MapError, match="unknown_islands"):
+        MapCleaning(unknown_islands="maybe")
+    c = MapCleaning(0.5, 0.1, "free")
+    assert MapCleaning.from_graph_attrs(c.as_graph_attrs()) == c
+    assert MapCleaning.from_graph_attrs({}) is None
+    G = topology_from_grid(_cleaning_map(), cleaning=c)
+    assert MapCleaning.from_graph_attrs(G.graph) == c
+    assert "cleaning_min_free_area_m2" not in topology_from_grid(_cleaning_map(), cleaning=None).graph
+
+
+cleaning_rect = st.tuples(st.integers(0, 44), st.integers(0, 44), st.integers(1, 8), st.integers(1, 8))
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    st.lists(cleaning_rect, max_size=14),
+    st.lists(cleaning_rect, max_size=6),
+    st.lists(cleaning_rect, max_size=8),
+)
+def test_cleaned_topology_counts_significant_regions_and_islands(obstacles, unknown, specks):
+    """Random 45 x 45 maps at 5 cm (minimum sizes 100 and 20 cells): obstacles and unknown patches of 1-64
+    cells, free specks punched into them; components and cycles are the significant regions and islands."""
+    occ = np.zeros((45, 45), np.int8)
+    for val, rects in ((100, obstacles), (-1, unknown), (0, specks)):
+        for r, c, dh, dw in rects:
+            occ[r : r + dh, c : c + dw] = val
+    g = OccupancyGrid(occ, 0.05)
+    G = topology_from_grid(g)
+    assert (nx.number_connected_components(G), cycle_rank(G)) == significant(g.free, 0.05)

@@ -145,18 +145,22 @@ def _cut_segments(rc: np.ndarray, d: np.ndarray, half_len_cells: float, free: np
 
 def _segment_cells(segs, h: int, w: int) -> np.ndarray:
     """Sorted flat indices of the cells ``cv2.line`` (LINE_8, thickness 1) draws for the segments on an (h, w)
-    image: drawn on a canvas of their bounding box when that lies inside the image (integer end points, so the
-    same cells), else on the whole image (clipped as the image clips them)."""
+    image, drawn on a canvas of their bounding box: each segment first clipped to the image by
+    ``cv2.clipLine``, as ``cv2.line`` clips it (integer end points, so the same cells; tested)."""
     import cv2
 
-    xs = [q[0] for s in segs for q in s]
-    ys = [q[1] for s in segs for q in s]
-    x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
-    if not (x0 >= 0 and y0 >= 0 and x1 < w and y1 < h):
-        x0 = y0 = 0
-        x1, y1 = w - 1, h - 1
-    canvas = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
+    clipped = []
     for a, b in segs:
+        ok, p, q = cv2.clipLine((0, 0, w, h), a, b)
+        if ok:
+            clipped.append((p, q))
+    if not clipped:
+        return np.zeros(0, dtype=np.int64)
+    xs = [q[0] for s in clipped for q in s]
+    ys = [q[1] for s in clipped for q in s]
+    x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
+    canvas = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
+    for a, b in clipped:
         cv2.line(canvas, (a[0] - x0, a[1] - y0), (b[0] - x0, b[1] - y0), 1, 1, cv2.LINE_8)
     r, c = np.nonzero(canvas)
     return np.unique((r + y0).astype(np.int64) * w + (c + x0))
@@ -182,24 +186,41 @@ def _side_walks(rc: np.ndarray, d: np.ndarray, max_cells: int, free: np.ndarray)
 
 
 class _Walks:
-    """All side walks concatenated: the first labelled cell of each, in one gather."""
+    """All side walks concatenated, with the position of each walk's first labelled cell. Cells only ever gain
+    a label (a dropped cut gives its cells back), so a walk's first labelled cell only moves towards its start:
+    each round looks up the walks through the cells given back (cells sorted once, ``searchsorted``), not all
+    walks."""
 
-    def __init__(self, walks: list[np.ndarray]) -> None:
+    def __init__(self, walks: list[np.ndarray], lab_flat: np.ndarray) -> None:
         lens = np.array([x.shape[0] for x in walks], dtype=np.int64)
         self.n = len(walks)
         self.cells = np.concatenate(walks) if walks else np.zeros(0, np.int64)
         self.group = np.repeat(np.arange(self.n), lens)
+        self.order = np.argsort(self.cells, kind="stable")
+        self.sorted_cells = self.cells[self.order]
+        self.end = self.cells.shape[0]  # "no labelled cell"
+        self.first = np.full(self.n, self.end, dtype=np.int64)
+        pos = np.flatnonzero(lab_flat[self.cells] > 0)
+        np.minimum.at(self.first, self.group[pos], pos)
 
-    def first(self, lab_flat: np.ndarray) -> np.ndarray:
-        """(n,) label of each walk's first cell with a label > 0 (0 where none)."""
-        out = np.zeros(self.n, dtype=np.int64)
-        v = lab_flat[self.cells]
-        pos = np.flatnonzero(v > 0)
-        if pos.shape[0]:
-            g = self.group[pos]
-            head = np.ones(pos.shape[0], dtype=bool)
-            head[1:] = g[1:] != g[:-1]
-            out[g[head]] = v[pos[head]]
+    def restored(self, cells: np.ndarray) -> None:
+        """Cells that just got a label."""
+        if cells.shape[0] == 0 or self.end == 0:
+            return
+        lo = np.searchsorted(self.sorted_cells, cells, side="left")
+        hi = np.searchsorted(self.sorted_cells, cells, side="right")
+        k = hi - lo
+        if not k.any():
+            return
+        q = self.order[np.repeat(lo - np.cumsum(k) + k, k) + np.arange(int(k.sum()))]
+        np.minimum.at(self.first, self.group[q], q)
+
+    def labels(self, lab_flat: np.ndarray, walks: np.ndarray) -> np.ndarray:
+        """The label of the first labelled cell of each of the ``walks`` (0 where none)."""
+        f = self.first[walks]
+        out = np.zeros(walks.shape[0], dtype=np.int64)
+        has = f < self.end
+        out[has] = lab_flat[self.cells[f[has]]]
         return out
 
 
@@ -376,7 +397,7 @@ def segment_regions(
         cover[cc] += 1
     total = int(sum(cc.shape[0] for cc in cut_cells))
     regions = _Regions(nav, cover, clr_flat, total)
-    side_walks = _Walks(walks)
+    side_walks = _Walks(walks, regions.lab)
     cut_clr = np.array([clr[rc[0], rc[1]] for rc, _d in cands], dtype=np.float64)
 
     def drop(j: int) -> None:
@@ -384,25 +405,25 @@ def segment_regions(
         cover[cc] -= 1
         back = cc[(cover[cc] == 0) & nav_flat[cc]]
         regions.restore(back, clr_flat)
+        side_walks.restored(back)
 
     active = np.arange(n_cuts)
     while True:
-        first = side_walks.first(regions.lab)
-        rt = regions.roots(first)
-        keep = _merge_round(
-            rt[2 * active], rt[2 * active + 1], cut_clr[active], regions.area, regions.mx, fragment_cells, p
-        )
+        two = np.column_stack([2 * active, 2 * active + 1]).ravel()
+        rt = regions.roots(side_walks.labels(regions.lab, two))
+        keep = _merge_round(rt[0::2], rt[1::2], cut_clr[active], regions.area, regions.mx, fragment_cells, p)
         if keep is None:
             break
         for j in active[~keep].tolist():
             drop(j)
         active = active[keep]
-    active = active.tolist()
 
     # the final partition, labelled in raster order
     m = (nav_flat & (cover == 0)).astype(np.uint8).reshape(h, w)
     n_lab, lab = cv2.connectedComponents(m, connectivity=4)
     area = np.bincount(lab.ravel(), minlength=n_lab).astype(np.float64)
-    first = side_walks.first(lab.reshape(-1))
-    sides = [(int(first[2 * j]), int(first[2 * j + 1])) for j in active]
+    two = np.column_stack([2 * active, 2 * active + 1]).ravel()
+    first = side_walks.labels(lab.reshape(-1), two).tolist()
+    sides = list(zip(first[0::2], first[1::2], strict=True))
+    active = active.tolist()
     return RegionSegmentation([cands[j] for j in active], int(n_lab), lab, area, sides)

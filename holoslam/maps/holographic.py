@@ -173,12 +173,12 @@ def build_holographic(
     import cv2
     import networkx as nx
 
-    from holoslam.maps.topology import clearance_map
+    from holoslam.maps.topology import cleaned_free, clearance_map
 
     reach_model = reach_model or ReachModel()
     p = params or PlaceParams()
     res, ox, oy = grid.resolution, grid.origin_x, grid.origin_y
-    free = grid.free
+    free = cleaned_free(grid, topology)  # the free space the topology was built on
     h, w = free.shape
     clr = clearance_map(free, res)
     anchors = None if anchors_wTa is None else np.asarray(anchors_wTa, dtype=np.float64).reshape(-1, 3)
