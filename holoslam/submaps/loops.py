@@ -10,10 +10,16 @@ the best-constrained way from one to the other; drift of odometry plus scan matc
 distance on real robots). The estimate is re-optimised after every closure. A match counts when
 its score (mean probability of the points) reaches ``min_score`` (``min_score_wide`` for windows beyond
 ``wide_window_xy``: a wide search has more chances of a wrong match), is refined by the continuous matcher
-against m's grid, and gives the ``loop`` relative pose of Eq. 15, mTn = mTr ∘ (nTr)^-1, with the refined
-match's covariance. Loops enter the graph with a robust kernel (DCS in ``solve``), so a wrong one that passes
-here does not bend the map. Defaults: Cartographer's published constraint-builder settings (SPEC §8: +-7 m,
-+-30 deg, 15 m, score 0.55 / 0.6, depth 7).
+against m's grid, and is unambiguous: no pose of the window outside a small box around it
+(``ambiguity_exclude_xy``, ``ambiguity_exclude_deg``) scores within ``ambiguity_margin`` of it. Along a
+corridor, or between two similar rooms, the best of the window can be an alias metres from the truth with a
+flat score surface, and the refinement's covariance (its +-0.5 m surface) does not cover the error; such a
+match is dropped (``ambiguity="reject"``) or kept with a covariance spanning the peaks (``"span"``). An
+accepted match gives the ``loop`` relative pose of Eq. 15, mTn = mTr ∘ (nTr)^-1, with the refined match's
+covariance. Loops enter the graph with a robust kernel (Huber in a run, ``pipeline.run_build_options``) and the
+final solve's chi-square rounds, so a wrong one that passes here bends the map less. Defaults: Cartographer's
+published constraint-builder settings (SPEC §8: +-7 m, +-30 deg, 15 m, score 0.55 / 0.6, depth 7); the
+ambiguity test's were measured on the real logs (``LoopConfig``).
 """
 
 from __future__ import annotations
@@ -50,6 +56,27 @@ class LoopConfig:
     wide_search_spacing: float = 2.0  # m travelled between two wide searches of one old submap
     precomputed_cache: int = 64  # submaps whose max-pooled grids stay in memory (a few ms to rebuild one)
     max_searches_per_node: int = 3  # narrow searches per node, nearest old submaps first (cost where many overlap)
+    # Ambiguity (an alias along a corridor, a similar room): after the best match, the best pose of the same window
+    # *outside* a box around it is sought (the same branch and bound with the box cut out: exact; when rejecting
+    # it stops at the first pose above the threshold). One scoring within ``ambiguity_margin`` of the best is a
+    # second peak: the scan fits two places about equally well and the score cannot tell which is right, while
+    # the refinement's covariance only describes the surface within +-0.5 m of one of them. The defaults were
+    # measured on the three real logs, a loop counted wrong when it lies > 0.3 m or d^2 > 21 from the final
+    # solution (``benchmarks/bench_loops_realdata.py``; with score alone aces held 29 wrong of 189, fr079 45 of
+    # 367, intel 214 of 1057): 0.15 m / 2 deg / 0.03 flag 29 of aces' 29 wrong loops (24 of its 160 right ones),
+    # fr079 25 of 45 (27 of 322), intel 174 of 214 (130 of 843), and no loop of the drifting two-room test is
+    # wrong. Most wrong loops have a flat score surface: a pose 0.2-0.3 m away scores within 0.01.
+    ambiguity: str = "reject"  # "reject": no closure; "span": kept, with the peaks' spread added to its
+    # covariance (``spanning_covariance``); "off": accepted on score alone (the rule before)
+    # score units (mean probability of the points, 0.1-0.9): 0.02 misses 4 of aces' 29 wrong loops, 0.04 flags 9
+    # more right ones there for none more wrong (fr079 +3 wrong / +11 right, intel +20 / +40)
+    ambiguity_margin: float = 0.03
+    # m, half-width of the box around the best in x and y: 3 cells at 5 cm, the best's own peak (its refinement
+    # may move it by 2 cells); 0.1 m / 1 deg takes the peak's own slope for a second one (aces: 48 right loops
+    # flagged instead of 24), 0.25 m / 3 deg lets wrong ones through (aces 1, intel 28 more; 2 of the drifting test)
+    ambiguity_exclude_xy: float = 0.15
+    ambiguity_exclude_deg: float = 2.0  # deg, half-width of the box in angle (measured with the 0.15 m above)
+    ambiguity_peaks: int = 1  # second peaks sought, each outside the boxes of the ones before ("span")
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,6 +93,8 @@ class LoopSearch:
     """Holds the finished submaps' precomputed grids and searches nodes against them."""
 
     def __init__(self, cfg: LoopConfig, match_cfg: MatchConfig) -> None:
+        if cfg.ambiguity not in ("reject", "span", "off"):
+            raise ValueError(f"LoopConfig.ambiguity must be 'reject', 'span' or 'off', got {cfg.ambiguity!r}")
         self.cfg = cfg
         # the refinement against an old map starts from the branch-and-bound pose; its window (for the score
         # surface, hence the covariance) is wide enough to show a corridor's ambiguity along its length
@@ -78,6 +107,9 @@ class LoopSearch:
         self.pairs: dict[tuple[int, int], int] = {}
         self.last_wide: dict[int, float] = {}
         self.tried = 0
+        self.ambiguous = 0  # matches with a second peak (rejected or widened, ``LoopConfig.ambiguity``)
+        # (old, new, best bnb.Match, its second peaks) of every branch-and-bound match checked, for diagnostics
+        self.peaks: list[tuple[int, int, object, list]] = []
 
     def add_submap(self, index: int, grid: ProbGrid) -> None:
         self.grids[index] = grid
@@ -107,8 +139,6 @@ class LoopSearch:
         ``graph_distance[m]`` is the graph path length from m to n (see the module docstring); ``travelled``
         the odometer reading, which spaces wide searches of one old submap ``wide_search_spacing`` apart (a
         wide window costs ~10 ms; one every couple of metres finds a revisit as surely as one per node)."""
-        from holoslam.submaps import bnb
-
         c = self.cfg
         wTr = g.compose(est_wTa[n], nTr)
         olds = [m for m in self.grids if m < n - c.skip_recent and self.pairs.get((m, n), 0) < c.max_per_pair]
@@ -134,16 +164,182 @@ class LoopSearch:
             seed = g.between(est_wTa[m], wTr)
             self.tried += 1
             searched += not wide
-            hit = bnb.search(self._precomputed(m), b_pts, seed, wxy, wth, min_score)
+            win = _Window(self._precomputed(m), b_pts, seed, wxy, wth)
+            hit = win.best(min_score)
             if hit is None:
                 continue
+            peaks = []
+            if c.ambiguity != "off":  # before the refinement: an ambiguous match is not worth refining
+                peaks = win.second_peaks(hit, c.ambiguity_margin, c.ambiguity_exclude_xy,
+                                         math.radians(c.ambiguity_exclude_deg), c.ambiguity_peaks,
+                                         first=c.ambiguity == "reject")
+                self.peaks.append((m, n, hit, peaks))
+                if peaks:
+                    self.ambiguous += 1
+                    if c.ambiguity == "reject":
+                        continue
             gr = self.grids[m]
             ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, hit.aTb, self.refine_cfg)
             if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * gr.resolution:
                 continue
+            cov_aTb = ref.cov_aTb
+            if peaks:
+                cov_aTb = spanning_covariance(ref.aTb, cov_aTb, [p.aTb for p in peaks])
             from holoslam.submaps.deadreckon import relative_anchor_pose
 
-            mTn, cov_mTn = relative_anchor_pose(ref.aTb, ref.cov_aTb, nTr, cov_nTr)
+            mTn, cov_mTn = relative_anchor_pose(ref.aTb, cov_aTb, nTr, cov_nTr)
             found.append(LoopCandidate(m, n, mTn, cov_mTn, ref.score, wxy))
             self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
         return found
+
+
+class _Window:
+    """One branch-and-bound search of a scan against a precomputed submap (``bnb.search``'s candidates and
+    algorithm), kept so that the ambiguity search re-uses its discretised points and its top level's bounds:
+    a second peak costs only the descent."""
+
+    def __init__(self, pre, b_pts, seed, wxy: float, wth: float) -> None:
+        from holoslam.submaps import bnb
+
+        self.pre = pre
+        self.cand = bnb._candidates(pre, b_pts, seed, wxy, wth, None)
+        n = self.cand.rows.shape[1]
+        self.n = n
+        self.quant = (pre.q_lo, pre.q_step, float(pre.q_out), float(bnb.OUTSIDE), bnb._SLACK * n)
+        self.d_top = bnb._top_level(pre, self.cand.box)
+        k = _kernels()
+        self.top, self.order = k[0](pre.prob, pre.levels, pre.starts, self.cand.rows, self.cand.cols,
+                                    self.cand.box, self.d_top, self.quant)
+        a = self.cand.angles
+        self.angle_step = abs(float(a[1] - a[0])) if a.size > 1 else math.pi
+
+    def _descend(self, min_score: float, centres, ex, first: bool):
+        from holoslam.submaps import bnb
+
+        pre, c = self.pre, self.cand
+        s, a, x, y = _kernels()[1](pre.prob, pre.levels, pre.starts, c.rows, c.cols, c.box, self.d_top, self.quant,
+                                   float(min_score) * self.n, self.top, self.order,
+                                   np.asarray(centres, np.int64).reshape(-1, 3), np.asarray(ex, np.int64), first)
+        return None if a < 0 else bnb._match(self.cand, self.pre.res, a, x, y, s)
+
+    def best(self, min_score: float):
+        """``bnb.search``: the best candidate strictly above ``min_score`` (None if there is none)."""
+        return self._descend(min_score, np.zeros((0, 3)), np.zeros(2), False)
+
+    def indices(self, aTb: np.ndarray) -> tuple[int, int, int]:
+        """The candidate (angle, x, y) indices of a pose on the window's lattice."""
+        c, res = self.cand, self.pre.res
+        a = int(np.argmin(np.abs(g.wrap(c.angles - aTb[2]))))
+        return a, int(round((aTb[0] - c.seed[0]) / res)), int(round((aTb[1] - c.seed[1]) / res))
+
+    def second_peaks(self, best, margin: float, exclude_xy: float, exclude_rad: float, count: int = 1,
+                     first: bool = False) -> list:
+        """Up to ``count`` candidates of the window scoring strictly above ``best.score - margin`` outside
+        boxes of +-``exclude_xy`` m (x and y) and +-``exclude_rad`` around ``best`` (a ``bnb.Match`` of this
+        window) and around each other: each the exact best outside the boxes so far, or with ``first`` any
+        candidate above the threshold (the first the search meets: enough to know that there is one)."""
+        ex = (int(math.floor(exclude_xy / self.pre.res + 1e-9)),
+              int(math.floor(exclude_rad / self.angle_step + 1e-9)))
+        centres = [self.indices(best.aTb)]
+        found = []
+        for _ in range(max(0, int(count))):
+            p = self._descend(best.score - margin, centres, ex, first)
+            if p is None:
+                break
+            found.append(p)
+            centres.append(self.indices(p.aTb))
+        return found
+
+
+def spanning_covariance(aTb: np.ndarray, cov_aTb: np.ndarray, others) -> np.ndarray:
+    """The covariance of a match about ``aTb`` when the poses ``others`` are as likely as it: the second moment
+    of the equal mixture of all of them about ``aTb`` (errors in ``aTb``'s frame, as ``cov_aTb``) added."""
+    d = np.array([g.between(aTb, np.asarray(o, float)) for o in others]).reshape(-1, 3)
+    d[:, 2] = g.wrap(d[:, 2])
+    return np.asarray(cov_aTb, float) + d.T @ d / (len(d) + 1)
+
+
+def _top_py(prob, levels, starts, rows, cols, box, d_top, quant):  # pragma: no cover - compiled
+    """The bounds of the top level's nodes (``_bnb_fast.branch_and_bound``'s first step) and their order, best
+    first: (bounds (A nx ny,), order)."""
+    n_ang = rows.shape[0]
+    x_lo, x_hi, y_lo, y_hi = box
+    w = 1 << d_top
+    nx = (x_hi - x_lo) // w + 1
+    ny = (y_hi - y_lo) // w + 1
+    bb = _bnb_fast._boxes(rows, cols)
+    top = np.empty(n_ang * nx * ny, dtype=np.float64)
+    for a in range(n_ang):
+        for ix in range(nx):
+            for iy in range(ny):
+                top[(a * nx + ix) * ny + iy] = _bnb_fast._score(prob, levels, starts, d_top, rows, cols, bb, a,
+                                                                x_lo + ix * w, y_lo + iy * w, quant)
+    return top, np.argsort(-top, kind="mergesort")
+
+
+def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, order, centres, ex,
+                first):  # pragma: no cover - compiled
+    """The rest of ``_bnb_fast.branch_and_bound`` (depth first, best child first, from the top level's nodes in
+    ``order``), with boxes cut out: no candidate within +-ex[0] offsets (x and y) and +-ex[1] angle indices of
+    any of ``centres`` (k, 3: angle, x, y) is returned, and a node whose block lies inside one box is dropped
+    (the bounds of the others are still upper bounds: the result is exact). ``first``: return the first
+    candidate above best0 met instead of the best. Returns (sum, a, x, y); a = -1 when nothing outside the
+    boxes beats best0 (strictly). With no boxes: the same nodes in the same order as branch_and_bound."""
+    x_lo, x_hi, y_lo, y_hi = box
+    w = 1 << d_top
+    nx = (x_hi - x_lo) // w + 1
+    ny = (y_hi - y_lo) // w + 1
+    bb = _bnb_fast._boxes(rows, cols)
+    cap = 4 * d_top + 4
+    st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
+          np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
+    cx, cy, cs = np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64)
+    best, ba, bx, by = best0, -1, 0, 0
+    for k in order:
+        if top[k] <= best:
+            break
+        a, rem = divmod(k, nx * ny)
+        st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = a, x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, \
+            d_top, top[k]
+        sp = 1
+        while sp > 0:
+            sp -= 1
+            if st[4][sp] <= best:
+                continue
+            a, x, y, d = st[0][sp], st[1][sp], st[2][sp], st[3][sp]
+            span = (1 << d) - 1
+            cut = False
+            for c in range(centres.shape[0]):
+                if (abs(a - centres[c, 0]) <= ex[1] and x >= centres[c, 1] - ex[0]
+                        and x + span <= centres[c, 1] + ex[0] and y >= centres[c, 2] - ex[0]
+                        and y + span <= centres[c, 2] + ex[0]):
+                    cut = True
+                    break
+            if cut:
+                continue
+            if d == 0:
+                best, ba, bx, by = st[4][sp], a, x, y
+                if first:
+                    return best, ba, bx, by
+                continue
+            sp, _ = _bnb_fast._push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best,
+                                             st, sp, cx, cy, cs)
+    return best, ba, bx, by
+
+
+_bnb_fast = None  # holoslam.submaps._bnb_fast once _kernels() has run (the compiled functions call into it)
+_KERNELS = None
+
+
+def _kernels():
+    """(``_top_py``, ``_descend_py``) compiled with numba on first use (this module does not import numba:
+    the front end's other users of it load it lazily too); cached on disk like ``_bnb_fast``."""
+    global _bnb_fast, _KERNELS
+    if _KERNELS is None:
+        import numba as nb
+
+        from holoslam.submaps import _bnb_fast as fast
+
+        _bnb_fast = fast
+        _KERNELS = (nb.njit(cache=True, nogil=True)(_top_py), nb.njit(cache=True, nogil=True)(_descend_py))
+    return _KERNELS
