@@ -18,8 +18,9 @@ of a second peak (``LoopSearch.ambiguous``, when the code has it); fe s = front-
 of it spent in ``LoopSearch.search`` (anchor re-estimates after closures excluded); loop cpu = the same in CPU
 time of this process (steadier than wall time on a shared machine; the JSON rows hold both).
 
-``--timing`` measures the cost of the acceptance rule alone: the loop search's calls of one run are recorded
-and replayed with ``ambiguity="off"`` and with the settings given, alternately (``replay_timing``).
+``--timing`` measures the loop search's CPU time before and after, paired: the calls of a run with
+``ambiguity="off"`` and of a run with the settings given are recorded and replayed alternately
+(``replay_timing``).
 """
 
 from __future__ import annotations
@@ -120,18 +121,11 @@ def bench_log(name: str, data: Path, overrides: dict) -> dict:
     }
 
 
-def replay_timing(name: str, data: Path, overrides: dict, repeats: int = 3) -> dict:
-    """CPU time of ``LoopSearch.search`` over the same calls with the acceptance rule off and on: the calls
-    (node, estimate, graph distances, scan points) of one front-end run with ``ambiguity="off"`` are recorded,
-    then replayed through a fresh ``LoopSearch`` per configuration (submaps added at the step they were), the
-    two alternating ``repeats`` times; the minimum of each is kept. A paired measurement: what a whole run's
-    time would say about the change is mostly other load on a shared machine."""
-    from holoslam.io.mcap import read_log
+def _record(log, loops_mod, cfg) -> list:
+    """The calls of ``LoopSearch`` (submaps added, searches with their arguments) in one front-end run."""
     from holoslam.pipeline import reestimate_anchors
-    from holoslam.submaps import loops as loops_mod
     from holoslam.submaps.frontend import FrontEndConfig, build_problem
 
-    log, _ = read_log(data / f"{name}.mcap", require=["odometry", "scan"])
     events: list = []
     o_search, o_add = loops_mod.LoopSearch.search, loops_mod.LoopSearch.add_submap
 
@@ -145,31 +139,57 @@ def replay_timing(name: str, data: Path, overrides: dict, repeats: int = 3) -> d
 
     loops_mod.LoopSearch.search, loops_mod.LoopSearch.add_submap = search, add
     try:
-        cfg_off = dataclasses.replace(loops_mod.LoopConfig(), ambiguity="off")
-        build_problem(log, (), FrontEndConfig(loops=cfg_off), optimize=reestimate_anchors)
+        build_problem(log, (), FrontEndConfig(loops=cfg), optimize=reestimate_anchors)
     finally:
         loops_mod.LoopSearch.search, loops_mod.LoopSearch.add_submap = o_search, o_add
+    return events
+
+
+def _replay(loops_mod, cfg, events) -> tuple[float, tuple[int, int, int]]:
+    """CPU seconds in ``LoopSearch.search`` replaying ``events`` through a fresh ``LoopSearch(cfg)``, and its
+    (closures found, windows tried, ambiguous matches)."""
     from holoslam.submaps.scanmatch import MatchConfig
 
-    configs = {"off": cfg_off, "on": dataclasses.replace(loops_mod.LoopConfig(), **overrides)}
-    best = {k: float("inf") for k in configs}
+    ls = loops_mod.LoopSearch(cfg, MatchConfig())
+    n_found, spent = 0, 0.0
+    for kind, a, k in events:
+        if kind == "add":
+            ls.add_submap(*a)
+            continue
+        c0 = time.process_time()
+        n_found += len(ls.search(*a, **k))
+        spent += time.process_time() - c0
+    return spent, (n_found, ls.tried, ls.ambiguous)
+
+
+def replay_timing(name: str, data: Path, overrides: dict, repeats: int = 7) -> dict:
+    """CPU time of ``LoopSearch.search`` with the ambiguity test off and on, paired: the calls of one front-end
+    run with ``ambiguity="off"`` and of one with the settings given are recorded, then replayed alternately
+    (``repeats`` times; the minimum of each and the median of the paired ratios kept) as: the off run's calls with the test off (``cpu_off_s``: the loop
+    search before), the same calls with it on (``cpu_rule_s``: the test's own cost), and the on run's calls
+    with it on (``cpu_on_s``: the loop search after, including what it does differently: fewer closures accepted
+    leave wider windows and unsaturated pairs). Whole-run timings mostly measure other load on a shared machine."""
+    from holoslam.io.mcap import read_log
+    from holoslam.submaps import loops as loops_mod
+
+    log, _ = read_log(data / f"{name}.mcap", require=["odometry", "scan"])
+    cfg_off = dataclasses.replace(loops_mod.LoopConfig(), ambiguity="off")
+    cfg_on = dataclasses.replace(loops_mod.LoopConfig(), **overrides)
+    ev_off, ev_on = _record(log, loops_mod, cfg_off), _record(log, loops_mod, cfg_on)
+    cases = {"off": (cfg_off, ev_off), "rule": (cfg_on, ev_off), "on": (cfg_on, ev_on)}
+    times: dict[str, list[float]] = {k: [] for k in cases}
     found = {}
     for _ in range(repeats):
-        for key, cfg in configs.items():
-            ls = loops_mod.LoopSearch(cfg, MatchConfig())
-            n_found, spent = 0, 0.0
-            for kind, a, k in events:
-                if kind == "add":
-                    ls.add_submap(*a)
-                    continue
-                c0 = time.process_time()
-                n_found += len(ls.search(*a, **k))
-                spent += time.process_time() - c0
-            best[key] = min(best[key], spent)
-            found[key] = (n_found, ls.tried, ls.ambiguous)
-    return {"log": name, "overrides": overrides, "searches": sum(e[0] == "search" for e in events),
-            "cpu_off_s": best["off"], "cpu_on_s": best["on"], "ratio": best["on"] / best["off"],
-            "found_off": found["off"], "found_on": found["on"]}
+        for key, (cfg, events) in cases.items():
+            spent, found[key] = _replay(loops_mod, cfg, events)
+            times[key].append(spent)
+    t = {k: np.array(v) for k, v in times.items()}
+    return {"log": name, "overrides": overrides, "searches_off": sum(e[0] == "search" for e in ev_off),
+            "searches_on": sum(e[0] == "search" for e in ev_on), "cpu_off_s": float(t["off"].min()),
+            "cpu_rule_s": float(t["rule"].min()), "cpu_on_s": float(t["on"].min()),
+            "rule_ratio_median": float(np.median(t["rule"] / t["off"])),
+            "on_ratio_median": float(np.median(t["on"] / t["off"])), "times": {k: v.tolist() for k, v in times.items()},
+            "found_off": found["off"], "found_rule": found["rule"], "found_on": found["on"]}
 
 
 def print_table(rows: list[dict]) -> None:
@@ -196,9 +216,13 @@ def main() -> int:
     if a.timing:
         for name in a.logs:
             r = replay_timing(name, a.data, overrides)
-            print(f"{name:<8} {r['searches']} searches: loop search CPU {r['cpu_off_s']:.2f} s (ambiguity off) "
-                  f"-> {r['cpu_on_s']:.2f} s (on, {r['overrides'] or 'defaults'}): x{r['ratio']:.3f}; "
-                  f"closures (found, tried, ambiguous) {r['found_off']} -> {r['found_on']}", flush=True)
+            print(f"{name:<8} loop search CPU (min of {len(r['times']['off'])}): {r['cpu_off_s']:.2f} s before "
+                  f"(ambiguity off, {r['searches_off']} calls); {r['cpu_rule_s']:.2f} s with the test on the same "
+                  f"calls (x{r['cpu_rule_s'] / r['cpu_off_s']:.3f}, median paired x{r['rule_ratio_median']:.3f}); "
+                  f"{r['cpu_on_s']:.2f} s after (its own run's {r['searches_on']} calls, "
+                  f"x{r['cpu_on_s'] / r['cpu_off_s']:.3f}, median paired x{r['on_ratio_median']:.3f}); "
+                  f"(closures, windows, ambiguous) {r['found_off']} / {r['found_rule']} / {r['found_on']}",
+                  flush=True)
             if a.out:
                 with a.out.open("a") as f:
                     f.write(json.dumps(r) + "\n")

@@ -175,6 +175,11 @@ def test_the_second_peak_search_is_exact():
         # "first": some candidate above the threshold outside the box, exactly when there is one
         first = win.second_peaks(best, margin, ex_xy, ex_rad, count=1, first=True)
         assert bool(first) == bool(peaks) and all(f.score > best.score - margin for f in first)
+        # resumed from the nodes the best's search set aside within the margin (what LoopSearch does): the same
+        again = _Window(pre, pts, seed, wxy, wth)
+        assert again.best(0.0, margin).score == best.score
+        assert [p.score for p in again.second_peaks(best, margin, ex_xy, ex_rad, count=3)] == [p.score for p in peaks]
+        assert bool(again.second_peaks(best, margin, ex_xy, ex_rad, count=1, first=True)) == bool(peaks)
 
 
 CORRIDOR = np.array([[-10.0, -0.8, 40.0, -0.8], [-10.0, 0.8, 40.0, 0.8]])  # 1.6 m wide, no door, no end in sight

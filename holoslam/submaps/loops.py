@@ -165,7 +165,7 @@ class LoopSearch:
             self.tried += 1
             searched += not wide
             win = _Window(self._precomputed(m), b_pts, seed, wxy, wth)
-            hit = win.best(min_score)
+            hit = win.best(min_score, c.ambiguity_margin if c.ambiguity != "off" else -1.0)
             if hit is None:
                 continue
             peaks = []
@@ -213,18 +213,29 @@ class _Window:
         a = self.cand.angles
         self.angle_step = abs(float(a[1] - a[0])) if a.size > 1 else math.pi
 
-    def _descend(self, min_score: float, centres, ex, first: bool):
+    def _descend(self, min_score: float, centres=None, ex=(0, 0), first: bool = False, defer: float = -1.0,
+                 resume: bool = False):
+        """The kernel's descent above ``min_score`` (mean probability) outside the boxes; ``defer`` >= 0 (score
+        units) keeps what it sets aside for a later ``resume`` (see ``_descend_py``)."""
         from holoslam.submaps import bnb
 
         pre, c = self.pre, self.cand
-        s, a, x, y = _kernels()[1](pre.prob, pre.levels, pre.starts, c.rows, c.cols, c.box, self.d_top, self.quant,
-                                   float(min_score) * self.n, self.top, self.order,
-                                   np.asarray(centres, np.int64).reshape(-1, 3), np.asarray(ex, np.int64), first)
+        seeds, k0 = (self.aside, self.k_break) if resume else (np.zeros((0, 5)), 0)
+        s, a, x, y, k_break, aside = _kernels()[1](
+            pre.prob, pre.levels, pre.starts, c.rows, c.cols, c.box, self.d_top, self.quant,
+            float(min_score) * self.n, self.top, self.order, k0, seeds,
+            np.asarray(centres if centres is not None else np.zeros((0, 3)), np.int64).reshape(-1, 3),
+            np.asarray(ex, np.int64), first, float(defer) * self.n if defer >= 0 else -1.0)
+        if defer >= 0:
+            self.aside, self.k_break = aside[np.argsort(-aside[:, 4], kind="stable")], k_break
         return None if a < 0 else bnb._match(self.cand, self.pre.res, a, x, y, s)
 
-    def best(self, min_score: float):
-        """``bnb.search``: the best candidate strictly above ``min_score`` (None if there is none)."""
-        return self._descend(min_score, np.zeros((0, 3)), np.zeros(2), False)
+    def best(self, min_score: float, margin: float = -1.0):
+        """``bnb.search``: the best candidate strictly above ``min_score`` (None if there is none). With
+        ``margin`` >= 0 the nodes it prunes within ``margin`` of the best are kept: a second peak search with
+        that margin then starts from them instead of from the top (the same result for less work)."""
+        self.margin = margin
+        return self._descend(min_score, defer=margin)
 
     def indices(self, aTb: np.ndarray) -> tuple[int, int, int]:
         """The candidate (angle, x, y) indices of a pose on the window's lattice."""
@@ -242,8 +253,11 @@ class _Window:
               int(math.floor(exclude_rad / self.angle_step + 1e-9)))
         centres = [self.indices(best.aTb)]
         found = []
-        for _ in range(max(0, int(count))):
-            p = self._descend(best.score - margin, centres, ex, first)
+        for k in range(max(0, int(count))):
+            # the first resumes from what best() set aside when it kept that much (it holds every node that can
+            # lead to a candidate above best - margin); later ones, with more boxes, start from the top
+            resume = k == 0 and 0 <= margin <= getattr(self, "margin", -1.0)
+            p = self._descend(best.score - margin, centres, ex, first, resume=resume)
             if p is None:
                 break
             found.append(p)
@@ -277,14 +291,31 @@ def _top_py(prob, levels, starts, rows, cols, box, d_top, quant):  # pragma: no 
     return top, np.argsort(-top, kind="mergesort")
 
 
-def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, order, centres, ex,
-                first):  # pragma: no cover - compiled
-    """The rest of ``_bnb_fast.branch_and_bound`` (depth first, best child first, from the top level's nodes in
-    ``order``), with boxes cut out: no candidate within +-ex[0] offsets (x and y) and +-ex[1] angle indices of
-    any of ``centres`` (k, 3: angle, x, y) is returned, and a node whose block lies inside one box is dropped
-    (the bounds of the others are still upper bounds: the result is exact). ``first``: return the first
-    candidate above best0 met instead of the best. Returns (sum, a, x, y); a = -1 when nothing outside the
-    boxes beats best0 (strictly). With no boxes: the same nodes in the same order as branch_and_bound."""
+def _defer(buf, n, a, x, y, d, bound):  # pragma: no cover - compiled
+    """Append the node (a, x, y, level d, bound) to the (capacity, 5) buffer holding n rows (doubled when full)."""
+    if n == buf.shape[0]:
+        grown = np.empty((2 * buf.shape[0], 5), dtype=np.float64)
+        grown[:n] = buf[:n]
+        buf = grown
+    buf[n, 0], buf[n, 1], buf[n, 2], buf[n, 3], buf[n, 4] = a, x, y, d, bound
+    return buf, n + 1
+
+
+def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, order, k0, seeds, centres, ex,
+                first, defer):  # pragma: no cover - compiled
+    """The rest of ``_bnb_fast.branch_and_bound`` (depth first, best child first): first from the nodes
+    ``seeds`` (m, 5: angle, x, y, level, bound), then from the top level's nodes ``order[k0:]`` until their bound
+    falls to the best. With no seeds, k0 = 0 and no boxes: the same nodes in the same order as
+    branch_and_bound, hence the same result.
+
+    Boxes cut out: no candidate within +-ex[0] offsets (x and y) and +-ex[1] angle indices of any of ``centres``
+    (k, 3: angle, x, y) is returned, and a node whose block lies inside one box is dropped (the bounds of the
+    others are still upper bounds: the result is exact). ``first``: return the first candidate above best0 met
+    instead of the best. ``defer`` >= 0: every node or candidate set aside with a bound above (best at the time -
+    defer) is returned, so that a search for anything above (final best - defer) can start from them and from
+    ``order[k_break:]`` instead of from the top (each node is set aside with a bound <= the best at the time, which
+    never exceeds the final best). Returns (sum, a, x, y, k_break, set-aside nodes (m', 5)); a = -1 when nothing
+    outside the boxes beats best0 (strictly)."""
     x_lo, x_hi, y_lo, y_hi = box
     w = 1 << d_top
     nx = (x_hi - x_lo) // w + 1
@@ -294,19 +325,32 @@ def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top,
     st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
           np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
     cx, cy, cs = np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64)
+    buf = np.empty((64 if defer >= 0 else 0, 5), dtype=np.float64)
+    nd = 0
     best, ba, bx, by = best0, -1, 0, 0
-    for k in order:
-        if top[k] <= best:
-            break
-        a, rem = divmod(k, nx * ny)
-        st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = a, x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, \
-            d_top, top[k]
+    k_break = order.size
+    for kk in range(-seeds.shape[0], order.size - k0):
+        if kk < 0:  # a seed
+            j = kk + seeds.shape[0]
+            a0, x0, y0, d0, b0 = int(seeds[j, 0]), int(seeds[j, 1]), int(seeds[j, 2]), int(seeds[j, 3]), seeds[j, 4]
+            if b0 <= best:
+                continue
+        else:
+            k = order[k0 + kk]
+            if top[k] <= best:
+                k_break = k0 + kk
+                break
+            a0, rem = divmod(k, nx * ny)
+            x0, y0, d0, b0 = x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, d_top, top[k]
+        st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = a0, x0, y0, d0, b0
         sp = 1
         while sp > 0:
             sp -= 1
-            if st[4][sp] <= best:
-                continue
             a, x, y, d = st[0][sp], st[1][sp], st[2][sp], st[3][sp]
+            if st[4][sp] <= best:
+                if defer >= 0 and st[4][sp] > best - defer:
+                    buf, nd = _defer(buf, nd, a, x, y, d, st[4][sp])
+                continue
             span = (1 << d) - 1
             cut = False
             for c in range(centres.shape[0]):
@@ -318,13 +362,40 @@ def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top,
             if cut:
                 continue
             if d == 0:
+                if defer >= 0 and ba >= 0 and best > st[4][sp] - defer:  # the best so far, set aside
+                    buf, nd = _defer(buf, nd, ba, bx, by, 0, best)
                 best, ba, bx, by = st[4][sp], a, x, y
                 if first:
-                    return best, ba, bx, by
+                    return best, ba, bx, by, k_break, buf[:nd]
                 continue
-            sp, _ = _bnb_fast._push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best,
-                                             st, sp, cx, cy, cs)
-    return best, ba, bx, by
+            if defer < 0:
+                sp, _ = _bnb_fast._push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant,
+                                                 best, st, sp, cx, cy, cs)
+                continue
+            # _bnb_fast._push_children, setting aside the children it drops
+            h = 1 << (d - 1)
+            ns = 0
+            for dx in range(2):
+                if x + dx * h > x_hi:
+                    break
+                for dy in range(2):
+                    if y + dy * h > y_hi:
+                        break
+                    sc = _bnb_fast._score(prob, levels, starts, d - 1, rows, cols, bb, a, x + dx * h, y + dy * h,
+                                          quant)
+                    if sc > best:
+                        q = ns
+                        while q > 0 and cs[q - 1] > sc:
+                            cx[q], cy[q], cs[q] = cx[q - 1], cy[q - 1], cs[q - 1]
+                            q -= 1
+                        cx[q], cy[q], cs[q] = x + dx * h, y + dy * h, sc
+                        ns += 1
+                    elif sc > best - defer:
+                        buf, nd = _defer(buf, nd, a, x + dx * h, y + dy * h, d - 1, sc)
+            for q in range(ns):
+                st[0][sp], st[1][sp], st[2][sp], st[3][sp], st[4][sp] = a, cx[q], cy[q], d - 1, cs[q]
+                sp += 1
+    return best, ba, bx, by, k_break, buf[:nd]
 
 
 _bnb_fast = None  # holoslam.submaps._bnb_fast once _kernels() has run (the compiled functions call into it)
@@ -341,5 +412,8 @@ def _kernels():
         from holoslam.submaps import _bnb_fast as fast
 
         _bnb_fast = fast
-        _KERNELS = (nb.njit(cache=True, nogil=True)(_top_py), nb.njit(cache=True, nogil=True)(_descend_py))
+        jit = nb.njit(cache=True, nogil=True)
+        global _defer
+        _defer = jit(_defer)  # called by _descend_py: compiled first, as the global it reads
+        _KERNELS = (jit(_top_py), jit(_descend_py))
     return _KERNELS
