@@ -212,6 +212,8 @@ class _Window:
                                     self.cand.box, self.d_top, self.quant)
         a = self.cand.angles
         self.angle_step = abs(float(a[1] - a[0])) if a.size > 1 else math.pi
+        self.margin = -1.0  # best()'s margin: the nodes it set aside (aside) and where its top level stopped
+        self.aside, self.k_break = np.zeros((0, 5)), 0
 
     def _descend(self, min_score: float, centres=None, ex=(0, 0), first: bool = False, defer: float = -1.0,
                  resume: bool = False):
@@ -235,7 +237,8 @@ class _Window:
         ``margin`` >= 0 the nodes it prunes within ``margin`` of the best are kept: a second peak search with
         that margin then starts from them instead of from the top (the same result for less work)."""
         self.margin = margin
-        return self._descend(min_score, defer=margin)
+        # a hair more than the margin: rounding of (best - margin) n can never leave a node out
+        return self._descend(min_score, defer=margin + 1e-9 if margin >= 0 else -1.0)
 
     def indices(self, aTb: np.ndarray) -> tuple[int, int, int]:
         """The candidate (angle, x, y) indices of a pose on the window's lattice."""
@@ -256,7 +259,7 @@ class _Window:
         for k in range(max(0, int(count))):
             # the first resumes from what best() set aside when it kept that much (it holds every node that can
             # lead to a candidate above best - margin); later ones, with more boxes, start from the top
-            resume = k == 0 and 0 <= margin <= getattr(self, "margin", -1.0)
+            resume = k == 0 and 0 <= margin <= self.margin
             p = self._descend(best.score - margin, centres, ex, first, resume=resume)
             if p is None:
                 break
