@@ -19,8 +19,7 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from enum import Enum
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +27,6 @@ import numpy as np
 
 from holoslam import geometry as g
 from holoslam.errors import ConfigError, HoloslamError, IngestError
-from holoslam.submaps.frontend import FrontEndConfig
 
 __all__ = [
     "RunConfig",
@@ -64,104 +62,18 @@ def _noop(*_a: Any, **_k: Any) -> None:
 # ------------------------------------------------------------------------------------------------- config
 
 
-class SolverMethod(str, Enum):
-    LM = "lm"
-    ISAM2 = "isam2"
-
-
-@dataclass(frozen=True)
-class SolverConfig:
-    """How the graph is optimised: batch Levenberg-Marquardt or incremental iSAM2 (anchor by anchor),
-    outlier rejection (robust kernels + chi2 consistency rounds), marginal covariances of anchors/objects."""
-
-    method: SolverMethod = SolverMethod.LM
-    reject_outliers: bool = True
-    chi2_probability: float = 0.9999
-    covariances: bool = True
-    max_iterations: int = 100
-    # isam2: a variable is relinearised when its step exceeds this (m / rad). gtsam's 0.1 leaves the estimate
-    # millimetres off the batch optimum, enough to flip a chi2 outlier decision on the household log; 0.001
-    # gives the batch answer (1e-6 m) at the same cost on a household-sized graph
-    isam2_relinearize_threshold: float = 0.001
-
-
-@dataclass(frozen=True)
-class VisionConfig:
-    """Where object sightings come from: decoded images and/or the robot's own tag detections."""
-
-    use_images: bool = True
-    use_tags: bool = True
-    sigma_px: float = 0.5
-    base_frame: str = "base_link"
-    features: bool = True  # the object feature set of Eq. 13 (size, texture, colours, SIFT) from image crops
-
-
-@dataclass(frozen=True)
-class GridConfig:
-    """The global occupancy grid: resolution (m/cell) and how far a no-return beam clears free space."""
-
-    resolution: float = 0.05
-    no_return_clear_m: float = 3.0
-    margin_m: float = 0.5
-
-
-@dataclass(frozen=True)
-class TopologyConfig:
-    """Thinning topology: spurs shorter than ``prune_spur_m`` (or ``spur_clearance_factor`` x the clearance at
-    their junction) are pruned; ``close_cells`` closes gaps in obstacles (scan holes) before thinning."""
-
-    prune_spur_m: float = 0.3
-    spur_clearance_factor: float = 1.5
-    erode_cells: int = 0
-    close_cells: int = 1
-
-
-@dataclass(frozen=True)
-class HolographicConfig:
-    """Reach model of the robot (who can handle which object from where) and place detection thresholds."""
-
-    robot_radius_m: float = 0.25
-    arm_reach_m: float = 0.9
-    doorway_width_m: float = 1.3
-    min_room_area_m2: float = 1.0
-
-
-@dataclass(frozen=True)
-class PlanningConfig:
-    """Two-layer planning graph: built on the free space eroded by the robot radius (its configuration space),
-    with the nine-square split stopping at ``min_block_cells`` (mixed blocks smaller count as occupied)."""
-
-    robot_radius_m: float = 0.2
-    min_block_cells: int = 1
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """The whole run's configuration; every section has defaults, so an empty YAML file is valid."""
-
-    mapping: Path | None = None  # YAML topic-role mapping for custom topics (see holoslam.io.mcap)
-    vision: VisionConfig = field(default_factory=VisionConfig)
-    frontend: FrontEndConfig = field(default_factory=FrontEndConfig)
-    solver: SolverConfig = field(default_factory=SolverConfig)
-    grid: GridConfig = field(default_factory=GridConfig)
-    topology: TopologyConfig = field(default_factory=TopologyConfig)
-    holographic: HolographicConfig = field(default_factory=HolographicConfig)
-    planning: PlanningConfig = field(default_factory=PlanningConfig)
-    pictures: bool = True
-    results_mcap: bool = True
-
-
-def load_run_config(path: str | Path | None) -> RunConfig:
-    """The run configuration from a YAML file (safe loader), or the defaults when ``path`` is None."""
-    if path is None:
-        return RunConfig()
-    from holoslam.config import load_yaml_config
-
-    cfg = load_yaml_config(RunConfig, path)
-    if cfg.mapping is not None and not cfg.mapping.is_absolute():
-        cfg = dataclasses.replace(cfg, mapping=Path(path).parent / cfg.mapping)
-    return cfg
-
+# The configuration tree lives in holoslam.config; re-exported here for existing callers.
+from holoslam.config import (  # noqa: E402
+    GridConfig,
+    HolographicConfig,
+    PlanningConfig,
+    RunConfig,
+    SolverConfig,
+    SolverMethod,
+    TopologyConfig,
+    VisionConfig,
+    load_run_config,
+)
 
 # ------------------------------------------------------------------------------------------------- result
 
