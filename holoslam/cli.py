@@ -173,7 +173,8 @@ def cmd_tags(a: argparse.Namespace) -> int:
             what = (
                 f"label {item['label']['id']} ({item['label']['type']})" if item.get("label") else "foreign"
             )
-            print(f"{item['image']}: {what}: {item['payload']!r}")
+            corners = "corners refined" if item.get("refined") else "corners as decoded"
+            print(f"{item['image']}: {what}: {item['payload']!r} [{item['decoder']}, {corners}]")
     return EXIT_FAILED if failed and failed == len(a.images) else EXIT_OK
 
 

@@ -175,3 +175,58 @@ def test_read_image_file_channels_and_errors(tmp_path):
         read_image_file(tmp_path)
     with pytest.raises(ImageDecodeError, match="missing.png.*no such file"):
         read_image_file(tmp_path / "missing.png")
+
+
+def _printed(payload, px: float, **kw) -> np.ndarray:
+    """A code as printed and scanned flat: ``px`` pixels per module, quiet zone 4, slight blur."""
+    import cv2
+    import segno
+
+    q = segno.make(payload, micro=False, **kw)
+    m = np.asarray(q.matrix, np.uint8)
+    big = (np.kron(1 - np.pad(m, 4), np.ones((10, 10), np.uint8)) * 255).astype(np.uint8)
+    img = cv2.resize(big, None, fx=px / 10, fy=px / 10, interpolation=cv2.INTER_AREA)
+    return cv2.GaussianBlur(img, (0, 0), 0.5)
+
+
+def test_a_large_code_read_at_low_resolution_is_kept_unverified():
+    # version 17 (85 modules): at 1.6 px per module the fixed pattern does not verify at the decoder's
+    # corners, but the decoder read an error-corrected payload: the code is kept with its corners
+    text = "x" * 600
+    (d,) = detect_qr(_printed(text, 1.6, error="l"))
+    assert d.payload == text and d.n_modules == 85 and not d.verified and not d.refined
+    (d,) = detect_qr(_printed(text, 2.5, error="l"))  # versions above 10 verify and refine too
+    assert d.payload == text and d.n_modules == 85 and d.verified and d.refined
+
+
+def test_shift_jis_payload_comes_out_as_the_decoder_reads_it():
+    text = "ﾃﾞｻﾞｲﾝQR 測試"
+    img = _printed(text, 4, encoding="shift_jis")
+    (d,) = detect_qr(img)  # zxing-cpp and zbar both read it: one code, zxing-cpp's text
+    assert d.payload == text and d.decoder == "zxing" and not d.text_guessed
+    assert d.raw == text.encode("shift_jis") and d.content == "text"
+    if decoder_status()["zbar"] is None:
+        (z,) = detect_qr(img, (Decoder.ZBAR,))
+        assert z.raw == text.encode("shift_jis") and z.text_guessed  # zbar guessed the character set
+
+
+def test_eci_and_binary_payloads():
+    (d,) = detect_qr(_printed("Grüße", 4, encoding="iso-8859-1", eci=True))
+    assert d.payload == "Grüße" and d.raw == "Grüße".encode("iso-8859-1")
+    data = bytes([0, 1, 2, 250, 251, 0x80, 0x81, 0xFF])
+    (b,) = detect_qr(_printed(data, 4))
+    js = detection_to_json(b)
+    assert b.raw == data and b.content == "binary" and js["raw_hex"] == data.hex() and js["foreign"]
+    assert js["verified"] and js["refined"] and js["n_modules"] == 21
+    (t,) = detect_qr(_printed(PAYLOAD, 4))
+    assert detection_to_json(t)["raw_hex"] is None  # plain text: the payload is the bytes
+
+
+def test_a_code_is_kept_when_its_pattern_does_not_verify(monkeypatch):
+    import holoslam.vision.qr as qr
+
+    img, truth = render_label_view(PAYLOAD, 0.06, look_at_label(0.4, 10), K)
+    monkeypatch.setattr(qr, "orient_and_refine", lambda *a, **k: None)
+    (d,) = qr.detect_qr(img)
+    assert d.payload == PAYLOAD and d.is_label and not d.verified and not d.refined
+    assert np.linalg.norm(d.corners - truth, axis=1).max() < 1.5  # the decoder's corners, in the code's order

@@ -1,36 +1,43 @@
-"""Find and decode every QR code in an image: payload text and the four corners in the code's own order
-(TL, TR, BR, BL of the printed code: the finder patterns sit at TL, TR and BL) with sub-pixel accuracy.
+"""Find and decode every QR code in an image: the decoder's text, the payload bytes and the four corners in
+the code's own order (TL, TR, BR, BL of the printed code: the finder patterns sit at TL, TR and BL) with
+sub-pixel accuracy where the code allows it.
 
-Decoders (``Decoder``): zxing-cpp (``zxingcpp``), zbar (``pyzbar``, needs the libzbar shared library),
-OpenCV's ``QRCodeDetector`` and ``QRCodeDetectorAruco``. Only full-size QR codes are read (Micro QR, rMQR and
-other symbologies are disabled, so clutter cannot decode as a tiny code). The default, chosen by measurement
-(``benchmarks/bench_vision.py``, 320 rendered VGA views): zxing-cpp and zbar on every image, their codes
-merged (``Fallback.ALWAYS``). zxing-cpp alone reads labels with modules >= 3 px under blur, noise, dim light,
-gradients, JPEG, tilt up to 60 deg and any rotation, but missed 3 % at 4 px per module and 4 % of the codes
-in images holding three; zbar only where zxing-cpp found nothing (``Fallback.IF_EMPTY``, 2.3 ms per image)
-cannot recover those, since the image already had a decode. Both always: every label with modules >= 3 px
-decoded, three codes per image included, no false decode, corner error 0.04 px median after refinement, ~10 ms
-per VGA image (~100 images/s on one core, the goal is 30). On the simulator's household log zxing-cpp alone
-read 102 of 104 labels, both 104 of 104.
-OpenCV's detectors decoded fewer labels and were slower. Pass ``decoders=`` / ``fallback=`` to change it.
+Decoders (``Decoder``; adapters in ``holoslam.vision.qr_decoders``): zxing-cpp (``zxingcpp``), zbar
+(``pyzbar``'s bindings, needs the libzbar shared library), OpenCV's ``QRCodeDetector`` and
+``QRCodeDetectorAruco``. The default, chosen by measurement (``benchmarks/bench_vision.py``: rendered VGA
+views, the simulator's household log and real phone photos): zxing-cpp and zbar on every image, their codes
+merged (``Fallback.ALWAYS``). On rendered labels zxing-cpp alone missed 3 % at 4 px per module and 4 % of
+the codes in images holding three, which zbar reads; on real photos zbar reads a few codes zxing-cpp does not.
 
-Whatever decoder found a code, its corners are put in the code's order and refined the same way
-(``orient_and_refine``):
+Every code a decoder reads is kept: an error-corrected payload is evidence on its own. Codes found by two
+decoders at the same place are one code; the earlier decoder's reading is kept (zxing-cpp first: it applies
+ECI designators and guesses Shift-JIS the way the QR standard's readers do, where zbar may not). A code only
+zbar read whose bytes are neither ASCII nor UTF-8 (zbar guessed their character set) is read again by
+zxing-cpp from an upright crop of the place zbar found, and zxing-cpp's text is used when it can read it;
+otherwise zbar's text is kept with ``text_guessed`` set. The text is the decoder's own (``payload``), the
+payload bytes are kept (``raw``), and ``content`` says whether the payload is text or binary.
 
-1. the four corners are made clockwise on screen, then the rotation and the module count N (versions 1-10)
-   that best match the fixed pattern (three finder patterns with their separators, the two timing lines)
-   sampled through the corner homography are chosen; a code whose pattern does not match is dropped;
+Corners (``orient_and_refine``), whatever decoder found the code:
+
+1. the rotation and module count N that best match the fixed pattern (three finder patterns with their
+   separators, the two timing lines) sampled through the corner homography are chosen (zxing-cpp and zbar
+   report the code's order and zxing-cpp the version, so only what is unknown is searched; OpenCV's corners
+   are tried in every rotation and winding). When the pattern matches (``verified``),
 2. along the code's four borders, at every dark module next to the quiet zone (finder patterns and dark data
    modules), the 50 % crossing of the intensity profile across the border is found; a total least-squares line
    is fitted per border and the corners are the line intersections (exact under perspective, unbiased under
-   symmetric blur). Two passes; if refinement fails or runs away the decoder's oriented corners are kept.
+   symmetric blur). Two passes; if refinement fails or runs away the decoder's corners are kept.
 
-Payloads are untrusted text. A payload that is not UTF-8 or not a holoslam label (``holoslam.vision.label``)
-is returned with ``is_label=False`` and the reason in ``error``, never guessed at.
+A code whose pattern does not verify at the decoder's corners (large codes at about one pixel per module, a
+damaged finder) is kept with the decoder's corners, ``verified`` and ``refined`` false.
+
+Payloads are untrusted text. A payload that is not a holoslam label (``holoslam.vision.label``) is returned
+with ``is_label=False`` and the reason in ``error``, never guessed at.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -41,6 +48,14 @@ import numpy as np
 
 from holoslam.errors import PayloadError, VisionError
 from holoslam.vision.label import ObjectLabel, parse_label
+from holoslam.vision.qr_decoders import (
+    RawCode,
+    read_opencv,
+    read_zbar,
+    read_zxing,
+    zxing_on_quad,
+)
+from holoslam.vision.qr_decoders import decoder_status as decoder_status
 
 __all__ = [
     "Decoder",
@@ -78,10 +93,14 @@ DEFAULT_FALLBACK = Fallback.ALWAYS
 
 @dataclass(frozen=True, slots=True)
 class QrDetection:
-    """One decoded QR code. ``corners`` (4, 2) float64 pixels in the code's order TL, TR, BR, BL;
-    ``label`` is the parsed holoslam label or None; ``error`` says why the payload is not a label (foreign
-    text, not UTF-8), else None. ``n_modules`` is the code's side in modules (0 if unknown) and ``refined``
-    whether the corners were refined on the finder patterns."""
+    """One decoded QR code. ``payload`` is the decoder's text, ``raw`` the payload bytes, ``content`` what
+    they are ("text", "binary", "mixed", "gs1", ...: zxing-cpp's content type; "text" for other decoders);
+    ``corners`` (4, 2) float64 pixels in the code's order TL, TR, BR, BL; ``label`` is the parsed holoslam
+    label or None; ``error`` says why the payload is not a label (foreign text), else None. ``n_modules`` is
+    the code's side in modules (0 if unknown); ``verified`` whether the fixed pattern matched at the corners
+    (orientation and module count checked), ``refined`` whether the corners were then refined on the code's
+    borders; ``text_guessed`` whether the decoder had to guess the character set of bytes that are neither
+    ASCII nor UTF-8 (the text may be wrong; ``raw`` is exact)."""
 
     payload: str
     corners: np.ndarray
@@ -92,6 +111,9 @@ class QrDetection:
     n_modules: int = 0
     refined: bool = False
     raw: bytes = field(default=b"", repr=False, compare=False)
+    content: str = "text"
+    verified: bool = False
+    text_guessed: bool = False
 
     def __post_init__(self) -> None:
         c = np.ascontiguousarray(np.asarray(self.corners, dtype=np.float64).reshape(4, 2))
@@ -116,107 +138,11 @@ class QrDetection:
         return float(sides.mean() / self.n_modules)
 
 
-# ----------------------------------------------------------------------------------------------- backends
-
-
-def decoder_status() -> dict[str, str | None]:
-    """For each decoder, None if it can run here, else a one-line reason (e.g. libzbar missing)."""
-    out: dict[str, str | None] = {}
-    try:
-        import zxingcpp  # noqa: F401
-
-        out[Decoder.ZXING.value] = None
-    except ImportError as e:  # pragma: no cover - installed in the project env
-        out[Decoder.ZXING.value] = f"zxing-cpp not importable ({e}); pip install zxing-cpp"
-    try:
-        from pyzbar import pyzbar  # noqa: F401
-
-        out[Decoder.ZBAR.value] = None
-    except (ImportError, OSError) as e:  # libzbar0 missing raises ImportError from ctypes
-        out[Decoder.ZBAR.value] = f"pyzbar/libzbar not available ({e}); apt install libzbar0"
-    import cv2
-
-    out[Decoder.OPENCV.value] = None if hasattr(cv2, "QRCodeDetector") else "cv2.QRCodeDetector missing"
-    out[Decoder.OPENCV_ARUCO.value] = (
-        None if hasattr(cv2, "QRCodeDetectorAruco") else "cv2.QRCodeDetectorAruco missing"
-    )
-    return out
-
-
-def _raw_zxing(gray: np.ndarray) -> list[tuple[bytes, np.ndarray, int]]:
-    import zxingcpp
-
-    res = zxingcpp.read_barcodes(
-        gray, formats=zxingcpp.BarcodeFormat.QRCode, try_rotate=True, try_downscale=True, try_invert=False
-    )
-    out = []
-    for b in res:
-        p = b.position
-        c = np.array(
-            [
-                [p.top_left.x, p.top_left.y],
-                [p.top_right.x, p.top_right.y],
-                [p.bottom_right.x, p.bottom_right.y],
-                [p.bottom_left.x, p.bottom_left.y],
-            ],
-            float,
-        )
-        # zxing puts corners on pixel boundaries (pixel centre at +0.5); holoslam uses OpenCV's centres
-        c -= 0.5
-        try:
-            n = 17 + 4 * int(b.extra.get("Version", 0))
-        except (TypeError, ValueError, AttributeError):
-            n = 0
-        out.append((bytes(b.bytes), c, n if n > 17 else 0))
-    return out
-
-
-def _raw_zbar(gray: np.ndarray) -> list[tuple[bytes, np.ndarray, int]]:
-    from pyzbar import pyzbar
-
-    res = pyzbar.decode(gray, symbols=[pyzbar.ZBarSymbol.QRCODE])
-    out = []
-    for r in res:
-        poly = np.array([(p.x, p.y) for p in r.polygon], float)
-        if poly.shape[0] != 4:
-            if poly.shape[0] < 4:
-                continue
-            import cv2
-
-            hull = cv2.approxPolyDP(poly.astype(np.float32), 2.0, True).reshape(-1, 2)
-            if hull.shape[0] != 4:
-                continue
-            poly = hull.astype(float)
-        out.append((bytes(r.data), poly, 0))
-    return out
-
-
-def _raw_opencv(gray: np.ndarray, aruco: bool) -> list[tuple[bytes, np.ndarray, int]]:
-    import cv2
-
-    det = cv2.QRCodeDetectorAruco() if aruco else cv2.QRCodeDetector()
-    try:
-        ok, texts, points, straight = det.detectAndDecodeMulti(gray)
-    except cv2.error:  # OpenCV raises on payloads that are not UTF-8: nothing usable from this image
-        return []
-    if not ok or points is None:
-        return []
-    out = []
-    for i, t in enumerate(texts):
-        if not t:
-            continue
-        n = 0
-        if straight is not None and i < len(straight) and straight[i] is not None:
-            n = int(np.asarray(straight[i]).shape[0])
-        out.append((t.encode("utf-8"), np.asarray(points[i], float).reshape(4, 2), n))
-    return out
-
-
 _BACKENDS = {
-    Decoder.ZXING: _raw_zxing,
-    Decoder.ZBAR: _raw_zbar,
-    Decoder.OPENCV: lambda g: _raw_opencv(g, False),
-    Decoder.OPENCV_ARUCO: lambda g: _raw_opencv(g, True),
+    Decoder.ZXING: read_zxing,
+    Decoder.ZBAR: read_zbar,
+    Decoder.OPENCV: lambda g: read_opencv(g, False),
+    Decoder.OPENCV_ARUCO: lambda g: read_opencv(g, True),
 }
 
 
@@ -258,7 +184,12 @@ def _pattern(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(pts).astype(np.float64) + 0.5, np.concatenate(dark)
 
 
-_PATTERNS = {n: _pattern(n) for n in range(21, 21 + 4 * 10, 4)}
+MODULE_COUNTS = tuple(range(21, 178, 4))  # versions 1-40
+
+
+@functools.cache
+def _fixed_pattern(n: int) -> tuple[np.ndarray, np.ndarray]:
+    return _pattern(n)
 
 
 def _finder_corners(n: int) -> np.ndarray:
@@ -288,28 +219,56 @@ def _apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def orient_and_refine(
-    gray: np.ndarray, corners: np.ndarray, n_modules: int = 0, refine: bool = True, min_agreement: float = 0.8
+    gray: np.ndarray,
+    corners: np.ndarray,
+    n_modules: int = 0,
+    refine: bool = True,
+    min_agreement: float = 0.8,
+    ordered: bool = False,
 ) -> tuple[np.ndarray, int, bool] | None:
-    """Put rough corners (any start, either winding) in the code's order TL, TR, BR, BL by matching the
-    finder/timing pattern, find the module count, and refine the corners on the finder patterns.
+    """Put rough corners in the code's order TL, TR, BR, BL by matching the finder/timing pattern, find the
+    module count, and refine the corners on the code's borders. ``ordered``: the corners are already in the
+    code's order (zxing-cpp, zbar), so only the module count is searched (when ``n_modules`` is 0); else any
+    start and either winding is tried.
 
     Returns ``(corners (4, 2), n_modules, refined)`` or None when no rotation/module count matches at least
-    ``min_agreement`` of the fixed pattern (not a QR code where the decoder said)."""
+    ``min_agreement`` of the fixed pattern (not verifiable at these corners)."""
 
     c = np.asarray(corners, np.float64).reshape(4, 2)
-    x, y = c[:, 0], c[:, 1]
-    if np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0:  # counter-clockwise on screen: reverse
-        c = c[[0, 3, 2, 1]]
-    gray_f = gray.astype(np.float32)
-    ns = [n_modules] if n_modules in _PATTERNS else list(_PATTERNS)
+    if not ordered:
+        x, y = c[:, 0], c[:, 1]
+        if np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0:  # counter-clockwise on screen: reverse
+            c = c[[0, 3, 2, 1]]
+    if not np.all(np.isfinite(c)):
+        return None
+    # work on the code's neighbourhood only (the profiles reach 1.6 modules outside the code)
+    side = float(np.max(np.linalg.norm(c - np.roll(c, -1, axis=0), axis=1)))
+    pad = 0.3 * side + 4.0
+    h, w = gray.shape[:2]
+    x0, y0 = (max(0, int(np.floor(v))) for v in c.min(axis=0) - pad)
+    x1, y1 = int(min(w, np.ceil(c[:, 0].max() + pad) + 1)), int(min(h, np.ceil(c[:, 1].max() + pad) + 1))
+    if x1 - x0 < 4 or y1 - y0 < 4:
+        return None
+    off = np.array([x0, y0], np.float64)
+    res = _orient_and_refine(gray[y0:y1, x0:x1].astype(np.float32), c - off, n_modules, refine,
+                             min_agreement, ordered)
+    if res is None:
+        return None
+    return res[0] + off, res[1], res[2]
+
+
+def _orient_and_refine(gray_f: np.ndarray, c: np.ndarray, n_modules: int, refine: bool, min_agreement: float,
+                       ordered: bool) -> tuple[np.ndarray, int, bool] | None:
+    ns = [n_modules] if n_modules in MODULE_COUNTS else list(MODULE_COUNTS)
     best = (-1.0, 0, 0, None)
-    for rot in range(4):
+    for rot in range(1 if ordered else 4):
         cr = np.roll(c, -rot, axis=0)
         for n in ns:
-            pts, dark = _PATTERNS[n]
+            pts, dark = _fixed_pattern(n)
             H = _homography(np.array([[0, 0], [n, 0], [n, n], [0, n]], float), cr)
             v = _sample(gray_f, _apply_h(H, pts))
-            lo, hi = np.percentile(v, (5, 95))
+            srt = np.sort(v)  # 5th and 95th percentiles (np.percentile costs 20x more per call)
+            lo, hi = srt[int(0.05 * (len(srt) - 1))], srt[int(0.95 * (len(srt) - 1))]
             if hi - lo < 1e-6:
                 continue
             agree = float(np.mean((v < 0.5 * (lo + hi)) == dark))
@@ -354,7 +313,7 @@ def _refine_edges(gray_f: np.ndarray, H: np.ndarray, n: int) -> np.ndarray | Non
         (np.column_stack([along, full]), np.array([0.0, 1.0])),
         (np.column_stack([zero, along]), np.array([-1.0, 0.0])),
     ]
-    fpts, fdark = _PATTERNS[n]
+    fpts, fdark = _fixed_pattern(n)
     fv = _sample(gray_f, _apply_h(H, fpts))
     g_dark, g_light = np.median(fv[fdark]), np.median(fv[~fdark])
     g_mid = 0.5 * (g_dark + g_light)
@@ -420,33 +379,32 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     raise VisionError(f"image shape {a.shape} is not (H, W), (H, W, 3) or (H, W, 4)")
 
 
-def _make_detection(raw: bytes, corners: np.ndarray, decoder: Decoder, n: int, refined: bool) -> QrDetection:
+def _make_detection(code: RawCode, corners: np.ndarray, decoder: str, n: int, refined: bool,
+                    verified: bool) -> QrDetection:
+    common = dict(n_modules=n, refined=refined, raw=code.raw, content=code.content, verified=verified,
+                  text_guessed=code.text_guessed)
     try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        return QrDetection(
-            raw.decode("utf-8", errors="replace"),
-            corners,
-            decoder.value,
-            False,
-            None,
-            "payload is not UTF-8 text: not a holoslam label",
-            n,
-            refined,
-            raw,
-        )
-    try:
-        label = parse_label(text)
+        label = parse_label(code.text)
     except PayloadError as e:
-        return QrDetection(text, corners, decoder.value, False, None, str(e), n, refined, raw)
-    return QrDetection(text, corners, decoder.value, True, label, None, n, refined, raw)
+        return QrDetection(code.text, corners, decoder, False, None, str(e), **common)
+    return QrDetection(code.text, corners, decoder, True, label, None, **common)
 
 
-def _same_code(a: QrDetection, raw: bytes, corners: np.ndarray) -> bool:
-    if a.raw != raw:
-        return False
-    size = float(np.mean(np.linalg.norm(a.corners - np.roll(a.corners, -1, axis=0), axis=1)))
-    return float(np.linalg.norm(a.centre - _diagonal_intersection(corners))) < 0.5 * size
+def _clockwise(c: np.ndarray) -> np.ndarray:
+    x, y = c[:, 0], c[:, 1]
+    return c[[0, 3, 2, 1]] if np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0 else c
+
+
+def _same_place(a: np.ndarray, b: np.ndarray) -> bool:
+    """Two decoders' quadrilaterals of one code: either centre lies inside the other quadrilateral."""
+    import cv2
+
+    for p, q in ((a, b), (b, a)):
+        ctr = _diagonal_intersection(q)
+        if np.all(np.isfinite(ctr)) and cv2.pointPolygonTest(p.astype(np.float32).reshape(-1, 1, 2),
+                                                              (float(ctr[0]), float(ctr[1])), False) >= 0:
+            return True
+    return False
 
 
 def detect_qr(
@@ -455,17 +413,18 @@ def detect_qr(
     fallback: Fallback | None = None,
     refine: bool = True,
 ) -> list[QrDetection]:
-    """Every QR code in ``image`` (grey or BGR uint8), as ``QrDetection`` records.
+    """Every QR code in ``image`` (grey or BGR uint8) that a decoder reads, as ``QrDetection`` records.
 
     ``decoders`` run in order (default ``DEFAULT_DECODERS``); the ones after the first run according to
-    ``fallback`` (default ``DEFAULT_FALLBACK``) and their codes are merged (same payload, same place = one
-    code). A decoder that cannot run here (e.g. libzbar missing) is skipped with one ``RuntimeWarning`` naming
-    it; the others go on. Codes whose finder pattern does not verify at the decoder's corners are dropped.
-    """
+    ``fallback`` (default ``DEFAULT_FALLBACK``) and their codes are merged (the same place = one code; the
+    earlier decoder's reading is kept). A decoder that cannot run here (e.g. libzbar missing) is skipped with
+    one ``RuntimeWarning`` naming it; the others go on. A code found by a decoder other than zxing-cpp whose
+    text was guessed is read again by zxing-cpp (when it is among ``decoders``) from an upright crop."""
     gray = to_gray(image)
     decoders = DEFAULT_DECODERS if decoders is None else tuple(Decoder(d) for d in decoders)
     fallback = DEFAULT_FALLBACK if fallback is None else Fallback(fallback)
     status = decoder_status()
+    zxing_here = Decoder.ZXING in decoders and status.get(Decoder.ZXING.value) is None
     out: list[QrDetection] = []
     for i, dec in enumerate(decoders):
         if i > 0 and (fallback is Fallback.NEVER or (fallback is Fallback.IF_EMPTY and out)):
@@ -474,16 +433,25 @@ def detect_qr(
         if why is not None:
             warnings.warn(f"QR decoder {dec.value} skipped: {why}", RuntimeWarning, stacklevel=2)
             continue
-        for raw, corners, n in _BACKENDS[dec](gray):
-            if any(_same_code(d, raw, corners) for d in out):
+        for code in _BACKENDS[dec](gray):
+            if not np.all(np.isfinite(code.corners)):
                 continue
-            res = orient_and_refine(gray, corners, n, refine=refine)
-            if res is None:
+            if any(_same_place(d.corners, code.corners) for d in out):
                 continue
-            c, n2, refined = res
-            if any(_same_code(d, raw, c) for d in out):
-                continue
-            out.append(_make_detection(raw, c, dec, n2, refined))
+            name = dec.value
+            if dec is not Decoder.ZXING and zxing_here and (code.text_guessed or not code.n_modules):
+                # zxing-cpp missed it in the whole image; on an upright crop it may read it (its text, the
+                # version, the code's order)
+                again = zxing_on_quad(gray, code.corners if code.ordered else _clockwise(code.corners))
+                if again is not None and (again.raw == code.raw or code.text_guessed):
+                    code, name = again, f"{dec.value}+{Decoder.ZXING.value}"
+            res = orient_and_refine(gray, code.corners, code.n_modules, refine=refine, ordered=code.ordered)
+            if res is None:  # not verifiable here (about 1 px per module, damaged finder): the decode stands
+                c = code.corners if code.ordered else _clockwise(code.corners)
+                out.append(_make_detection(code, c, name, code.n_modules, False, False))
+            else:
+                c, n, refined = res
+                out.append(_make_detection(code, c, name, n, refined, True))
     return out
 
 
@@ -500,11 +468,14 @@ def decode_image_file(
 
 
 def detection_to_json(det: QrDetection, image: str | None = None) -> dict:
-    """The JSON form the CLI prints: ``{"image", "payload", "corners", "decoder", "label", "foreign",
-    "error"}``."""
+    """The JSON form the CLI prints: ``{"image", "payload", "corners", "decoder", "label", "foreign", "error",
+    "content", "raw_hex", "text_guessed", "n_modules", "verified", "refined"}``; ``raw_hex`` holds the payload
+    bytes when they are not plain text (``content`` other than "text", or a guessed character set), else
+    None."""
     label = None
     if det.label is not None:
         label = {"id": det.label.object_id, "type": det.label.kind, "attributes": dict(det.label.attributes)}
+    exact_text = det.content == "text" and not det.text_guessed
     return {
         "image": image,
         "payload": det.payload,
@@ -513,4 +484,10 @@ def detection_to_json(det: QrDetection, image: str | None = None) -> dict:
         "label": label,
         "foreign": not det.is_label,
         "error": det.error,
+        "content": det.content,
+        "raw_hex": None if exact_text else det.raw.hex(),
+        "text_guessed": det.text_guessed,
+        "n_modules": det.n_modules,
+        "verified": det.verified,
+        "refined": det.refined,
     }
