@@ -207,7 +207,8 @@ class VisionConfig:
     use_images: bool = True
     use_tags: bool = True
     sigma_px: float = 0.5
-    base_frame: str = "base_link"
+    # the robot's base frame; "" = the log's: the mapping's frames.base, else the odometry's child frame
+    base_frame: str = ""
     features: bool = True  # the object feature set of Eq. 13 (size, texture, colours, SIFT) from image crops
 
 

@@ -273,7 +273,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         with _stage(progress, timings, "vision"):
             observations, vrep = observations_from_log(
                 log,
-                base_frame=cfg.vision.base_frame,
+                base_frame=cfg.vision.base_frame or log.base_frame,
                 sigma_px=cfg.vision.sigma_px,
                 use_images=cfg.vision.use_images,
                 use_tags=cfg.vision.use_tags,

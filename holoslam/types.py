@@ -288,6 +288,8 @@ class LogData:
     tags: tuple[TagSighting, ...] = ()
     ground_truth: tuple[GroundTruthPose, ...] = ()
     world_json: str | None = None
+    # the robot's base frame: the mapping's frames.base, else the odometry's child frame (set by ingestion)
+    base_frame: str = "base_link"
 
     def odometry_arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """(stamps_ns (N,) int64, odomTb (N, 3) float64)."""

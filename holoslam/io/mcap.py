@@ -17,6 +17,8 @@ A channel's role comes from its schema name (ROS 2 ``pkg/msg/Type``, ROS 1 ``pkg
 ``foxglove.Type`` in protobuf or JSON), see ``ROLE_BY_SCHEMA``; ``PoseStamped``-like poses are ground truth on
 topics containing ``ground_truth`` and odometry on topics containing ``odom``. A YAML mapping overrides it::
 
+    frames:
+      base: base_footprint            # the robot's base frame (default: the odometry's child frame)
     topics:
       /wheel/odom: ignored            # a role name: odometry heading scan image camera_info tf tf_static tags
       /odom_fused: odometry           #   ground_truth ground_truth_world ignored
@@ -27,8 +29,23 @@ topics containing ``ground_truth`` and odometry on topics containing ``odom``. A
 
 Custom fields: heading ``yaw sigma``; odometry / ground_truth ``x y yaw``; scan ``ranges angle_min
 angle_increment range_min range_max``; every role ``stamp frame_id``. Units: angles ``rad``/``deg``, lengths
-``m``/``cm``/``mm``. When two topics could fill one role (odometry, heading, scan, image, camera_info, tags,
-ground_truth, ground_truth_world) reading stops with an IngestError naming both and the mapping line that fixes
+``m``/``cm``/``mm``.
+
+Frames
+------
+The robot's base frame is the mapping's ``frames: {base: NAME}``, else the odometry's child frame (``base_link``
+when no odometry names one); ``LogData.base_frame`` and ``IngestReport.base_frame`` carry it. A laser whose z
+axis points down in the base frame (mounted upside down) has its scans mirrored into a level frame
+``<laser>_level`` (``level_scans``): ``read_log`` does it, with a note in ``IngestReport.levelled``.
+
+Several topics for one role
+---------------------------
+When several topics could fill one role (odometry, heading, scan, image, camera_info, tags, ground_truth,
+ground_truth_world), topics the mapping names for it come first, then rules pick one (``_ROLE_RULES``): the most
+complete (``COMPLETE_FRACTION`` of the most messages), the unfiltered topic, the compressed image beside a raw
+one, a colour camera over a depth camera, odometry over a bare pose, the most messages. The choice is a
+``RoleChoice`` in the report and the summary. When no rule tells them apart an optional role takes the first by
+name (reported); odometry and scan (what a run needs) stop with an IngestError naming the mapping line that fixes
 it.
 
 Time
@@ -108,6 +125,10 @@ __all__ = [
     "ROLE_BY_SCHEMA",
     "EXCLUSIVE_ROLES",
     "CLOCK_THRESHOLD_NS",
+    "COMPLETE_FRACTION",
+    "RoleChoice",
+    "level_scans",
+    "mirrored_scan",
 ]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -115,6 +136,9 @@ CLOCK_THRESHOLD_NS = 1_000_000_000
 CLOCK_WINDOW = 8
 GAP_FACTOR = 5.0
 MOSTLY_INVALID = 0.5  # a scan with fewer valid beams than this fraction is "mostly invalid"
+# Of several topics for one role, those with at least this fraction of the most messages are "complete" (a
+# compressed stream that dropped a few frames is as complete as its raw twin); the rest are not used.
+COMPLETE_FRACTION = 0.9
 RUN_ROLES = (Role.ODOMETRY, Role.SCAN)  # what a SLAM run needs at least
 
 EXCLUSIVE_ROLES = frozenset(
@@ -209,6 +233,7 @@ class LogMapping:
 
     rules: tuple[TopicRule, ...]
     source: str = "<mapping>"
+    base_frame: str | None = None  # ``frames: {base: NAME}``; None: the odometry's child frame
 
     def get(self, topic: str) -> TopicRule | None:
         for r in self.rules:
@@ -262,11 +287,12 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
         raise ConfigError(
             f"{name}: a mapping is a YAML dictionary with a 'topics:' key, got {type(data).__name__}"
         )
-    extra = set(data) - {"topics"}
+    extra = set(data) - {"topics", "frames"}
     if extra:
         raise ConfigError(
-            f"{name}: unknown key(s) {sorted(map(str, extra))}; the only top-level key is 'topics'"
+            f"{name}: unknown key(s) {sorted(map(str, extra))}; the top-level keys are 'topics' and 'frames'"
         )
+    base_frame = _mapping_frames(name, data.get("frames"))
     topics = data.get("topics") or {}
     if not isinstance(topics, dict):
         raise ConfigError(f"{name}: 'topics' must map topic names to a role or to {{role, fields, units}}")
@@ -316,7 +342,26 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
                 line=lines.get(topic, 0),
             )
         )
-    return LogMapping(tuple(rules), name)
+    return LogMapping(tuple(rules), name, base_frame)
+
+
+def _mapping_frames(name: str, frames: Any) -> str | None:
+    """The ``frames:`` section of a mapping -> the base frame it names (None when it names none)."""
+    if frames is None:
+        return None
+    if not isinstance(frames, dict):
+        raise ConfigError(
+            f"{name}: 'frames' must map 'base' to a frame name, e.g. 'frames: {{base: base_footprint}}'"
+        )
+    bad = set(frames) - {"base"}
+    if bad:
+        raise ConfigError(f"{name}: unknown key(s) {sorted(map(str, bad))} under 'frames'; allowed: base")
+    base = frames.get("base")
+    if base is None:
+        return None
+    if not isinstance(base, str) or not base.strip("/ "):
+        raise ConfigError(f"{name}: frames.base must be a frame name (like base_footprint), got {base!r}")
+    return base.strip().lstrip("/")
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -819,8 +864,11 @@ def _scan_channels(files: list[Path]) -> tuple[dict[str, _Topic], bool, int, int
     return topics, indexed, start or 0, end or 0, notes
 
 
-def _assign_roles(topics: dict[str, _Topic], mapping: LogMapping | None) -> list[str]:
-    """Give each topic its role and status; return the problems (ambiguities) found."""
+def _assign_roles(
+    topics: dict[str, _Topic], mapping: LogMapping | None
+) -> tuple[list[RoleChoice], list[str]]:
+    """Give each topic its role and status; return the choices made among topics of one role and the problems
+    (a role a run needs offered by topics no rule tells apart)."""
     if mapping is not None:
         for rule in mapping.rules:
             if rule.topic not in topics:
@@ -851,24 +899,136 @@ def _assign_roles(topics: dict[str, _Topic], mapping: LogMapping | None) -> list
             )
         else:
             t.status = "used"
-    problems = []
+    choices, problems = _choose_roles(topics)
+    return choices, problems
+
+
+@dataclass(frozen=True, slots=True)
+class RoleChoice:
+    """Several topics could fill one role: the one used, the others left unused, and the rule that decided."""
+
+    role: str
+    topic: str
+    others: tuple[str, ...]
+    rule: str
+
+    def text(self) -> str:
+        return (
+            f"{self.role}: {self.topic} used, not {', '.join(self.others)} ({self.rule}); a mapping line "
+            f"'{self.others[0]}: {self.role}' with '{self.topic}: ignored' chooses another"
+        )
+
+
+_ODOMETRY_TYPES = frozenset({"nav_msgs/Odometry", "foxglove.Odometry"})
+_COMPRESSED_TYPES = frozenset({"sensor_msgs/CompressedImage", "foxglove.CompressedImage"})
+
+
+def _schema_of(t: _Topic) -> str:
+    return normalize_schema_name(t.schema.name) if t.schema is not None else ""
+
+
+def _filtered(role: Role, t: _Topic) -> int:
+    return int("filter" in t.topic.lower())
+
+
+def _raw_image(role: Role, t: _Topic) -> int:
+    return int(role is Role.IMAGE and _schema_of(t) not in _COMPRESSED_TYPES)
+
+
+def _depth(role: Role, t: _Topic) -> int:
+    return int(role in (Role.IMAGE, Role.CAMERA_INFO) and "depth" in t.topic.lower())
+
+
+def _poorer_pose(role: Role, t: _Topic) -> int:
+    n = _schema_of(t)
+    if role not in (Role.ODOMETRY, Role.GROUND_TRUTH) or n in _ODOMETRY_TYPES:
+        return 0
+    return 1 if "Covariance" in n else 2
+
+
+# The rules that pick one topic when several could fill a role, in order: each keeps the candidates with the
+# lowest key and the next rule decides among those. (name, key(role, topic), why)
+_ROLE_RULES: tuple[tuple[str, Callable[[Role, _Topic], int], str], ...] = (
+    (
+        "unfiltered",
+        _filtered,
+        "the unfiltered topic: holoslam filters and fuses itself (a filtered scan lost beams, filtered odometry "
+        "already fused the IMU)",
+    ),
+    (
+        "compressed",
+        _raw_image,
+        "the compressed image beside a raw one: the same camera in a fraction of the memory",
+    ),
+    ("colour", _depth, "a colour camera rather than a depth camera"),
+    ("richer", _poorer_pose, "the richer message type (odometry with covariance and twist)"),
+)
+
+
+def _pick(role: Role, candidates: list[_Topic]) -> tuple[list[_Topic], str]:
+    """The candidates left after the rules (one when a rule decided) and the reasons of the rules that acted."""
+    most = max(t.count for t in candidates)
+    keep = [t for t in candidates if t.count >= COMPLETE_FRACTION * most]
+    why = []
+    if len(keep) < len(candidates):
+        why.append(
+            f"the most complete: {most} messages against {max(t.count for t in candidates if t not in keep)}"
+        )
+    for _name, key, reason in _ROLE_RULES:
+        if len(keep) == 1:
+            break
+        best = min(key(role, t) for t in keep)
+        kept = [t for t in keep if key(role, t) == best]
+        if len(kept) < len(keep):
+            why.append(reason)
+        keep = kept
+    if len(keep) > 1:
+        top = max(t.count for t in keep)
+        kept = [t for t in keep if t.count == top]
+        if len(kept) < len(keep):
+            why.append(f"the most messages ({top})")
+        keep = kept
+    return sorted(keep, key=lambda t: t.topic), "; ".join(why)
+
+
+def _choose_roles(topics: dict[str, _Topic]) -> tuple[list[RoleChoice], list[str]]:
+    """One topic per exclusive role. Topics the mapping names for a role come first; among several candidates
+    ``_pick``'s rules decide. When no rule decides, an optional role takes the first topic by name (reported);
+    a role a SLAM run needs (odometry, scan) is a problem naming the mapping line that fixes it."""
     by_role: dict[Role, list[_Topic]] = {}
     for t in topics.values():
         if t.role in EXCLUSIVE_ROLES and t.status == "used":
             by_role.setdefault(t.role, []).append(t)
+    choices: list[RoleChoice] = []
+    problems: list[str] = []
     for role, ts in by_role.items():
-        if len(ts) > 1:
-            names = " and ".join(f"'{t.topic}' ({t.schema.name if t.schema else '?'})" for t in ts)
-            keep = [t for t in ts if t.rule is not None]
-            drop = [t for t in ts if t.rule is None] or ts[1:]
-            fix = "; ".join(f"'  {t.topic}: ignored'" for t in drop)
-            problems.append(
-                f"two topics could fill the {role.value} role: {names}. Keep one: add under 'topics:' of a mapping "
-                f"file the line {fix}" + (f" (kept by the mapping: {keep[0].topic})" if keep else "")
-            )
-            for t in ts:
-                t.status = f"ambiguous: {role.value} is also offered by another topic"
-    return problems
+        if len(ts) < 2:
+            continue
+        named = [t for t in ts if t.rule is not None]
+        pool = named or ts
+        keep, why = _pick(role, pool) if len(pool) > 1 else (pool, "")
+        if named and len(named) < len(ts):
+            why = "; ".join(x for x in ("named in the mapping", why) if x)
+        if len(keep) > 1:
+            if role in RUN_ROLES:
+                names = " and ".join(f"'{t.topic}' ({t.schema.name if t.schema else '?'})" for t in keep)
+                fix = "; ".join(f"'  {t.topic}: ignored'" for t in keep[1:])
+                problems.append(
+                    f"two topics could fill the {role.value} role and no rule tells them apart: {names}. Keep one: "
+                    f"add under 'topics:' of a mapping file the line {fix}"
+                )
+                for t in keep:
+                    t.status = f"ambiguous: {role.value} is also offered by another topic"
+                continue
+            why = "; ".join(x for x in (why, "no rule tells the rest apart: the first by name") if x)
+        chosen = keep[0]
+        others = tuple(sorted(t.topic for t in ts if t is not chosen))
+        for t in ts:
+            if t is not chosen:
+                t.status = f"unused: the {role.value} role comes from {chosen.topic}"
+        choices.append(RoleChoice(role.value, chosen.topic, others, why))
+    choices.sort(key=lambda c: c.role)
+    return choices, problems
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -890,6 +1050,7 @@ class LogSummary:
     missing: tuple[str, ...]  # roles a SLAM run needs that no topic fills
     problems: tuple[str, ...]
     notes: tuple[str, ...] = ()
+    choices: tuple[RoleChoice, ...] = ()  # roles several topics could fill: which one is used and why
 
 
 def inspect_log(path: str | Path, mapping: str | Path | dict | LogMapping | None = None) -> LogSummary:
@@ -907,7 +1068,7 @@ def inspect_log(path: str | Path, mapping: str | Path | dict | LogMapping | None
             tmp.cleanup()
     if note:
         notes = [note, *notes]
-    problems = _assign_roles(topics, m)
+    choices, problems = _assign_roles(topics, m)
     dur = (end - start) / 1e9 if end > start else 0.0
     chans = []
     for t in sorted(topics.values(), key=lambda t: t.topic):
@@ -953,6 +1114,7 @@ def inspect_log(path: str | Path, mapping: str | Path | dict | LogMapping | None
         missing=missing,
         problems=tuple(problems),
         notes=tuple(notes),
+        choices=tuple(choices),
     )
 
 
@@ -983,7 +1145,12 @@ def summary_to_dict(s: LogSummary) -> dict[str, Any]:
         "missing": list(s.missing),
         "problems": list(s.problems),
         "notes": list(s.notes),
+        "choices": [_choice_dict(c) for c in s.choices],
     }
+
+
+def _choice_dict(c: RoleChoice) -> dict[str, Any]:
+    return {"role": c.role, "topic": c.topic, "others": list(c.others), "rule": c.rule}
 
 
 def _table(rows: list[list[str]]) -> list[str]:
@@ -1017,6 +1184,8 @@ def format_summary(s: LogSummary) -> str:
     out.append("a run would use: " + (", ".join(f"{r}={t}" for r, t in s.uses) or "nothing"))
     if s.missing:
         out.append("missing for a SLAM run: " + ", ".join(s.missing))
+    for c in s.choices:
+        out.append(f"chosen: {c.text()}")
     for p in s.problems:
         out.append(f"problem: {p}")
     for n in s.notes:
@@ -1443,6 +1612,10 @@ class IngestReport:
     warnings: tuple[str, ...]
     start_ns: int
     end_ns: int
+    base_frame: str = "base_link"  # the robot's base frame the run uses
+    base_frame_from: str = ""  # where it comes from: "the mapping", "the odometry's child frame", "default"
+    choices: tuple[RoleChoice, ...] = ()  # roles several topics could fill: which one is used and why
+    levelled: tuple[str, ...] = ()  # lasers not mounted upright whose scans were projected into a level frame
 
     @property
     def ok(self) -> bool:
@@ -1485,6 +1658,10 @@ def report_to_dict(r: IngestReport) -> dict[str, Any]:
         "rebased": list(r.rebased),
         "missing_transforms": list(r.missing_transforms),
         "warnings": list(r.warnings),
+        "base_frame": r.base_frame,
+        "base_frame_from": r.base_frame_from,
+        "choices": [_choice_dict(c) for c in r.choices],
+        "levelled": list(r.levelled),
         "channels": [
             {
                 k: (list(map(list, getattr(c, k))) if k == "gaps" else getattr(c, k))
@@ -1555,6 +1732,9 @@ def format_report(r: IngestReport) -> str:
     for x in r.lost:
         span = f"{x.start_ns / 1e9:.3f}..{x.end_ns / 1e9:.3f} s" if x.end_ns else "time range unknown"
         out.append(f"lost: {Path(x.file).name} byte {x.offset}: {span}: {x.reason}")
+    out.append(f"base frame: {r.base_frame}" + (f" ({r.base_frame_from})" if r.base_frame_from else ""))
+    out.extend(f"chosen: {c.text()}" for c in r.choices)
+    out.extend(f"levelled: {m}" for m in r.levelled)
     out.extend(f"re-based: {m}" for m in r.rebased)
     out.extend(f"missing transform: {m}" for m in r.missing_transforms)
     out.extend(f"warning: {w}" for w in r.warnings)
@@ -1603,7 +1783,7 @@ class LogReader:
         self._read_files, self._tmp, note = _sqlite_to_mcap(self.files)
         try:
             topics, _indexed, _s, _e, _notes = _scan_channels(self._read_files)
-            problems = _assign_roles(topics, self.mapping)
+            choices, problems = _assign_roles(topics, self.mapping)
             if problems:
                 raise IngestError(f"{path}: " + " | ".join(problems))
         except BaseException:
@@ -1617,7 +1797,11 @@ class LogReader:
         self._files: list[_FileState] = []
         self._edges: dict[str, str] = {}  # child -> parent
         self._sensor_frames: dict[str, str] = {}  # frame -> topic
-        self._base_frame = "base_link"
+        self._choices = tuple(choices)
+        # the robot's base frame: the mapping's frames.base, else the odometry's child frame (see _note_frames)
+        self._base_frame_fixed = self.mapping is not None and self.mapping.base_frame is not None
+        self._base_frame = (self.mapping.base_frame if self._base_frame_fixed else None) or "base_link"
+        self._base_frame_seen = self._base_frame_fixed
         self._start: int | None = None
         self._end: int | None = None
         self._done = False
@@ -1831,7 +2015,8 @@ class LogReader:
             if r.child not in self._edges:
                 self._edges[r.child] = r.parent
         elif isinstance(r, Odometry):
-            self._base_frame = r.child_frame_id or self._base_frame
+            if not self._base_frame_seen and r.child_frame_id:
+                self._base_frame, self._base_frame_seen = r.child_frame_id, True
         elif isinstance(r, (Scan, Image)) and r.frame_id and r.frame_id not in self._sensor_frames:
             self._sensor_frames[r.frame_id] = topic
 
@@ -1919,6 +2104,15 @@ class LogReader:
             warnings=tuple(warnings),
             start_ns=self._start or 0,
             end_ns=self._end or 0,
+            base_frame=self._base_frame,
+            base_frame_from=(
+                "named by the mapping"
+                if self._base_frame_fixed
+                else "the odometry's child frame"
+                if self._base_frame_seen
+                else "default: no odometry names a child frame"
+            ),
+            choices=self._choices,
         )
 
 
@@ -1970,16 +2164,106 @@ def read_log(
                 + "}'"
             )
     key = lambda r: r.stamp_ns  # noqa: E731
+    transforms = tuple(sorted(buckets[Transform], key=key))
+    scans, level_tfs, levelled, tilted = level_scans(
+        tuple(sorted(buckets[Scan], key=key)), transforms, report.base_frame
+    )
+    if levelled or tilted:
+        report = replace(report, levelled=tuple(levelled), warnings=report.warnings + tuple(tilted))
     data = LogData(
         source=str(path),
         odometry=tuple(sorted(buckets[Odometry], key=key)),
         headings=tuple(sorted(buckets[Heading], key=key)),
-        scans=tuple(sorted(buckets[Scan], key=key)),
+        scans=scans,
         images=tuple(sorted(buckets[Image], key=key)),
         camera_infos=tuple(sorted(buckets[CameraInfo], key=key)),
-        transforms=tuple(sorted(buckets[Transform], key=key)),
+        transforms=level_tfs + transforms,
         tags=tuple(sorted(buckets[TagSighting], key=key)),
         ground_truth=tuple(sorted(buckets[GroundTruthPose], key=key)),
         world_json=world,
+        base_frame=report.base_frame,
     )
     return data, report
+
+
+# ----------------------------------------------------------------------------------------------------------
+# lasers not mounted upright
+
+LEVEL_SUFFIX = "_level"
+TILT_WARN_DEG = 5.0  # a laser plane further than this from the base's xy plane is reported (used as if level)
+
+
+def mirrored_scan(scan: Scan, frame_id: str) -> Scan:
+    """The same beams as an upright laser sees them: an upside-down laser's beam at angle a points at -a in
+    the level frame, so the ranges run backwards from ``-(angle_min + (n - 1) * angle_increment)``."""
+    n = scan.ranges.shape[0]
+    a_last = scan.angle_min + scan.angle_increment * (n - 1) if n else scan.angle_min
+    return Scan(
+        scan.stamp_ns,
+        frame_id,
+        -a_last,
+        scan.angle_increment,
+        scan.range_min,
+        scan.range_max,
+        scan.ranges[::-1].copy(),
+        scan.valid[::-1].copy(),
+    )
+
+
+def level_scans(
+    scans: tuple[Scan, ...], transforms: tuple[Transform, ...], base_frame: str
+) -> tuple[tuple[Scan, ...], tuple[Transform, ...], list[str], list[str]]:
+    """Scans of a laser whose z axis points down in ``base_frame`` (mounted upside down: a roll or pitch of
+    pi in its static transform) put into a level frame ``<laser>_level``.
+
+    A planar laser's beam at angle a in its own frame points along R (cos a, sin a, 0) in the base frame, R the
+    full 3D rotation base -> laser. When R's z axis points down, R restricted to the xy plane is a reflection:
+    the beam points at yaw(R x) - a, so the planar pose (x, y, yaw) alone (what a 2D front end uses) mirrors
+    the scan. The mirrored scan (``mirrored_scan``) in a level frame at (x, y, z, yaw(R x)) gives every beam
+    its true direction. Returns (scans, the level frames' static transforms, what was levelled, warnings about
+    tilted lasers). A laser not connected to the base is left alone (the report names the missing transform)."""
+    from holoslam.frames import TransformTree
+
+    first: dict[str, int] = {}
+    for sc in scans:
+        first.setdefault(sc.frame_id, sc.stamp_ns)
+    frames = [f for f in first if f and f != base_frame]
+    if not frames:
+        return scans, (), [], []
+    tree = TransformTree(transforms)
+    level: dict[str, str] = {}
+    tfs: list[Transform] = []
+    done: list[str] = []
+    tilted: list[str] = []
+    for frame in frames:
+        if not tree.can_transform(base_frame, frame):
+            continue
+        try:
+            T = tree.lookup(base_frame, frame, first[frame])
+        except IngestError:
+            continue
+        zz = float(T[2, 2])
+        tilt = math.degrees(math.acos(min(1.0, abs(zz))))
+        if tilt > TILT_WARN_DEG:
+            tilted.append(
+                f"laser frame '{frame}' is tilted {tilt:.1f} deg from the base's plane; its scans are used as if level"
+            )
+        if zz >= 0.0:
+            continue
+        yaw = math.atan2(T[1, 0], T[0, 0])
+        name = frame + LEVEL_SUFFIX
+        t = (float(T[0, 3]), float(T[1, 3]), float(T[2, 3]))
+        tfs.append(
+            Transform(
+                first[frame], base_frame, name, t, (0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)), True
+            )
+        )
+        level[frame] = name
+        done.append(
+            f"laser frame '{frame}' is mounted upside down (its z axis points down in '{base_frame}'): its scans "
+            f"are mirrored into the level frame '{name}' (beam angle a -> -a, yaw {math.degrees(yaw):.1f} deg)"
+        )
+    if not level:
+        return scans, (), [], tilted
+    out = tuple(mirrored_scan(sc, level[sc.frame_id]) if sc.frame_id in level else sc for sc in scans)
+    return out, tuple(tfs), done, tilted

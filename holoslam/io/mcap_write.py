@@ -177,7 +177,7 @@ def ros2_message(rec: Record) -> dict[str, Any]:
 
 def write_ros2_log(
     path: str | Path,
-    records: Iterable[Record],
+    records: Iterable[Record | tuple[str, Record]],
     *,
     topics: dict[type, tuple[str, str]] | None = None,
     log_time_offset_ns: int = 0,
@@ -187,7 +187,8 @@ def write_ros2_log(
     """Write ``records`` (in the order given) into a ROS 2 MCAP file with ``mcap_ros2.writer.Writer``.
 
     Each record type goes to its topic in ``topics`` (``DEFAULT_TOPICS`` otherwise; transforms go to
-    ``/tf_static`` or ``/tf`` by their ``static`` flag). Log time = stamp + ``log_time_offset_ns``.
+    ``/tf_static`` or ``/tf`` by their ``static`` flag); a ``(topic, record)`` pair goes to that topic (two
+    topics of one type, a rewritten real log's own names). Log time = stamp + ``log_time_offset_ns``.
     """
     from mcap.writer import CompressionType
     from mcap_ros2.writer import Writer
@@ -202,13 +203,15 @@ def write_ros2_log(
     with open(path, "wb") as f:
         w = Writer(f, chunk_size=chunk_size, compression=comp)
         schemas: dict[str, Any] = {}
-        for rec in records:
+        for item in records:
+            named, rec = item if isinstance(item, tuple) else (None, item)
             if isinstance(rec, Transform):
                 topic, typ = ("/tf_static" if rec.static else "/tf"), "tf2_msgs/msg/TFMessage"
             elif isinstance(rec, Image) and rec.width and rec.height and type(rec) not in (topics or {}):
                 topic, typ = "/camera/image_raw", "sensor_msgs/msg/Image"
             else:
                 topic, typ = table[type(rec)]
+            topic = named or topic
             if typ not in schemas:
                 schemas[typ] = w.register_msgdef(typ, MSGDEFS[typ])
             stamp = getattr(rec, "stamp_ns", 0)

@@ -53,7 +53,7 @@ class FrontEndConfig:
     loops: LoopConfig = field(default_factory=LoopConfig)
     features: FeatureConfig = field(default_factory=FeatureConfig)
     default_heading_sigma: float = 0.03  # rad, when the log gives none
-    base_frame: str = "base_link"
+    base_frame: str = ""  # "" = the log's base frame (LogData.base_frame: the mapping's, else the odometry's child)
     build_grids: bool = True
     association_drift: float = 0.15  # m, allowance for the initial anchors' drift when comparing sightings
     association_gate: float = 13.8  # chi-square(2) 0.999: two sightings of one object agree below this
@@ -81,8 +81,10 @@ class FrontEnd:
     dead_reckoning_inflation: float = 1.0  # factor applied to the dead-reckoning covariances (_Graph)
 
 
-def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "base_link") -> np.ndarray:
-    """The planar pose (x, y, yaw) of the laser in the base frame from the log's static transforms."""
+def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "") -> np.ndarray:
+    """The planar pose (x, y, yaw) of the laser in the base frame ("" = ``log.base_frame``) from the log's
+    static transforms (ingestion puts an upside-down laser's scans in a level frame, so yaw is all it takes)."""
+    base_frame = base_frame or log.base_frame
     try:
         from holoslam.frames import TransformTree
 
@@ -98,7 +100,8 @@ def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "base_link")
     if laser_frame == base_frame:
         return np.zeros(3)
     raise IngestError(f"no transform from {base_frame!r} to the laser frame {laser_frame!r} in {log.source}; "
-                      "the log needs /tf_static base_link->laser")
+                      f"the log needs /tf_static {base_frame}->{laser_frame} (a mapping's 'frames: {{base: NAME}}' "
+                      "names another base frame)")
 
 
 def landmark_in_anchor(
