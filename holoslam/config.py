@@ -32,6 +32,7 @@ __all__ = [
     "SolverMethod",
     "SolverConfig",
     "VisionConfig",
+    "SightingSource",
     "GridConfig",
     "TopologyConfig",
     "HolographicConfig",
@@ -200,16 +201,38 @@ class SolverConfig:
     isam2_relinearize_threshold: float = 0.001
 
 
+class SightingSource(str, Enum):
+    """Where object sightings come from. ``auto``: the log's images decoded here when it has images, else the
+    robot's own tag topic; ``images`` / ``tags``: only that; ``both``: images first, then the tag sightings no
+    image decode gave (same stamp and id)."""
+
+    AUTO = "auto"
+    IMAGES = "images"
+    TAGS = "tags"
+    BOTH = "both"
+
+
 @dataclass(frozen=True)
 class VisionConfig:
-    """Where object sightings come from: decoded images and/or the robot's own tag detections."""
+    """Where object sightings come from (pixels first: ``source``), how objects are located from them, and
+    whether codes that are not holoslam labels become landmarks.
 
-    use_images: bool = True
-    use_tags: bool = True
+    A label with its printed size (``s=``) is located by PnP in every view; one without (and a foreign code)
+    by triangulation over views from robot poses at least ``min_parallax_deg`` apart as seen from the code,
+    views agreeing within ``inlier_m`` (``holoslam.vision.multiview``), once the trajectory is solved; the
+    graph is then solved again with them. ``foreign_landmarks``: any QR code that is not a holoslam label
+    (a product code, a Wi-Fi sticker, a poster) becomes an anonymous landmark keyed by its payload
+    (``holoslam.vision.label.foreign_code_id``); off by default until measured on real homes."""
+
+    source: SightingSource = SightingSource.AUTO
     sigma_px: float = 0.5
     # the robot's base frame; "" = the log's: the mapping's frames.base, else the odometry's child frame
     base_frame: str = ""
     features: bool = True  # the object feature set of Eq. 13 (size, texture, colours, SIFT) from image crops
+    triangulate: bool = True  # labels without a printed size: located over views from several robot poses
+    foreign_landmarks: bool = False  # codes that are not holoslam labels become anonymous landmarks
+    min_parallax_deg: float = 2.0  # deg between two views' rays at the code, for them to triangulate it
+    inlier_m: float = 0.10  # m: a view agrees with a triangulated point when its ray passes this close
 
 
 @dataclass(frozen=True)

@@ -173,10 +173,13 @@ def keyframe_poses(submaps: Sequence[Any], wTa: np.ndarray) -> tuple[np.ndarray,
     return s[keep], p[keep]
 
 
-def _objects(problem: Any, solution: Any, observations: Sequence[Any], features: dict | None = None) -> tuple:
+def _objects(problem: Any, solution: Any, observations: Sequence[Any], features: dict | None = None,
+             extra_sightings: dict[str, int] | None = None) -> tuple:
+    """The located objects as graph records. ``extra_sightings``: views beyond one per landmark measurement (a
+    triangulated code is one measurement from several agreeing views; they all count as sightings)."""
     from holoslam.graph.problem import MeasurementFamily
     from holoslam.maps.holographic import ObjectInfo
-    from holoslam.vision.label import parse_label
+    from holoslam.vision.label import FOREIGN_PREFIX, parse_label
 
     payload = {o.object_id: o.payload for o in observations}
     lm = problem.landmarks
@@ -201,8 +204,9 @@ def _objects(problem: Any, solution: Any, observations: Sequence[Any], features:
         try:
             label = parse_label(payload.get(base, ""))
             kind, attrs, text = label.kind, label.attributes, payload[base]
-        except HoloslamError:
-            kind, attrs, text = "unknown", (), payload.get(base, "")
+        except HoloslamError:  # an anonymous landmark (a foreign code keyed by its payload), or unknown
+            kind = "qr_code" if base.startswith(FOREIGN_PREFIX) else "unknown"
+            attrs, text = (), payload.get(base, "")
         if "@" in oid:  # a moved object's earlier place: kept in the result, not as a separate graph object
             continue
         xy = solution.w_landmarks[k]
@@ -216,7 +220,7 @@ def _objects(problem: Any, solution: Any, observations: Sequence[Any], features:
                 attrs,
                 text,
                 feats,
-                sightings=kept[oid],
+                sightings=kept[oid] + (extra_sightings or {}).get(oid, 0),
             )
         )
     return tuple(objs)
@@ -246,7 +250,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     from holoslam.planning.twolayer import build_two_layer
     from holoslam.solve import CovarianceScope, Method, SolveOptions, solve
     from holoslam.submaps.frontend import build_problem
-    from holoslam.vision.observe import observations_from_log
+    from holoslam.vision.observe import locate_from_log
 
     cfg = config or RunConfig()
     progress = progress or _noop
@@ -268,24 +272,27 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
 
     observations: tuple = ()
     features: dict = {}
+    vision = None
     vision_report: dict[str, Any] = {"skipped": "the log has no images and no tag sightings"}
     if log.images or log.tags:
         with _stage(progress, timings, "vision"):
-            observations, vrep = observations_from_log(
+            vision = locate_from_log(
                 log,
                 base_frame=cfg.vision.base_frame or log.base_frame,
                 sigma_px=cfg.vision.sigma_px,
-                use_images=cfg.vision.use_images,
-                use_tags=cfg.vision.use_tags,
+                source=cfg.vision.source,
                 progress=lambda done, total: progress("vision", done, total),
+                triangulate=cfg.vision.triangulate,
+                foreign=cfg.vision.foreign_landmarks,
             )
-            vision_report = dataclasses.asdict(vrep)
+            observations = vision.observations
+            vision_report = dataclasses.asdict(vision.report)
             vision_report["problems"] = list(vision_report.get("problems", ()))[:50]
-        if cfg.vision.features and log.images and observations:
+        if cfg.vision.features and log.images and vision.sightings:
             from holoslam.vision.features import object_features_from_log
 
             with _stage(progress, timings, "object features (Eq. 13)"):
-                features = object_features_from_log(log, observations)
+                features = object_features_from_log(log, vision.sightings)
 
     fe_stage = "front end (submaps, Eq. 12/14/15/16)"
     with _stage(progress, timings, fe_stage):
@@ -304,6 +311,15 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         )
         sol = solve(fe.problem, options)
 
+    extra_sightings: dict[str, int] = {}
+    if vision is not None and vision.views:
+        with _stage(progress, timings, "objects by triangulation"):
+            fe, sol, tri = _triangulated_objects(vision.views, fe, sol, log, cfg, options)
+            observations = tuple(observations) + tri.observations
+            vision_report["triangulation"] = {**dataclasses.asdict(tri.report), "problems": list(tri.report.problems)[:50]}
+            for p in tri.points:
+                extra_sightings[p.object_id] = extra_sightings.get(p.object_id, 0) + len(p.views) - 1
+
     with _stage(progress, timings, "trajectory"):
         odom_stamps, odomTb = log.odometry_arrays()
         scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
@@ -313,7 +329,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
         # between keyframes (a few tenths of a second) the wheel odometry's own motion is the most faithful
         wTb = optimised_trajectory(stamps, odom_stamps, odomTb, key_stamps, wTk)
-        objects = _objects(fe.problem, sol, observations, features)
+        objects = _objects(fe.problem, sol, observations, features, extra_sightings)
 
     with _stage(progress, timings, "occupancy grid"):
         wTb_scan = optimised_trajectory(scan_stamps, odom_stamps, odomTb, key_stamps, wTk)
@@ -385,6 +401,8 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         stamps=stamps,
         wTb=wTb,
         dr=dr,
+        located_by=_located_by(observations, objects),
+        codes_truth=cfg.vision.foreign_landmarks,
     )
     return RunResult(
         source=str(log_path),
@@ -406,6 +424,37 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         planning=planning,
         report=report,
     )
+
+
+def _triangulated_objects(views: Sequence[Any], fe: Any, sol: Any, log: Any, cfg: RunConfig, options: Any):
+    """Codes without a printed size (and foreign codes) triangulated over the solved poses, added to the
+    problem as landmark measurements, and the problem solved again (``holoslam.vision.landmarks``)."""
+    from holoslam.solve import solve
+    from holoslam.vision.landmarks import triangulated_landmarks, with_landmarks
+
+    odom_stamps, odomTb = log.odometry_arrays()
+    tl = triangulated_landmarks(views, fe.submaps, sol.wTa, sol.cov_wTa, odom_stamps, odomTb, cfg.vision.sigma_px,
+                                cfg.vision.min_parallax_deg, cfg.vision.inlier_m)
+    if len(tl.ids):
+        problem = with_landmarks(fe.problem, tl, sol.wTa)
+        sol = solve(problem, options)
+        fe = dataclasses.replace(fe, problem=problem)
+    return fe, sol, tl
+
+
+def _located_by(observations: Sequence[Any], objects: Sequence[Any]) -> dict[str, dict[str, str]]:
+    """Per located object: where its sightings came from ("images", "tags", "images+tags") and how it was
+    located ("pnp", "triangulation", "pnp+triangulation")."""
+    src: dict[str, set[str]] = {}
+    how: dict[str, set[str]] = {}
+    for o in observations:
+        src.setdefault(o.object_id, set()).add(o.source or "?")
+        how.setdefault(o.object_id, set()).add(o.method)
+    return {
+        o.object_id: {"source": "+".join(sorted(src.get(o.object_id, {"?"}))),
+                      "method": "+".join(sorted(how.get(o.object_id, {"?"}), key=lambda m: m != "pnp"))}
+        for o in objects
+    }
 
 
 def _interp(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) -> np.ndarray:
@@ -430,9 +479,12 @@ def _configuration_space(grid: Any, robot_radius_m: float) -> Any:
 
 
 def _accuracy(
-    log: Any, fe: Any, sol: Any, objects: Sequence[Any], stamps: np.ndarray, wTb: np.ndarray, dr: np.ndarray
+    log: Any, fe: Any, sol: Any, objects: Sequence[Any], stamps: np.ndarray, wTb: np.ndarray, dr: np.ndarray,
+    codes: bool = False,
 ) -> dict[str, Any] | None:
-    """Errors against the log's ground truth after the best SE(2) alignment (the run's world frame is its own)."""
+    """Errors against the log's ground truth after the best SE(2) alignment (the run's world frame is its own);
+    with ``codes`` the simulator's foreign codes (world ``codes``, keyed like the anonymous landmarks) count
+    as objects too."""
     if not log.ground_truth:
         return None
     from holoslam.evaluate import align_se2, object_errors, trajectory_errors, truth_at
@@ -456,6 +508,8 @@ def _accuracy(
     if log.world_json:
         world = json.loads(log.world_json)
         truth = {o["id"]: np.asarray(o["position"], dtype=np.float64) for o in world.get("objects", [])}
+        if codes:
+            truth.update({c["id"]: np.asarray(c["position"], dtype=np.float64) for c in world.get("codes", [])})
         T = align_se2(sol.wTa[:, :2], true_a[:, :2])
         ids = [o.object_id for o in objects]
         est = np.array([o.w_position for o in objects]).reshape(-1, 3)
@@ -504,6 +558,8 @@ def _report(
     stamps,
     wTb,
     dr,
+    located_by=None,
+    codes_truth=False,
 ) -> dict[str, Any]:
     """The run report (JSON-able) from every stage's output."""
     from holoslam.io.mcap import report_to_dict
@@ -572,6 +628,8 @@ def _report(
             "without_reach_edge": sorted(set(obj_nodes) - reachable),
             # seen fewer than CONFIRMING_SIGHTINGS times: a single misread id cannot be told from a real label
             "unconfirmed": sorted(o.object_id for o in objects if o.sightings < CONFIRMING_SIGHTINGS),
+            # per object: where its sightings came from (images / tags) and how it was located (pnp / triangulation)
+            "located_by": located_by or {},
         },
         "map": {
             "shape": list(grid.shape),
@@ -593,7 +651,7 @@ def _report(
         },
         "planning": {"layer1_blocks": int(planning.n_blocks), "layer2_regions": int(planning.n_regions)},
         "timings_s": timings,
-        "accuracy": _accuracy(log, fe, sol, objects, stamps, wTb, dr),
+        "accuracy": _accuracy(log, fe, sol, objects, stamps, wTb, dr, codes_truth),
     }
 
 
@@ -627,9 +685,16 @@ def format_run_report(report: dict[str, Any]) -> str:
         lines.append(f"  vision: skipped ({v['skipped']})")
     else:
         lines.append(
-            f"  vision: {v['images']} images, {v['decodes']} codes decoded, {v['tag_sightings']} robot "
-            f"sightings, {v['observations']} object observations, {v['foreign']} foreign codes"
+            f"  vision: sightings from {v.get('source') or '?'}: {v['images']} images, {v['decodes']} codes "
+            f"decoded, {v['tag_sightings']} robot sightings, {v['observations']} object observations (PnP), "
+            f"{v['foreign']} foreign codes"
         )
+        t = v.get("triangulation")
+        if t:
+            lines.append(
+                f"  triangulation: {t['views']} views of {t['codes']} codes without a printed size or foreign "
+                f"-> {t['points']} points ({t['views_unused']} views unused)"
+            )
     sm = report["submaps"]
     lines.append(
         f"  submaps: {sm['count']} ({', '.join(f'{k} {n}' for k, n in sm['split_reasons'].items())}); "
@@ -654,6 +719,9 @@ def format_run_report(report: dict[str, Any]) -> str:
         f"without a reach edge: {o['without_reach_edge'] or 'none'}; "
         f"unconfirmed (seen once): {o.get('unconfirmed') or 'none'}"
     )
+    if o.get("located_by"):
+        ways = Counter(f"{d['source']} by {d['method']}" for d in o["located_by"].values())
+        lines.append("  objects located from: " + ", ".join(f"{k} {n}" for k, n in sorted(ways.items())))
     h = report["holographic"]
     lines.append(
         f"  holographic graph: {h['environment_nodes']} environment nodes "

@@ -248,6 +248,7 @@ class ObjectObservation:
     b_position: np.ndarray
     cov_b_position: np.ndarray
     method: str = "pnp"  # "pnp" (single view, known label size) or "triangulation" (two views)
+    source: str = ""  # where the sighting came from: "images" (decoded here), "tags" (the robot's topic)
 
     def __post_init__(self) -> None:
         object.__setattr__(

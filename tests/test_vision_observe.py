@@ -13,7 +13,8 @@ import pytest
 from holoslam.errors import VisionError
 from holoslam.types import CameraInfo, Image, LogData, TagSighting, Transform
 from holoslam.vision.camera import OPTICAL_IN_BODY
-from holoslam.vision.observe import accept_landmarks, observations_from_log
+from holoslam.vision.label import foreign_code_id
+from holoslam.vision.observe import accept_landmarks, locate_from_log, observations_from_log
 from holoslam.vision.synth import LabelInView, look_at_label, render_labels_view
 
 K = np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]])
@@ -73,8 +74,8 @@ def _log(tmp_stamps=(1_000, 2_000, 3_000)):
 
 def test_observations_from_log_images_and_tags():
     log, truth_b = _log()
-    obs, rep = observations_from_log(log)
-    assert rep.images == 3 and rep.corrupt_images == 1 and rep.images_decoded == 2
+    obs, rep = observations_from_log(log, source="both")
+    assert rep.source == "both" and rep.images == 3 and rep.corrupt_images == 1 and rep.images_decoded == 2
     assert rep.decodes == 6 and rep.foreign == 2 and rep.foreign_payloads == ("hello world",)
     assert rep.tag_sightings == 2 and rep.rejected_payloads == 1
     assert rep.duplicates_skipped == 1  # O02 at t2 came from /tags; its image decode is not counted twice
@@ -85,6 +86,34 @@ def test_observations_from_log_images_and_tags():
         assert err < 0.02 * np.linalg.norm(truth_b[o.object_id]), (o.object_id, err)
         assert np.all(np.linalg.eigvalsh(o.cov_b_position) > 0)
     assert "observations of 2 objects" in rep.summary()
+
+
+def test_pixels_first_the_tag_topic_when_asked_or_without_images():
+    log, _ = _log()
+    obs, rep = observations_from_log(log)  # auto: the log has images, its tag topic is not used
+    assert rep.source == "images" and rep.tag_sightings == 0 and rep.rejected_payloads == 0
+    assert rep.observations == len(obs) == 4 and rep.duplicates_skipped == 0
+    obs, rep = observations_from_log(log, source="tags")
+    assert rep.source == "tags" and rep.images == 0 and [o.object_id for o in obs] == ["O02"]
+    no_images = LogData("x", camera_infos=log.camera_infos, transforms=log.transforms, tags=log.tags)
+    obs, rep = observations_from_log(no_images)
+    assert rep.source == "tags" and len(obs) == 1
+
+
+def test_labels_without_size_and_foreign_codes_become_views_to_triangulate():
+    log, _ = _log()
+    r = locate_from_log(log)
+    assert r.views == () and r.report.foreign == 2  # foreign codes are counted, not kept, by default
+    r = locate_from_log(log, foreign=True)
+    assert [v.object_id for v in r.views] == [foreign_code_id("hello world")] * 2
+    assert r.report.foreign_views == 2 and r.report.sizeless == 0 and all(v.foreign for v in r.views)
+    assert {s.object_id for s in r.sightings} == {"O01", "O02"}  # label sightings, for object features
+    unsized = LogData("x", camera_infos=log.camera_infos, transforms=log.transforms,
+                      tags=(TagSighting(3_000, "camera_optical", "HL1;O09;cup", log.tags[0].corners),))
+    r = locate_from_log(unsized)
+    (v,) = r.views
+    assert v.object_id == "O09" and v.source == "tags" and r.report.sizeless == 1 and r.observations == ()
+    assert np.allclose(v.centre_px, np.mean(log.tags[0].corners, axis=0), atol=1.0) and v.side_px > 10
 
 
 def test_missing_calibration_and_transform_are_reported():
@@ -131,7 +160,7 @@ def test_bundled_household_log_gives_ground_truth_object_set():
     world = json.loads(log.world_json)
     objects = {o["id"]: o for o in world["objects"]}
     calls: list[tuple[int, int]] = []
-    obs, rep = observations_from_log(log, use_tags=False, progress=lambda d, n: calls.append((d, n)))
+    obs, rep = observations_from_log(log, source="images", progress=lambda d, n: calls.append((d, n)))
     assert rep.corrupt_images == 0 and rep.rejected_payloads == 0
     # progress followed the decoding: from 0, increasing, at most 50 calls, all against the image count
     done = [d for d, _ in calls]

@@ -26,9 +26,19 @@ from dataclasses import dataclass
 
 from holoslam.errors import PayloadError
 
-__all__ = ["ObjectLabel", "encode_label", "parse_label", "is_label", "MAGIC", "MAX_PAYLOAD_CHARS"]
+__all__ = [
+    "ObjectLabel",
+    "encode_label",
+    "parse_label",
+    "is_label",
+    "foreign_code_id",
+    "FOREIGN_PREFIX",
+    "MAGIC",
+    "MAX_PAYLOAD_CHARS",
+]
 
 MAGIC = "HL1"
+FOREIGN_PREFIX = "QR-"
 MAX_PAYLOAD_CHARS = 64
 _ID = re.compile(r"[A-Z0-9-]{1,16}")
 _TYPE = re.compile(r"[a-z0-9_]{1,24}")
@@ -114,3 +124,13 @@ def is_label(text: str) -> bool:
     except PayloadError:
         return False
     return True
+
+
+def foreign_code_id(payload: str | bytes) -> str:
+    """The id of an anonymous landmark: a QR code that is not a holoslam label, keyed by its payload (the same
+    payload always gives the same id): ``QR-`` and the first 10 hex digits of the SHA-256 of its bytes (UTF-8
+    for text), upper case, so it fits the label id grammar and cannot be mistaken for a label's id."""
+    import hashlib
+
+    data = payload.encode("utf-8") if isinstance(payload, str) else bytes(payload)
+    return FOREIGN_PREFIX + hashlib.sha256(data).hexdigest()[:10].upper()

@@ -43,6 +43,7 @@ __all__ = [
     "MultiViewPoint",
     "MultiViewReport",
     "locate_from_views",
+    "point_covariance",
     "planar_to_matrix",
     "DEFAULT_MIN_PARALLAX_DEG",
     "DEFAULT_INLIER_M",
@@ -167,6 +168,20 @@ def _pose_covariance_term(
     return cov
 
 
+def point_covariance(
+    views: Sequence[View], wTb: np.ndarray, cov_wTb: np.ndarray | None, sigma_px: float = DEFAULT_SIGMA_PX
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The joint triangulation of ``views`` at base poses ``wTb`` (V, 3): the point (3,), its covariance from
+    the pixels and from the poses' covariances ``cov_wTb`` (V, 3, 3, body frame; None: exact poses), and the
+    reprojection RMS (px). Raises ``VisionError`` when the views do not determine a point."""
+    P = np.asarray(wTb, np.float64).reshape(-1, 3)
+    Ts = [planar_to_matrix(p) @ v.bTc for p, v in zip(P, views, strict=True)]
+    X, cov, rms = _solve(views, Ts, sigma_px)
+    if cov_wTb is not None:
+        cov = cov + _pose_covariance_term(views, P, np.asarray(cov_wTb, np.float64).reshape(-1, 3, 3), sigma_px)
+    return X, 0.5 * (cov + cov.T), rms
+
+
 def locate_from_views(
     views: Sequence[View],
     wTb: np.ndarray,
@@ -220,8 +235,7 @@ def locate_from_views(
             mv = [views[k] for k in members]
             mT = [wTcs[k] for k in members]
             try:
-                X, cov_px, rms = _solve(mv, mT, sigma_px)
-                cov = cov_px + _pose_covariance_term(mv, P[members], C[members], sigma_px)
+                X, cov, rms = point_covariance(mv, P[members], C[members], sigma_px)
             except VisionError as e:
                 problems.append(f"{oid}: {e}")
                 break
@@ -235,7 +249,7 @@ def locate_from_views(
             if sides:
                 size = float(np.median([s * r / f for s, r, f in sides]))
             points.append(
-                MultiViewPoint(oid, views[ref].payload, X, 0.5 * (cov + cov.T), tuple(sorted(members)), parallax,
+                MultiViewPoint(oid, views[ref].payload, X, cov, tuple(sorted(members)), parallax,
                                rms, int(views[ref].stamp_ns), ref, views[ref].foreign, size)
             )
             found_any = True

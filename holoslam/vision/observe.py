@@ -1,12 +1,24 @@
-"""Wiring: a log's images (and the tag sightings the robot decoded itself) become object observations.
+"""Wiring: a log's images (or the tag sightings the robot decoded itself) become object observations.
 
-``observations_from_log(log)`` decodes every image of the log (``holoslam.vision.qr.detect_qr``), takes the
-``CameraInfo`` with the image's stamp (nearest within a tolerance) and the base -> camera transform at that
-stamp from the log's TF records (``holoslam.frames.TransformTree``), and locates each holoslam label by PnP
-with its printed size (label attribute ``s``). Sightings already decoded on the robot (``log.tags``) are used
-as they are (PnP from their corners); an image decode of the same label at the same stamp is then skipped as a
-duplicate. Nothing is silently lost: a ``VisionReport`` counts images, decodes, foreign codes, rejected
-payloads, corrupt images (with their messages) and every reason a sighting gave no observation.
+Pixels first (``holoslam.config.SightingSource``): by default (``auto``) a log with images has its images
+decoded here (``holoslam.vision.qr.detect_qr``) and its robot tag topic is not used; a log without images uses
+the tag topic. ``images``, ``tags`` and ``both`` (images first, then the tag sightings no image decode gave)
+choose explicitly. Every sighting records its source.
+
+``locate_from_log(log)`` takes, for each sighting, the ``CameraInfo`` with the image's stamp (nearest within
+a tolerance) and the base -> camera transform at that stamp from the log's TF records
+(``holoslam.frames.TransformTree``), then:
+
+- a holoslam label with its printed size (attribute ``s``) is located by PnP in that view
+  (an ``ObjectObservation`` in the base frame at the stamp);
+- a label without a size, and (with ``foreign=True``) a code that is not a holoslam label, becomes a ``View``
+  for triangulation over several robot poses (``holoslam.vision.multiview``), which needs the trajectory: the
+  pipeline does it after the first solve. A foreign code's id is derived from its payload
+  (``holoslam.vision.label.foreign_code_id``).
+
+Nothing is silently lost: a ``VisionReport`` counts images, decodes, foreign codes, rejected payloads,
+corrupt images (with their messages) and every reason a sighting gave no observation.
+``observations_from_log`` is the same returning only the PnP observations and the report.
 
 ``accept_landmarks`` is the acceptance rule "a landmark only after consistent decodes": an object id is
 accepted once at least ``min_decodes`` (default 3) of its sightings, expressed in one common frame, lie within
@@ -16,23 +28,28 @@ accepted once at least ``min_decodes`` (default 3) of its sightings, expressed i
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from holoslam.config import SightingSource
 from holoslam.errors import HoloslamError, ImageDecodeError, PayloadError, VisionError
 from holoslam.types import CameraInfo, LogData, ObjectObservation
 from holoslam.vision.camera import PinholeCamera
-from holoslam.vision.label import MAGIC, ObjectLabel, parse_label
+from holoslam.vision.label import MAGIC, ObjectLabel, foreign_code_id, parse_label
 from holoslam.vision.locate import DEFAULT_SIGMA_PX, observation_from_pnp
+from holoslam.vision.multiview import View
 from holoslam.vision.qr import Decoder, Fallback, detect_qr
 
 __all__ = [
     "Sighting",
     "VisionReport",
+    "VisionResult",
     "AcceptedLandmark",
     "DEFAULT_MIN_DECODES",
+    "resolve_source",
     "sightings_from_log",
+    "locate_from_log",
     "observations_from_log",
     "accept_landmarks",
 ]
@@ -42,24 +59,33 @@ DEFAULT_MIN_DECODES = 3
 
 @dataclass(frozen=True, slots=True)
 class Sighting:
-    """A holoslam label seen in one image: where its corners are and where they came from ("image": decoded
-    here from the pixels, "tags": decoded on the robot). ``image_index`` indexes ``log.images`` (-1 for
-    tags)."""
+    """A code seen in one image: where its corners are and where they came from ("images": decoded here from
+    the pixels, "tags": decoded on the robot). ``label`` is the holoslam label (None for a foreign code, whose
+    ``object_id`` then comes from its payload). ``image_index`` indexes ``log.images`` (-1 for tags)."""
 
     stamp_ns: int
     frame_id: str
     payload: str
-    label: ObjectLabel
+    label: ObjectLabel | None
     corners: np.ndarray
     source: str
     image_index: int = -1
+    object_id: str = ""
+    foreign: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.object_id:
+            oid = self.label.object_id if self.label is not None else foreign_code_id(self.payload)
+            object.__setattr__(self, "object_id", oid)
 
 
 @dataclass(frozen=True, slots=True)
 class VisionReport:
-    """What the vision stage made of a log. ``problems`` holds one line per image or sighting that gave
-    nothing (corrupt image, missing calibration or transform, label without a size), ``foreign_payloads``
-    the distinct texts of codes that are not holoslam labels."""
+    """What the vision stage made of a log. ``source`` is where the sightings came from ("images", "tags" or
+    "both"); ``problems`` holds one line per image or sighting that gave nothing (corrupt image, missing
+    calibration or transform, label without a size when triangulation is off), ``foreign_payloads`` the
+    distinct texts of codes that are not holoslam labels. ``views`` counts the sightings kept for
+    triangulation (labels without a size: ``sizeless``; foreign codes as landmarks: ``foreign_views``)."""
 
     images: int = 0
     images_decoded: int = 0
@@ -78,14 +104,31 @@ class VisionReport:
     object_ids: tuple[str, ...] = ()
     foreign_payloads: tuple[str, ...] = ()
     problems: tuple[str, ...] = field(default=())
+    source: str = ""
+    views: int = 0
+    sizeless: int = 0
+    foreign_views: int = 0
 
     def summary(self) -> str:
         return (
             f"{self.images} images ({self.images_decoded} with codes, {self.corrupt_images} corrupt), "
             f"{self.decodes} decodes ({self.labels} labels, {self.foreign} foreign, {self.rejected_payloads} "
-            f"rejected), {self.tag_sightings} robot tag sightings, {self.observations} observations of "
-            f"{len(self.object_ids)} objects"
+            f"rejected), {self.tag_sightings} robot tag sightings, sightings from {self.source or 'nothing'}, "
+            f"{self.observations} observations of {len(self.object_ids)} objects, {self.views} views to "
+            "triangulate"
         )
+
+
+@dataclass(frozen=True)
+class VisionResult:
+    """``observations``: PnP observations of labels with a size; ``views``: sightings to triangulate (labels
+    without a size, foreign codes); ``sightings``: every label sighting used (for object features);
+    ``report``."""
+
+    observations: tuple[ObjectObservation, ...]
+    views: tuple[View, ...]
+    sightings: tuple[Sighting, ...]
+    report: VisionReport
 
 
 def _camera_info_at(
@@ -107,17 +150,37 @@ def _shown(text: str) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+def _centre(corners: np.ndarray) -> np.ndarray:
+    """The intersection of the quadrilateral's diagonals (the code centre, exact under perspective)."""
+    p0, p1, p2, p3 = np.asarray(corners, np.float64).reshape(4, 2)
+    d1, d2 = p2 - p0, p3 - p1
+    A = np.column_stack([d1, -d2])
+    if abs(np.linalg.det(A)) < 1e-12:
+        return np.asarray(corners, np.float64).reshape(4, 2).mean(axis=0)
+    return p0 + np.linalg.solve(A, p1 - p0)[0] * d1
+
+
+def resolve_source(log: LogData, source: SightingSource | str = SightingSource.AUTO) -> SightingSource:
+    """``auto`` made concrete for a log: its images when it has any, else its tag topic."""
+    src = SightingSource(source)
+    if src is SightingSource.AUTO:
+        return SightingSource.IMAGES if log.images else SightingSource.TAGS
+    return src
+
+
 def sightings_from_log(
     log: LogData,
-    use_images: bool = True,
-    use_tags: bool = True,
+    source: SightingSource | str = SightingSource.AUTO,
     decoders: tuple[Decoder, ...] | None = None,
     fallback: Fallback | None = None,
     progress: Callable[[int, int], None] | None = None,
+    foreign: bool = False,
 ) -> tuple[list[Sighting], dict]:
-    """All holoslam-label sightings of a log (decoded images, then robot tag sightings), and counters for
-    the report (as a plain dict; ``observations_from_log`` turns it into a ``VisionReport``).
-    ``progress(done, total)`` is called with the images decoded so far, about every 2 % of them."""
+    """The code sightings of a log from ``source`` (see the module docstring): holoslam labels, and with
+    ``foreign`` the codes that are not labels too; and counters for the report (as a plain dict;
+    ``locate_from_log`` turns it into a ``VisionReport``). ``progress(done, total)`` is called with the images
+    decoded so far, about every 2 % of them."""
+    src = resolve_source(log, source)
     c = {
         k: 0
         for k in (
@@ -133,32 +196,24 @@ def sightings_from_log(
         )
     }
     problems: list[str] = []
-    foreign: dict[str, None] = {}
+    foreign_texts: dict[str, None] = {}
     out: list[Sighting] = []
 
-    def classify(text: str, where: str) -> ObjectLabel | None:
+    def classify(text: str, where: str) -> tuple[ObjectLabel | None, bool]:
+        """(label, keep): a label; a foreign code (kept as a landmark with ``foreign``); a rejected payload."""
         try:
-            return parse_label(text)
+            return parse_label(text), True
         except PayloadError as e:
             if text.startswith(MAGIC + ";"):
                 c["rejected_payloads"] += 1
                 problems.append(f"{where}: rejected label payload: {e}")
-            else:
-                c["foreign"] += 1
-                foreign.setdefault(_shown(text), None)
-            return None
+                return None, False
+            c["foreign"] += 1
+            foreign_texts.setdefault(_shown(text), None)
+            return None, foreign and bool(text)
 
-    tag_keys = set()
-    if use_tags:
-        for t in log.tags:
-            c["tag_sightings"] += 1
-            label = classify(t.payload, f"tag sighting at {t.stamp_ns} ns")
-            if label is None:
-                continue
-            c["labels"] += 1
-            tag_keys.add((t.stamp_ns, label.object_id))
-            out.append(Sighting(t.stamp_ns, t.frame_id, t.payload, label, t.corners, "tags"))
-    if use_images:
+    seen: set[tuple[int, str]] = set()
+    if src in (SightingSource.IMAGES, SightingSource.BOTH):
         every = max(1, -(-len(log.images) // 50))  # at most 50 calls
         for idx, im in enumerate(log.images):
             if progress is not None and idx % every == 0:
@@ -176,41 +231,52 @@ def sightings_from_log(
                 c["images_decoded"] += 1
             for d in dets:
                 c["decodes"] += 1
-                if d.label is None:
-                    if d.payload.startswith(MAGIC + ";") or (d.error and "UTF-8" in d.error):
-                        c["rejected_payloads"] += 1
-                        problems.append(f"{where}: rejected payload {_shown(d.payload)!r}: {d.error}")
-                    else:
-                        c["foreign"] += 1
-                        foreign.setdefault(_shown(d.payload), None)
+                label, keep = classify(d.payload, where)
+                if not keep:
                     continue
-                if (im.stamp_ns, d.label.object_id) in tag_keys:
-                    c["duplicates_skipped"] += 1
-                    continue
-                c["labels"] += 1
-                out.append(Sighting(im.stamp_ns, im.frame_id, d.payload, d.label, d.corners, "image", idx))
+                s = Sighting(im.stamp_ns, im.frame_id, d.payload, label, d.corners, "images", idx,
+                             foreign=label is None)
+                c["labels"] += label is not None
+                seen.add((im.stamp_ns, s.object_id))
+                out.append(s)
+    if src in (SightingSource.TAGS, SightingSource.BOTH):
+        for t in log.tags:
+            c["tag_sightings"] += 1
+            label, keep = classify(t.payload, f"tag sighting at {t.stamp_ns} ns")
+            if not keep:
+                continue
+            s = Sighting(t.stamp_ns, t.frame_id, t.payload, label, t.corners, "tags", foreign=label is None)
+            if (t.stamp_ns, s.object_id) in seen:  # the image decode of the same code came first
+                c["duplicates_skipped"] += 1
+                continue
+            c["labels"] += label is not None
+            out.append(s)
     c["problems"] = problems
-    c["foreign_payloads"] = tuple(foreign)
+    c["foreign_payloads"] = tuple(foreign_texts)
+    c["source"] = src.value
     return out, c
 
 
-def observations_from_log(
+def locate_from_log(
     log: LogData,
-    base_frame: str = "base_link",
+    base_frame: str = "",
     sigma_px: float = DEFAULT_SIGMA_PX,
-    use_images: bool = True,
-    use_tags: bool = True,
+    source: SightingSource | str = SightingSource.AUTO,
     decoders: tuple[Decoder, ...] | None = None,
     fallback: Fallback | None = None,
     camera_info_tolerance_ns: int = 50_000_000,
     progress: Callable[[int, int], None] | None = None,
-) -> tuple[tuple[ObjectObservation, ...], VisionReport]:
-    """Object observations (label centre in ``base_frame`` at each image stamp, with covariance from
-    ``sigma_px`` pixel noise) from every image and robot tag sighting of ``log``, plus a ``VisionReport``.
-    ``progress(done, total)`` follows the image decoding (see :func:`sightings_from_log`)."""
+    triangulate: bool = True,
+    foreign: bool = False,
+) -> VisionResult:
+    """PnP observations (label centre in the base frame, "" = ``log.base_frame``, at each image stamp, with
+    covariance from ``sigma_px`` pixel noise) of every sized label sighting of ``log``, the views to
+    triangulate (labels without a size when ``triangulate``; foreign codes when ``foreign`` too), and a
+    ``VisionReport``. ``progress(done, total)`` follows the image decoding (see :func:`sightings_from_log`)."""
     from holoslam.frames import TransformTree
 
-    sightings, c = sightings_from_log(log, use_images, use_tags, decoders, fallback, progress)
+    base_frame = base_frame or log.base_frame
+    sightings, c = sightings_from_log(log, source, decoders, fallback, progress, foreign and triangulate)
     problems: list[str] = list(c.pop("problems"))
     foreign_payloads = c.pop("foreign_payloads")
     tree = TransformTree(log.transforms)
@@ -218,13 +284,18 @@ def observations_from_log(
     info_stamps = np.array([i.stamp_ns for i in infos], dtype=np.int64)
     miss = {"missing_camera_info": 0, "missing_transform": 0, "missing_size": 0, "pnp_failures": 0}
     obs: list[ObjectObservation] = []
+    views: list[View] = []
+    used: list[Sighting] = []
+    n_sizeless = n_foreign = 0
     for s in sightings:
-        where = f"{s.source} sighting of {s.label.object_id} at {s.stamp_ns} ns"
-        side = s.label.size_m
-        if side is None or not side > 0:
+        where = f"{s.source} sighting of {s.object_id} at {s.stamp_ns} ns"
+        side = s.label.size_m if s.label is not None else None
+        sized = side is not None and side > 0
+        if not sized and not triangulate:
             miss["missing_size"] += 1
             problems.append(
-                f"{where}: label has no printed size (attribute s=<mm>); cannot locate it from one view"
+                f"{where}: label has no printed size (attribute s=<mm>) and triangulation is off; cannot "
+                "locate it from one view"
             )
             continue
         info = _camera_info_at(infos, info_stamps, s.frame_id, s.stamp_ns, camera_info_tolerance_ns)
@@ -243,14 +314,21 @@ def observations_from_log(
             continue
         try:
             cam = PinholeCamera.from_camera_info(info)
-            obs.append(
-                observation_from_pnp(
-                    s.stamp_ns, s.label.object_id, s.payload, s.corners, side, cam, bTc, sigma_px
-                )
-            )
+            if sized:
+                ob = observation_from_pnp(s.stamp_ns, s.object_id, s.payload, s.corners, side, cam, bTc, sigma_px)
+                obs.append(replace(ob, source=s.source))
+            else:
+                sides = np.linalg.norm(s.corners - np.roll(s.corners, -1, axis=0), axis=1)
+                views.append(View(s.stamp_ns, s.object_id, s.payload, _centre(s.corners), cam, bTc, s.source,
+                                  s.foreign, float(sides.mean())))
+                n_foreign += s.foreign
+                n_sizeless += not s.foreign
         except VisionError as e:
             miss["pnp_failures"] += 1
             problems.append(f"{where}: {e}")
+            continue
+        if s.label is not None:
+            used.append(s)
     obs.sort(key=lambda o: (o.stamp_ns, o.object_id))
     report = VisionReport(
         **c,
@@ -259,8 +337,28 @@ def observations_from_log(
         object_ids=tuple(sorted({o.object_id for o in obs})),
         foreign_payloads=foreign_payloads,
         problems=tuple(problems),
+        views=len(views),
+        sizeless=n_sizeless,
+        foreign_views=n_foreign,
     )
-    return tuple(obs), report
+    return VisionResult(tuple(obs), tuple(views), tuple(used), report)
+
+
+def observations_from_log(
+    log: LogData,
+    base_frame: str = "",
+    sigma_px: float = DEFAULT_SIGMA_PX,
+    source: SightingSource | str = SightingSource.AUTO,
+    decoders: tuple[Decoder, ...] | None = None,
+    fallback: Fallback | None = None,
+    camera_info_tolerance_ns: int = 50_000_000,
+    progress: Callable[[int, int], None] | None = None,
+) -> tuple[tuple[ObjectObservation, ...], VisionReport]:
+    """The PnP observations of :func:`locate_from_log` and its report (labels without a size are reported as
+    ``missing_size``: triangulating them needs the trajectory)."""
+    r = locate_from_log(log, base_frame, sigma_px, source, decoders, fallback, camera_info_tolerance_ns, progress,
+                        triangulate=False)
+    return r.observations, r.report
 
 
 @dataclass(frozen=True, slots=True)
