@@ -209,6 +209,24 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_config(a: argparse.Namespace) -> int:
+    from holoslam.config import dump_run_config, load_run_config
+
+    if not a.dump:
+        _err("say what to do with the configuration: --dump writes every setting as YAML")
+        return EXIT_BAD_INPUT
+    text = dump_run_config(load_run_config(a.config))
+    if a.output is None:
+        sys.stdout.write(text)
+        return EXIT_OK
+    try:
+        a.output.write_text(text, encoding="utf-8")
+    except OSError as e:
+        _err(f"cannot write {a.output}: {e.strerror or e}")
+        return EXIT_BAD_INPUT
+    return EXIT_OK
+
+
 # ---------------------------------------------------------------------------------------------- parser
 
 
@@ -231,6 +249,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     s.add_argument("--json", action="store_true", help="print the summary as JSON only")
     s.set_defaults(func=cmd_run)
+
+    s = sub.add_parser("config", help="the run configuration: --dump writes every setting with its default")
+    s.add_argument("--dump", action="store_true", help="write the whole run configuration as YAML")
+    s.add_argument("--config", type=Path, help="a YAML run configuration to merge over the defaults first")
+    s.add_argument("-o", "--output", type=Path, help="file to write (default: standard output)")
+    s.set_defaults(func=cmd_config)
 
     s = sub.add_parser("inspect", help="summarise a log's channels without reading its messages")
     s.add_argument("log", type=Path)

@@ -38,6 +38,7 @@ __all__ = [
     "HolographicConfig",
     "PlanningConfig",
     "load_run_config",
+    "dump_run_config",
 ]
 
 T = TypeVar("T")
@@ -298,3 +299,72 @@ def load_run_config(path: str | Path | None) -> RunConfig:
     if cfg.mapping is not None and not cfg.mapping.is_absolute():
         cfg = dataclasses.replace(cfg, mapping=Path(path).parent / cfg.mapping)
     return cfg
+
+
+# ------------------------------------------------------------------------------------------- dump
+
+
+def _field_comments(cls: type) -> dict[str, str]:
+    """The source comments of a dataclass's fields: a trailing ``# ...`` on the field's line, else the
+    ``#`` lines right above it. Empty when the source is not available (a frozen build)."""
+    import inspect
+    import re
+
+    try:
+        lines = inspect.getsource(cls).splitlines()
+    except (OSError, TypeError):
+        return {}
+    names = {f.name for f in dataclasses.fields(cls)}
+    out: dict[str, str] = {}
+    above: list[str] = []
+    for line in lines:
+        s = line.strip()
+        if s.startswith("#"):
+            above.append(s.lstrip("#").strip())
+            continue
+        m = re.match(r"(\w+)\s*:", s)
+        if m and m.group(1) in names:
+            trailing = s.split("  # ", 1)[1].strip() if "  # " in s else ""
+            out[m.group(1)] = trailing or " ".join(above)
+        above = []
+    return out
+
+
+def _yaml_scalar(value: Any) -> str:
+    import yaml
+
+    text = yaml.safe_dump([value], default_flow_style=True, width=10_000).strip()
+    return text[1:-1]  # "[x]" -> "x"
+
+
+def _dump_lines(obj: Any, indent: int) -> list[str]:
+    pad = "  " * indent
+    out: list[str] = []
+    doc = " ".join((type(obj).__doc__ or "").split())
+    if doc and not doc.startswith(type(obj).__name__ + "("):  # dataclasses without a docstring get a signature
+        out.append(f"{pad}# {doc}")
+    comments = _field_comments(type(obj))
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        note = comments.get(f.name, "")
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            if note:
+                out.append(f"{pad}# {note}")
+            out.append(f"{pad}{f.name}:")
+            out.extend(_dump_lines(value, indent + 1))
+        else:
+            line = f"{pad}{f.name}: {_yaml_scalar(to_mapping(value))}"
+            out.append(f"{line}  # {note}" if note else line)
+    return out
+
+
+def dump_run_config(config: RunConfig | None = None) -> str:
+    """Every setting of a run as YAML (the defaults, or ``config``), each section with its docstring and each
+    setting with its source comment (unit, why its default). ``load_run_config`` reads it back to the same
+    configuration."""
+    cfg = config if config is not None else RunConfig()
+    head = [
+        "# holoslam run configuration: every setting (`holoslam config --dump`). Pass a copy, edited or cut",
+        "# down to the settings you change, as `holoslam run --config FILE`; a missing setting keeps its default.",
+    ]
+    return "\n".join(head + _dump_lines(cfg, 0)) + "\n"
