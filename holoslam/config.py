@@ -342,7 +342,9 @@ def _dump_lines(obj: Any, indent: int) -> list[str]:
     out: list[str] = []
     doc = " ".join((type(obj).__doc__ or "").split())
     if doc and not doc.startswith(type(obj).__name__ + "("):  # dataclasses without a docstring get a signature
-        out.append(f"{pad}# {doc}")
+        import textwrap
+
+        out.extend(f"{pad}# {line}" for line in textwrap.wrap(doc, max(60, 108 - len(pad))))
     comments = _field_comments(type(obj))
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
