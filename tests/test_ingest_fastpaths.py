@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from holoslam.io import mcap as mcap_io
-from holoslam.io.mcap import read_log, report_to_dict
+from holoslam.io.mcap import container, convert, read_log, report_to_dict
 from holoslam.io.mcap_write import example_records, write_ros2_log
 from holoslam.types import CameraInfo, Odometry, Pose2
 
@@ -54,7 +54,7 @@ def _damaged(tmp_path, records, kind):
 def test_mapped_and_buffered_reads_give_identical_records_and_reports(tmp_path, records, monkeypatch, kind):
     path = _damaged(tmp_path, records, kind)
     mapped, rep_mapped = read_log(path)
-    monkeypatch.setattr(mcap_io, "_open_mapped", lambda fh: fh)  # the buffered-read fallback
+    monkeypatch.setattr(container, "_open_mapped", lambda fh: fh)  # the buffered-read fallback
     buffered, rep_buffered = read_log(path)
     assert _norm(mapped) == _norm(buffered)
     assert report_to_dict(rep_mapped) == report_to_dict(rep_buffered)
@@ -75,11 +75,11 @@ def test_scalar_covariance_rotation_is_bit_identical_to_the_matrix_form():
         c = c36  # the (x, y, yaw) block of the 6x6, rotated into the body frame by the matrix form
         block = np.array([[c[0], c[1], c[5]], [c[6], c[7], c[11]], [c[30], c[31], c[35]]])
         want = mcap_io.rotate_cov_xy(block, -th)
-        got = mcap_io._cov36_to_body(c36, th)
+        got = convert._cov36_to_body(c36, th)
         assert got.dtype == np.float64 and got.shape == (3, 3)
         assert np.array_equal(got, want)
-    assert mcap_io._cov36_to_body((0.0,) * 36, 0.3) is None
-    assert mcap_io._cov36_to_body((1.0,) * 35, 0.3) is None  # not a 6x6 covariance: unknown
+    assert convert._cov36_to_body((0.0,) * 36, 0.3) is None
+    assert convert._cov36_to_body((1.0,) * 35, 0.3) is None  # not a 6x6 covariance: unknown
 
 
 def test_camera_info_records_follow_intrinsics_that_change_mid_log(tmp_path):
