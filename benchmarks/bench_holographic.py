@@ -67,9 +67,9 @@ def significant(grid) -> tuple[int, int]:
 def measure(name: str, grid, repeat: int, counts: bool = True) -> dict:
     import networkx as nx
 
-    from holoslam.maps.holographic import PlaceParams, ReachModel, build_holographic
+    from holoslam.maps.holographic import PlaceParams, build_holographic
     from holoslam.maps.topology import cycle_rank, topology_from_grid
-    from holoslam.pipeline import RunConfig
+    from holoslam.pipeline import RunConfig, reach_model
 
     cfg = RunConfig()
     tc, hc = cfg.topology, cfg.holographic
@@ -87,7 +87,7 @@ def measure(name: str, grid, repeat: int, counts: bool = True) -> dict:
         return build_holographic(
             grid,
             T,
-            reach_model=ReachModel(robot_radius_m=hc.robot_radius_m, arm_reach_m=hc.arm_reach_m),
+            reach_model=reach_model(cfg.robot),
             params=PlaceParams(doorway_width_m=hc.doorway_width_m, min_room_area_m2=hc.min_room_area_m2),
         )
 

@@ -37,11 +37,19 @@ __all__ = [
     "TopologyConfig",
     "HolographicConfig",
     "PlanningConfig",
+    "RobotConfig",
     "load_run_config",
     "dump_run_config",
 ]
 
 T = TypeVar("T")
+
+# settings that moved: (section class, old key) -> where they are now
+_MOVED_KEYS = {
+    ("PlanningConfig", "robot_radius_m"): "robot.radius_m",
+    ("HolographicConfig", "robot_radius_m"): "robot.radius_m",
+    ("HolographicConfig", "arm_reach_m"): "robot.arm_reach_m",
+}
 
 
 def _describe(tp: Any) -> str:
@@ -128,6 +136,9 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], where: str = "config") -
     kwargs: dict[str, Any] = {}
     for key, value in data.items():
         if not isinstance(key, str) or key not in fields:
+            moved = _MOVED_KEYS.get((cls.__name__, str(key)))
+            if moved is not None:
+                raise ConfigError(f"{where}: {key!r} is now {moved!r} (one robot description); move it there")
             close = difflib.get_close_matches(str(key), list(fields), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else f"; valid keys: {', '.join(sorted(fields))}"
             raise ConfigError(f"{where}: unknown key {key!r}{hint}")
@@ -257,21 +268,52 @@ class TopologyConfig:
 
 
 @dataclass(frozen=True)
-class HolographicConfig:
-    """Reach model of the robot (who can handle which object from where) and place detection thresholds."""
+class RobotConfig:
+    """The robot description: one base footprint and one arm, for every stage that asks how big the robot is or
+    how far it reaches: the configuration space of the planning graph (free space eroded by ``radius_m``), the
+    reach model of the holographic graph (where the base fits, what the arm reaches from there) and the narrowest
+    passage doorway detection considers (``2 radius_m``). Defaults: the reference robot of the method (seed 002):
+    a Pioneer III (3-DX) base with an arm on its top plate. Sensor mountings are not here: the log's /tf_static gives
+    the laser's and the camera's pose on the base, and a second copy could only disagree with it."""
 
-    robot_radius_m: float = 0.25
+    # m: radius of the circle the base sweeps turning in place about its centre (the odometry frame's origin);
+    # the paper's Pioneer III (3-DX datasheet: body 455 x 381 mm, swing radius about 26 cm). The planning graph's
+    # configuration space, the reach model's standing points and the narrowest doorway (2 radius_m) use it
+    radius_m: float = 0.26
+    # m: horizontal distance from the base centre the gripper reaches; a Kinova JACO-class arm (reach 0.90 m)
+    # mounted near the centre of the top plate
     arm_reach_m: float = 0.9
+    # m: how far the arm reaches over an obstacle (the furniture an object stands on) toward the object: the
+    # front half of a standard 600 mm deep kitchen worktop plus one 5 cm map cell, the full depth of a 350 mm
+    # shelf. An object farther behind an obstacle is out of reach (the paper's chair behind the dining table)
+    reach_through_m: float = 0.35
+    # m: label heights the robot can handle, from the floor ...
+    reach_z_min_m: float = 0.0
+    reach_z_max_m: float = 2.5  # m: ... to the highest label it operates (the paper counts its air conditioner)
+
+    def __post_init__(self) -> None:
+        for name in ("radius_m", "arm_reach_m", "reach_through_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be a finite number of metres >= 0, got {v!r}")
+        if not self.reach_z_min_m <= self.reach_z_max_m:
+            raise ValueError(f"reach_z_min_m {self.reach_z_min_m} is above reach_z_max_m {self.reach_z_max_m}")
+
+
+@dataclass(frozen=True)
+class HolographicConfig:
+    """Place detection thresholds of the holographic graph (the robot's size and reach: ``robot``)."""
+
     doorway_width_m: float = 1.3
     min_room_area_m2: float = 1.0
 
 
 @dataclass(frozen=True)
 class PlanningConfig:
-    """Two-layer planning graph: built on the free space eroded by the robot radius (its configuration space),
-    with the nine-square split stopping at ``min_block_cells`` (mixed blocks smaller count as occupied)."""
+    """Two-layer planning graph: built on the free space eroded by the robot's radius (``robot.radius_m``: its
+    configuration space), with the nine-square split stopping at ``min_block_cells`` (mixed blocks smaller count
+    as occupied)."""
 
-    robot_radius_m: float = 0.2
     min_block_cells: int = 1
 
 
@@ -283,6 +325,7 @@ class RunConfig:
     vision: VisionConfig = field(default_factory=VisionConfig)
     frontend: FrontEndConfig = field(default_factory=FrontEndConfig)
     solver: SolverConfig = field(default_factory=SolverConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
     grid: GridConfig = field(default_factory=GridConfig)
     topology: TopologyConfig = field(default_factory=TopologyConfig)
     holographic: HolographicConfig = field(default_factory=HolographicConfig)

@@ -35,6 +35,7 @@ __all__ = [
     "TopologyConfig",
     "HolographicConfig",
     "PlanningConfig",
+    "RobotConfig",
     "VisionConfig",
     "RunResult",
     "run",
@@ -67,6 +68,7 @@ from holoslam.config import (  # noqa: E402
     GridConfig,
     HolographicConfig,
     PlanningConfig,
+    RobotConfig,
     RunConfig,
     SolverConfig,
     SolverMethod,
@@ -244,7 +246,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     """The main job on one log: ingest, locate objects, build and optimise the graph, build the maps and
     graphs. Raises ``IngestError`` when the log lacks what a run needs (odometry and laser scans)."""
     from holoslam.io.mcap import read_log
-    from holoslam.maps.holographic import PlaceParams, ReachModel, build_holographic
+    from holoslam.maps.holographic import PlaceParams, build_holographic
     from holoslam.maps.occupancy import build_grid
     from holoslam.maps.topology import topology_from_grid
     from holoslam.planning.twolayer import build_two_layer
@@ -369,9 +371,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             anchors_wTa=sol.wTa,
             submap_ids=[sm.index for sm in fe.submaps],
             objects=objects,
-            reach_model=ReachModel(
-                robot_radius_m=cfg.holographic.robot_radius_m, arm_reach_m=cfg.holographic.arm_reach_m
-            ),
+            reach_model=reach_model(cfg.robot),
             params=PlaceParams(
                 doorway_width_m=cfg.holographic.doorway_width_m,
                 min_room_area_m2=cfg.holographic.min_room_area_m2,
@@ -381,7 +381,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
 
     with _stage(progress, timings, "planning graph"):
         planning = build_two_layer(
-            _configuration_space(grid, cfg.planning.robot_radius_m), cfg.planning.min_block_cells
+            _configuration_space(grid, cfg.robot.radius_m), cfg.planning.min_block_cells
         )
 
     timings["total"] = round(time.perf_counter() - t_start, 4)
@@ -461,6 +461,14 @@ def _interp(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) -> np.ndar
     from holoslam.submaps.deadreckon import interpolate_poses
 
     return interpolate_poses(stamps, poses, query)
+
+
+def reach_model(robot: RobotConfig) -> Any:
+    """The holographic graph's reach model (``holoslam.maps.holographic.ReachModel``) of a robot description."""
+    from holoslam.maps.holographic import ReachModel
+
+    return ReachModel(robot_radius_m=robot.radius_m, arm_reach_m=robot.arm_reach_m, z_min_m=robot.reach_z_min_m,
+                      z_max_m=robot.reach_z_max_m, reach_through_m=robot.reach_through_m)
 
 
 def _configuration_space(grid: Any, robot_radius_m: float) -> Any:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from holoslam.cli import main
-from holoslam.config import from_mapping
+from holoslam.config import RobotConfig, from_mapping
 from holoslam.errors import ConfigError, IngestError
 from holoslam.pipeline import RunConfig, load_run_config, run
 from holoslam.submaps.frontend import FrontEndConfig
@@ -42,7 +42,8 @@ def test_odometry_and_laser_only_log_runs_end_to_end(short_run, tmp_path):
     log = _write(
         short_run, tmp_path / "plain_robot.mcap", ["odometry", "scans", "transforms", "ground_truth"]
     )
-    result = run(log)
+    # a wide robot: the planning graph is built on the free space its centre fits in (one robot description)
+    result = run(log, RunConfig(robot=RobotConfig(radius_m=0.35)))
     assert set(result.report["inputs_absent"]) == {"compass", "camera images", "tag sightings"}
     assert result.report["vision"]["skipped"]
     assert result.report["factors"]["compass_heading"] == 0
@@ -53,6 +54,11 @@ def test_odometry_and_laser_only_log_runs_end_to_end(short_run, tmp_path):
     assert acc["anchors"]["rmse_m"] < acc["anchors_dead_reckoning"]["rmse_m"]
     assert result.grid.free.sum() > 1000
     assert result.holographic.number_of_nodes() > 0
+    from holoslam.maps.topology import clearance_map
+
+    clr = clearance_map(result.grid.free, result.grid.resolution)
+    in_blocks = result.planning.labels >= 0
+    assert in_blocks.any() and np.all(clr[in_blocks] >= 0.35 - result.grid.resolution)
 
 
 def test_log_without_laser_is_a_clear_error(short_run, tmp_path):
@@ -93,8 +99,8 @@ def test_run_config_from_yaml(tmp_path):
     with pytest.raises(ConfigError, match="frontend: unknown key 'revisit_radius'"):
         load_run_config(bad)
     assert load_run_config(None) == RunConfig()
-    with pytest.raises(ConfigError, match="planning.robot_radius_m: expected a number"):
-        from_mapping(RunConfig, {"planning": {"robot_radius_m": "wide"}})
+    with pytest.raises(ConfigError, match="robot.radius_m: expected a number"):
+        from_mapping(RunConfig, {"robot": {"radius_m": "wide"}})
 
 
 def test_optimised_trajectory_follows_anchors():

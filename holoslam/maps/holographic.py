@@ -125,10 +125,11 @@ class ObjectInfo:
 
 @dataclass(frozen=True, slots=True)
 class ReachModel:
-    """Where the robot can handle an object from (module docstring). Defaults: the reference household's
-    robot (0.25 m radius base, 0.9 m horizontal arm reach, labels 0-2.5 m high)."""
+    """Where the robot can handle an object from (module docstring). A run builds it from the robot description
+    (``holoslam.config.RobotConfig``, ``holoslam.pipeline.reach_model``), whose defaults these are and where
+    they are justified."""
 
-    robot_radius_m: float = 0.25
+    robot_radius_m: float = 0.26
     arm_reach_m: float = 0.9
     z_min_m: float = 0.0
     z_max_m: float = 2.5
