@@ -686,8 +686,11 @@ def format_run_report(report: dict[str, Any]) -> str:
     lines.append(
         f"  ingest: {len(chans)} channels, {sum(c.get('decoded', 0) for c in chans)} messages decoded, "
         f"{sum(c.get('failed', 0) for c in chans)} failed, {sum(c.get('skipped', 0) for c in chans)} "
-        f"skipped, {len(ing.get('warnings', []))} warnings"
+        f"skipped, {len(ing.get('warnings', []))} warnings; base frame {ing.get('base_frame', '?')}"
     )
+    for c in ing.get("choices", []):
+        lines.append(f"    {c['role']}: {c['topic']} used, not {', '.join(c['others'])} ({c['rule']})")
+    lines.extend(f"    levelled: {m}" for m in ing.get("levelled", []))
     v = report["vision"]
     if "skipped" in v:
         lines.append(f"  vision: skipped ({v['skipped']})")
