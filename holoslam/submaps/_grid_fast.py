@@ -158,6 +158,11 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
         return cost, cost_occ
 
     cost, cost_occ = evaluate(x, y, t, H, g, Hocc, True)
+    # a trial step is evaluated with its gradient and Hessian (into the spare buffers): accepted, they are the
+    # next iteration's; one pass over the points per iteration instead of a value pass and a gradient pass
+    H2 = np.zeros((3, 3))
+    g2 = np.zeros(3)
+    Hocc2 = np.zeros((3, 3))
     used = 0
     for it in range(iters):
         used = it + 1
@@ -166,14 +171,17 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
             A[a, a] += lam * (H[a, a] + 1e-9)
         step = np.linalg.solve(A, -g)
         nx, ny, nt = x + step[0], y + step[1], t + step[2]
-        ncost, nocc = evaluate(nx, ny, nt, H, g, Hocc, False)
+        ncost, nocc = evaluate(nx, ny, nt, H2, g2, Hocc2, True)
         if ncost < cost:
-            x, y, t = nx, ny, nt
-            lam = max(lam * 0.3, 1e-7)
             # converged: a step under 0.1 mm and 0.006 deg, or a relative decrease under 1e-6
             small = abs(cost - ncost) < 1e-6 * max(cost, 1e-12) or (
                 abs(step[0]) < 1e-4 and abs(step[1]) < 1e-4 and abs(step[2]) < 1e-4)
-            cost, cost_occ = evaluate(x, y, t, H, g, Hocc, True)
+            x, y, t = nx, ny, nt
+            lam = max(lam * 0.3, 1e-7)
+            cost, cost_occ = ncost, nocc
+            H, H2 = H2, H
+            g, g2 = g2, g
+            Hocc, Hocc2 = Hocc2, Hocc
             if small:
                 break
         else:
@@ -203,6 +211,11 @@ def window_scores(prob, ox, oy, res, px, py, cx, cy, ct, nxy, angles, outside): 
             wy = s * px[k] + c * py[k] + cy
             c0 = int(math.floor((wx - ox) / res)) - nxy
             r0 = int(math.floor((wy - oy) / res)) - nxy
+            if r0 >= 0 and c0 >= 0 and r0 + m <= rows and c0 + m <= cols:  # the whole block inside: no checks
+                for j in range(m):
+                    for i in range(m):
+                        out[a, j, i] += prob[r0 + j, c0 + i]
+                continue
             for j in range(m):
                 r = r0 + j
                 if r < 0 or r >= rows:
