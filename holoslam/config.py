@@ -234,7 +234,10 @@ class VisionConfig:
     views agreeing within ``inlier_m`` (``holoslam.vision.multiview``), once the trajectory is solved; the
     graph is then solved again with them. ``foreign_landmarks``: any QR code that is not a holoslam label
     (a product code, a Wi-Fi sticker, a poster) becomes an anonymous landmark keyed by its payload
-    (``holoslam.vision.label.foreign_code_id``); off by default until measured on real homes."""
+    (``holoslam.vision.label.foreign_code_id``); off by default until measured on real homes. ``laser_range``:
+    where at least two views' rays meet laser-seen surfaces (walls, furniture fronts) at one place that agrees
+    with the triangulation, each view is located by its ray and the laser's range instead
+    (``holoslam.vision.landmarks``)."""
 
     source: SightingSource = SightingSource.AUTO
     sigma_px: float = 0.5
@@ -245,6 +248,7 @@ class VisionConfig:
     foreign_landmarks: bool = False  # codes that are not holoslam labels become anonymous landmarks
     min_parallax_deg: float = 2.0  # deg between two views' rays at the code, for them to triangulate it
     inlier_m: float = 0.10  # m: a view agrees with a triangulated point when its ray passes this close
+    laser_range: bool = True  # a code's range along its rays from the laser points, where views agree
 
 
 @dataclass(frozen=True)

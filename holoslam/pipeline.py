@@ -318,7 +318,8 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         with _stage(progress, timings, "objects by triangulation"):
             fe, sol, tri = _triangulated_objects(vision.views, fe, sol, log, cfg, options)
             observations = tuple(observations) + tri.observations
-            vision_report["triangulation"] = {**dataclasses.asdict(tri.report), "problems": list(tri.report.problems)[:50]}
+            vision_report["triangulation"] = {**dataclasses.asdict(tri.report), "laser_ranged": tri.laser_ranged,
+                                              "problems": list(tri.report.problems)[:50]}
             for p in tri.points:
                 extra_sightings[p.object_id] = extra_sightings.get(p.object_id, 0) + len(p.views) - 1
 
@@ -434,7 +435,7 @@ def _triangulated_objects(views: Sequence[Any], fe: Any, sol: Any, log: Any, cfg
 
     odom_stamps, odomTb = log.odometry_arrays()
     tl = triangulated_landmarks(views, fe.submaps, sol.wTa, sol.cov_wTa, odom_stamps, odomTb, cfg.vision.sigma_px,
-                                cfg.vision.min_parallax_deg, cfg.vision.inlier_m)
+                                cfg.vision.min_parallax_deg, cfg.vision.inlier_m, cfg.vision.laser_range)
     if len(tl.ids):
         problem = with_landmarks(fe.problem, tl, sol.wTa)
         sol = solve(problem, options)
@@ -704,7 +705,8 @@ def format_run_report(report: dict[str, Any]) -> str:
         if t:
             lines.append(
                 f"  triangulation: {t['views']} views of {t['codes']} codes without a printed size or foreign "
-                f"-> {t['points']} points ({t['views_unused']} views unused)"
+                f"-> {t['points']} points ({t['views_unused']} views unused); {t.get('laser_ranged', 0)} views "
+                "ranged by the laser instead"
             )
     sm = report["submaps"]
     lines.append(
@@ -856,8 +858,11 @@ def simulate(
     duration_s: float | None = None,
     image_rate_hz: float | None = None,
     noise_scale: float = 1.0,
+    wall_codes: int = 0,
+    sizeless_labels: int = 0,
 ) -> dict[str, Any]:
-    """Write a simulated reference-household log (``holoslam.sim``) to ``output``."""
+    """Write a simulated reference-household log (``holoslam.sim``) to ``output``; ``wall_codes`` foreign QR codes
+    on walls and ``sizeless_labels`` labels without a printed size can be added (``holoslam.sim.world``)."""
     from holoslam.sim import SimConfig, simulate_to_file
 
     if noise_scale < 0 or not np.isfinite(noise_scale):
@@ -866,7 +871,7 @@ def simulate(
         raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
     if image_rate_hz is not None and not image_rate_hz >= 0:
         raise ConfigError(f"--image-rate must be >= 0 snapshots per second, got {image_rate_hz}")
-    kw: dict[str, Any] = {"seed": seed}
+    kw: dict[str, Any] = {"seed": seed, "wall_codes": wall_codes, "sizeless_labels": sizeless_labels}
     if duration_s is not None:
         kw["duration_s"] = duration_s
     if image_rate_hz is not None:

@@ -50,6 +50,8 @@ class SimConfig:
     image_width: int = 640
     image_height: int = 480
     jpeg_quality: int = 55
+    wall_codes: int = 0  # foreign QR codes on walls (holoslam.sim.world.WALL_CODES, the first k)
+    sizeless_labels: int = 0  # labels printed without their size (holoslam.sim.world.SIZELESS_ORDER, the first k)
 
     def __post_init__(self) -> None:
         checks = [
@@ -70,6 +72,8 @@ class SimConfig:
             ("odom_heading_sigma_deg", self.odom_heading_sigma_deg >= 0, ">= 0"),
             ("compass_sigma_deg", self.compass_sigma_deg >= 0, ">= 0"),
             ("laser_sigma", self.laser_sigma >= 0, ">= 0"),
+            ("wall_codes", 0 <= self.wall_codes <= 12, "0..12"),
+            ("sizeless_labels", 0 <= self.sizeless_labels <= 8, "0..8"),
         ]
         for name, ok, what in checks:
             if not ok:
@@ -97,6 +101,9 @@ class SimConfig:
     def metadata(self) -> dict[str, str]:
         """The config as the string map of the MCAP metadata record ``holoslam``."""
         d = {k: repr(v) if isinstance(v, float) else str(v) for k, v in dataclasses.asdict(self).items()}
+        for extra in ("wall_codes", "sizeless_labels"):  # the reference household's log stays as it was
+            if not getattr(self, extra):
+                del d[extra]
         d["generator"] = "holoslam.sim.simulate_household"
         d["world"] = "reference_household (seed 002)"
         return d
@@ -122,7 +129,7 @@ def simulate_household(config: SimConfig = SimConfig()) -> SimulatedRun:
     from holoslam.sim.sensors import camera_snapshots, compass, laser_scans, odometry
     from holoslam.sim.world import reference_household
 
-    world = reference_household()
+    world = reference_household(config.wall_codes, config.sizeless_labels)
     traj = household_trajectory(world, config.duration_s, config.odom_rate_hz, config.seed, T0_NS)
 
     def rng(stream: int) -> np.random.Generator:

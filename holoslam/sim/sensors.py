@@ -370,7 +370,7 @@ def readable_labels(
     w, h = size
     readable, corners, draw = [], {}, []
     cosmax = math.cos(math.radians(MAX_FACING_DEG))
-    for o in world.objects:
+    for o in world.all_codes:
         fc = _facing_cos(o, wtc)
         if fc <= 0.05:
             continue
@@ -410,7 +410,7 @@ def camera_snapshots(
     """Operator-style PTZ snapshots along the trajectory (see the module docstring)."""
     from holoslam.sim.render import render_image
 
-    modules = {o.object_id: qr_modules(o.payload) for o in world.objects}
+    modules = {o.object_id: qr_modules(o.payload) for o in world.all_codes}
     cosmax = math.cos(math.radians(MAX_FACING_DEG))
     period = int(round(1e9 / image_rate_hz))
     last_shot = -(10**19)
@@ -418,7 +418,7 @@ def camera_snapshots(
     shots_of: dict[str, list[np.ndarray]] = {}  # camera positions of the snapshots of each label
     out: list[Snapshot] = []
     walls = world.wall_segments()
-    positions = np.array([o.position for o in world.objects])
+    positions = np.array([o.position for o in world.all_codes])
     for k in range(0, len(stamps_ns), 2):
         t = int(stamps_ns[k]) + offset_ns
         if t - last_shot < period or t > stamps_ns[-1]:
@@ -428,11 +428,11 @@ def camera_snapshots(
         d = np.linalg.norm(positions - cam, axis=1)
         # labels never photographed first, then those photographed once (a second view from a point at
         # least SECOND_VIEW_BASELINE away, for triangulation), then the nearest
-        count = np.array([min(len(shots_of.get(o.object_id, ())), 2) for o in world.objects])
+        count = np.array([min(len(shots_of.get(o.object_id, ())), 2) for o in world.all_codes])
         order = np.lexsort((d, count))
         target = None
         for i in order:
-            o = world.objects[i]
+            o = world.all_codes[i]
             if d[i] > MAX_SNAPSHOT_RANGE:
                 continue
             if count[i] == 1:
@@ -483,7 +483,7 @@ def camera_snapshots(
 
 
 def target_index(world: World, obj) -> int:
-    for i, o in enumerate(world.objects):
+    for i, o in enumerate(world.all_codes):
         if o.object_id == obj.object_id:
             return i
     raise KeyError(obj.object_id)

@@ -16,6 +16,12 @@ label's height is blocked by furniture at least that tall). Each object carries 
 (``holoslam.vision.label`` format, with the printed side ``s`` in mm), the label centre (x, y, z) in ``map``,
 the yaw of the label normal (the direction the printed face looks at) and the printed side in metres.
 
+Optional extras, for testing what holoslam makes of them (``reference_household(wall_codes=, sizeless_labels=)``,
+both 0 in the reference household): ``wall_codes`` foreign QR codes fixed to walls (a Wi-Fi sticker, a poster,
+a manual link, a product code...: ``World.codes``, ids ``holoslam.vision.label.foreign_code_id(payload)``),
+and ``sizeless_labels`` objects whose label carries no printed size (``s`` left out of the payload: they can
+only be located by triangulation).
+
 ``reachable`` is computed, not declared: an object is reachable when some point of the free space a
 ``ROBOT_RADIUS`` robot can stand in (connected to the start) lies within ``ARM_REACH`` of the label centre
 (horizontal distance). The dining chair stored in the north-east corner behind the dining table is the one
@@ -46,6 +52,8 @@ __all__ = [
     "FreeSpace",
     "ROBOT_RADIUS",
     "ARM_REACH",
+    "WALL_CODES",
+    "SIZELESS_ORDER",
 ]
 
 ROBOT_RADIUS = 0.25  # m, a Pioneer III-sized base (about 0.5 m across)
@@ -119,6 +127,12 @@ class World:
     furniture: tuple[Furniture, ...]
     objects: tuple[WorldObject, ...]
     magnetic_sources: tuple[tuple[str, float, float, float], ...] = ()  # (name, x, y, amplitude_deg)
+    codes: tuple[WorldObject, ...] = ()  # foreign QR codes on walls (not objects; kind "wall_code")
+
+    @property
+    def all_codes(self) -> tuple[WorldObject, ...]:
+        """Every printed code the camera can see: the objects' labels, then the wall codes."""
+        return self.objects + self.codes
 
     def wall_segments(self) -> np.ndarray:
         """Walls as an (M, 4) float64 array of (x0, y0, x1, y1)."""
@@ -148,7 +162,8 @@ class World:
         return out
 
     def object(self, object_id: str) -> WorldObject:
-        for o in self.objects:
+        """The object, or wall code, with this id."""
+        for o in self.all_codes:
             if o.object_id == object_id:
                 return o
         raise KeyError(object_id)
@@ -213,8 +228,36 @@ _OBJECTS: list[tuple] = [
 ]
 
 
-def reference_household() -> World:
-    """The reference household (deterministic; no randomness in the world itself)."""
+# Foreign codes on walls: (payload, room, (x, y, z) of the code centre, yaw of its normal [deg], side [mm]); each a
+# centimetre off its wall, above the furniture, where the tour passes within the camera's range.
+WALL_CODES: list[tuple[str, str, tuple[float, float, float], float, int]] = [
+    ("WIFI:S:home-5G;T:WPA;P:correct horse battery;;", "living_room", (3.4, 6.99, 1.45), -90, 120),
+    ("https://example.com/manual/washer-WM1200", "balcony", (3.8, 0.01, 1.25), 90, 120),
+    ("https://example.com/fridge/FR-450?lang=en", "kitchen", (9.49, 2.6, 1.40), 180, 120),
+    ("4006381333931", "kitchen", (8.6, 2.99, 1.50), -90, 100),
+    ("BEGIN:VCARD\nN:Plumber;Joe\nTEL:+441234567890\nEND:VCARD", "dining_room", (9.49, 3.9, 1.45), 180, 140),
+    ("https://example.com/menu", "dining_room", (8.6, 6.99, 1.50), -90, 110),
+    ("tel:+441234567890", "study", (6.31, 9.6, 1.45), 0, 100),
+    ("https://example.com/poster/2026", "bedroom_1", (3.49, 8.0, 1.50), 180, 150),
+    ("geo:51.5007,-0.1246", "bedroom_2", (6.29, 7.6, 1.45), 180, 110),
+    ("https://example.com/thermostat/T-22", "living_room", (5.49, 2.0, 1.40), 180, 110),
+    ("SMSTO:+441234567890:hello", "living_room", (1.0, 1.51, 1.40), 90, 100),
+    ("https://example.com/lamp", "bedroom_1", (0.01, 7.6, 1.50), 0, 110),
+]
+# The objects whose labels lose their printed size, in this order (``sizeless_labels`` takes the first k).
+SIZELESS_ORDER = ("O13", "O03", "O10", "O32", "O18", "O29", "O07", "O26")
+
+
+def reference_household(wall_codes: int = 0, sizeless_labels: int = 0) -> World:
+    """The reference household (deterministic; no randomness in the world itself). ``wall_codes`` (0 to
+    ``len(WALL_CODES)``) foreign codes on walls and ``sizeless_labels`` (0 to ``len(SIZELESS_ORDER)``) labels
+    without a printed size can be added for tests; the reference household has neither."""
+    if not (0 <= wall_codes <= len(WALL_CODES)) or not (0 <= sizeless_labels <= len(SIZELESS_ORDER)):
+        raise ValueError(
+            f"wall_codes must be 0..{len(WALL_CODES)} and sizeless_labels 0..{len(SIZELESS_ORDER)}, got "
+            f"{wall_codes} and {sizeless_labels}"
+        )
+    sizeless = set(SIZELESS_ORDER[:sizeless_labels])
     W, H = 9.5, 10.5
     rooms = (
         Room("balcony", 0.0, 0.0, 5.5, 1.5),
@@ -283,7 +326,9 @@ def reference_household() -> World:
     )
     objects = []
     for oid, kind, room, furn, pos, yaw_deg, side_mm, attrs in _OBJECTS:
-        pairs = tuple(tuple(kv.split("=", 1)) for kv in attrs.split(",")) + (("s", str(side_mm)),)
+        pairs = tuple(tuple(kv.split("=", 1)) for kv in attrs.split(","))
+        if oid not in sizeless:
+            pairs += (("s", str(side_mm)),)
         payload = encode_label(ObjectLabel(oid, kind, pairs))
         objects.append(
             WorldObject(
@@ -314,7 +359,14 @@ def reference_household() -> World:
         )
         for o, r in zip(objects, reach, strict=True)
     ]
-    return World(W, H, rooms, tuple(walls), doorways, furniture, tuple(objects), magnetic_sources)
+    from holoslam.vision.label import foreign_code_id
+
+    codes = tuple(
+        WorldObject(foreign_code_id(text), "wall_code", room, text, pos, math.radians(yaw), mm / 1000.0, None,
+                    False)
+        for text, room, pos, yaw, mm in WALL_CODES[:wall_codes]
+    )
+    return World(W, H, rooms, tuple(walls), doorways, furniture, tuple(objects), magnetic_sources, codes)
 
 
 # ---------------------------------------------------------------------------------------------- free space
@@ -489,6 +541,19 @@ def world_to_json(world: World) -> str:
             {"name": n, "x": x, "y": y, "amplitude_deg": a} for n, x, y, a in world.magnetic_sources
         ],
     }
+    if world.codes:  # only when there are any: the reference household's JSON stays as it was
+        d["codes"] = [
+            {
+                "id": c.object_id,
+                "type": c.kind,
+                "room": c.room,
+                "payload": c.payload,
+                "position": list(c.position),
+                "label_yaw": c.label_yaw,
+                "label_size": c.label_size,
+            }
+            for c in world.codes
+        ]
     return json.dumps(d, separators=(",", ":"))
 
 
@@ -523,5 +588,10 @@ def world_from_json(text: str) -> World:
         ),
         magnetic_sources=tuple(
             (m["name"], m["x"], m["y"], m["amplitude_deg"]) for m in d.get("magnetic_sources", [])
+        ),
+        codes=tuple(
+            WorldObject(c["id"], c["type"], c["room"], c["payload"], tuple(c["position"]), c["label_yaw"],
+                        c["label_size"], None, False)
+            for c in d.get("codes", [])
         ),
     )

@@ -3,10 +3,21 @@
 After the first solve, each ``View`` (a label without a printed size, or a foreign code) gets its robot pose
 from the front end and the solution: the anchor ``k`` of the submap active at the view's stamp (optimised
 ``wTa_k``), the nearest earlier keyframe of that submap (scan-matched ``aTb``; the scans localised between
-nodes count) and the wheel odometry's motion from it to the stamp. ``holoslam.vision.multiview`` triangulates
+nodes count) and the wheel odometry's motion from it to the stamp, bent to end at the next keyframe's matched
+pose (the PTZ often fires while the robot turns, where the odometry's turn scale error shows). ``holoslam.vision.multiview`` triangulates
 the views; every point becomes one landmark measurement in the anchor frame of its earliest view (Eq. 16 with
 the point's height kept), so the second solve holds it like a PnP sighting: moved-object detection, outlier
 rounds and marginal covariances apply.
+
+A code on a wall or on the front of furniture also lies where the laser sees a surface: along each view's ray
+(horizontal projection, in the view's own submap frame) the submap's laser points give the range
+(``laser_ranges``). When at least two of a triangulated point's views have laser-ranged points that agree
+(within ``inlier_m``) and agree with the triangulated point (within its covariance, chi-square 3 dof 0.999),
+each such view becomes its own landmark measurement in its own anchor's frame, like a PnP sighting, and the
+triangulated point is not used: a relative heading error between two views far apart
+moves a triangulated point by about range x error / parallax, a laser-ranged one by range x error sideways
+only. A code above furniture that stands in front of the wall gets laser ranges to the furniture, which its
+triangulation (or the disagreement between views from different sides) rejects.
 
 The views' pose covariances: the keyframe's scan-match covariance in its submap; a view in another submap than
 the point's reference view adds both anchors' marginal covariances (no cross-covariance is computed: the sum
@@ -35,6 +46,8 @@ from holoslam.vision.multiview import (
 
 __all__ = ["TriangulatedLandmarks", "view_poses", "triangulated_landmarks", "with_landmarks"]
 
+_MAX_BRIDGE_NS = 1_000_000_000  # interpolate between matched scans at most this far apart
+
 
 @dataclass(frozen=True)
 class TriangulatedLandmarks:
@@ -51,6 +64,7 @@ class TriangulatedLandmarks:
     z: np.ndarray
     initial: dict[str, np.ndarray]
     report: MultiViewReport
+    laser_ranged: int = 0  # views located by their ray and the laser's range instead of the triangulation
 
 
 def view_poses(
@@ -70,13 +84,65 @@ def view_poses(
         sm = submaps[k]
         key_t = np.concatenate([np.asarray(sm.scan_stamps_ns, np.int64), np.asarray(sm.track_stamps_ns, np.int64)])
         key_p = np.vstack([np.reshape(sm.aTb, (-1, 3)), np.reshape(sm.track_aTb, (-1, 3))])
-        before = np.flatnonzero(key_t <= t)
-        q = int(before[np.argmax(key_t[before])]) if before.size else int(np.argmin(key_t))
+        order = np.argsort(key_t, kind="stable")
+        key_t, key_p = key_t[order], key_p[order]
+        q = max(int(np.searchsorted(key_t, t, side="right")) - 1, 0)
         odo = interpolate_poses(odom_stamps_ns, odomTb, np.array([key_t[q], t], np.int64))
         aTb[n] = g.compose(key_p[q], g.between(odo[0], odo[1]))
+        if key_t[q] < t and q + 1 < len(key_t) and key_t[q + 1] - key_t[q] <= _MAX_BRIDGE_NS:
+            # between two matched scans: the odometry's motion, bent to end at the next scan's matched pose
+            # (odometry over- or under-reports a turn by a few per cent; the scans do not)
+            o_next = interpolate_poses(odom_stamps_ns, odomTb, np.array([key_t[q + 1]], np.int64))[0]
+            miss = g.between(g.compose(key_p[q], g.between(odo[0], o_next)), key_p[q + 1])
+            frac = float(t - key_t[q]) / float(key_t[q + 1] - key_t[q])
+            aTb[n] = g.compose(aTb[n], frac * miss)
         node = int(np.clip(np.searchsorted(sm.scan_stamps_ns, t, side="right") - 1, 0, len(sm.scan_stamps_ns) - 1))
         cov[n] = np.asarray(sm.cov_aTb)[node]
     return ks, aTb, cov
+
+
+_CHI2_3_999 = 16.27
+LASER_RANGE_SIGMA_M = 0.03  # along the ray: laser noise, the 5 cm decimation of the submap's points, paint
+
+
+def laser_ranges(
+    views: Sequence[View], ks: np.ndarray, aTb: np.ndarray, cov_aTb: np.ndarray, submaps: Sequence[Any],
+    sigma_px: float, lateral_m: float = 0.04,
+) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """For each view: the point (3,) in its anchor's frame where its ray meets the first laser point of its
+    submap within ``lateral_m`` (+1 % of the range) of the ray's horizontal projection, and its 2x2 covariance
+    (range ``LASER_RANGE_SIGMA_M`` along the ray; pixels and the pose's heading across it); None when the ray
+    meets no laser point (a code above the laser's plane with nothing below it, or beyond the submap)."""
+    out: list[tuple[np.ndarray, np.ndarray] | None] = []
+    for v, k, T, C in zip(views, ks, aTb, cov_aTb, strict=True):
+        pts = np.asarray(submaps[int(k)].points, np.float64).reshape(-1, 2)
+        aTb4 = np.eye(4)
+        aTb4[:2, :2] = g.rot2(T[2])
+        aTb4[:2, 3] = T[:2]
+        aTc = aTb4 @ v.bTc
+        c = aTc[:3, 3]
+        d = aTc[:3, :3] @ v.camera.unproject(v.centre_px[None, :])[0]
+        h = float(np.hypot(d[0], d[1]))
+        if h < 1e-3 or not len(pts):
+            out.append(None)
+            continue
+        u = d[:2] / h
+        rel = pts - c[:2]
+        along = rel @ u
+        perp = np.abs(rel[:, 0] * u[1] - rel[:, 1] * u[0])
+        hit = (along > 0.2) & (perp <= lateral_m + 0.01 * along)
+        if not hit.any():
+            out.append(None)
+            continue
+        first = float(along[hit].min())
+        rho = float(np.median(along[hit & (along <= first + 0.05)]))
+        X = c + d * (rho / h)
+        f = float(v.camera.K[0, 0])
+        lat2 = (rho * sigma_px / f) ** 2 + rho**2 * C[2, 2] + max(C[0, 0], C[1, 1])
+        along2 = LASER_RANGE_SIGMA_M**2 + max(C[0, 0], C[1, 1])
+        R = np.column_stack([u, [-u[1], u[0]]])
+        out.append((X, R @ np.diag([along2, lat2]) @ R.T))
+    return out
 
 
 def triangulated_landmarks(
@@ -89,6 +155,7 @@ def triangulated_landmarks(
     sigma_px: float,
     min_parallax_deg: float = DEFAULT_MIN_PARALLAX_DEG,
     inlier_m: float = DEFAULT_INLIER_M,
+    laser_range: bool = True,
 ) -> TriangulatedLandmarks:
     """Triangulate ``views`` over the solved poses (module docstring) and express every point as a landmark
     measurement of the anchor of its earliest view."""
@@ -115,6 +182,40 @@ def triangulated_landmarks(
         points = redone
     obs, i, ids, axy, acov, z = [], [], [], [], [], []
     initial: dict[str, np.ndarray] = {}
+    laser = laser_ranges(views, ks, aTb, cov_local, submaps, sigma_px) if laser_range else [None] * V
+    drop: set[int] = set()  # triangulated points replaced by their views' laser ranges
+    ranged: list[int] = []
+    for j, p in enumerate(points):
+        idx = [n for n in p.views if laser[n] is not None]
+        Lw = {n: np.r_[g.transform_points(wTa[ks[n]], laser[n][0][None, :2])[0], laser[n][0][2]] for n in idx}
+        support = [[m for m in idx if np.linalg.norm(Lw[m] - Lw[n]) <= inlier_m] for n in idx]
+        group = max(support, key=len, default=[])
+        if len(group) < 2:
+            continue
+        d = np.mean([Lw[n] for n in group], axis=0) - p.w_position
+        if d @ np.linalg.solve(p.cov_w_position + np.eye(3) * LASER_RANGE_SIGMA_M**2, d) > _CHI2_3_999:
+            continue  # the laser saw something else along these rays (furniture before the wall)
+        drop.add(j)
+        ranged.extend(group)
+    for n in sorted(ranged, key=lambda n: views[n].stamp_ns):
+        X, C2 = laser[n]
+        k = int(ks[n])
+        if np.hypot(*X[:2]) < 1e-3:
+            continue
+        i.append(k)
+        ids.append(views[n].object_id)
+        axy.append(X[:2])
+        acov.append(C2)
+        z.append(float(X[2]))
+        initial.setdefault(views[n].object_id, g.transform_points(wTa[k], X[None, :2])[0])
+        b = np.r_[g.transform_points(g.inverse(aTb[n]), X[None, :2])[0], X[2]]
+        Rb = np.eye(3)
+        Rb[:2, :2] = g.rot2(aTb[n, 2])
+        C3 = np.diag([0.0, 0.0, LASER_RANGE_SIGMA_M**2])
+        C3[:2, :2] = C2
+        obs.append(ObjectObservation(views[n].stamp_ns, views[n].object_id, views[n].payload, b, Rb.T @ C3 @ Rb,
+                                     "laser_range", views[n].source))
+    points = [p for j, p in enumerate(points) if j not in drop]
     for p in points:
         r = p.reference
         k = int(ks[r])
@@ -136,7 +237,7 @@ def triangulated_landmarks(
                                      "triangulation", views[r].source))
     return TriangulatedLandmarks(
         tuple(points), tuple(obs), np.array(i, np.int64), tuple(ids), np.array(axy).reshape(-1, 2),
-        np.array(acov).reshape(-1, 2, 2), np.array(z), initial, report,
+        np.array(acov).reshape(-1, 2, 2), np.array(z), initial, report, len(ranged),
     )
 
 
