@@ -115,3 +115,45 @@ def test_rendered_label_without_size_from_pixels_at_3_m():
     (p,), _ = locate_from_views(views, poses, sigma_px=0.5)
     assert np.linalg.norm(p.w_position - w_X) <= 0.05
     assert p.size_m == pytest.approx(side, rel=0.05)
+
+
+class _Submap:
+    """The parts of a front-end submap the landmark step reads: anchor stamp, keyframes, laser points."""
+
+    def __init__(self, points, stamps, aTb):
+        self.anchor_stamp_ns = int(stamps[0])
+        self.scan_stamps_ns = np.asarray(stamps, np.int64)
+        self.aTb = np.asarray(aTb, np.float64)
+        self.cov_aTb = np.broadcast_to(np.diag([0.005, 0.005, math.radians(0.3)]) ** 2, (len(stamps), 3, 3))
+        self.track_stamps_ns = np.zeros(0, np.int64)
+        self.track_aTb = np.zeros((0, 3))
+        self.points = np.asarray(points, np.float64)
+
+
+def test_laser_range_along_the_rays_replaces_a_triangulation_it_agrees_with():
+    """A code on a wall 3 m ahead seen from two poses 0.3 m apart whose headings are off by 0.3 deg: the
+    triangulation is decimetres off along the rays (its covariance, from the poses' 0.3 deg, says so), the
+    laser's wall gives the range (each view its own measurement); with a cabinet before the wall the laser
+    disagrees with the triangulation and the triangulation is kept."""
+    from holoslam.vision.landmarks import triangulated_landmarks
+
+    cam = _camera(3000.0)
+    w_X = np.array([3.0, 0.4, 1.5])
+    true = np.array([[0.0, 0.0, 0.05], [0.0, 0.3, -0.08]])
+    views = [_view(w_X, p, cam, stamp=1_000_000_000 * (k + 1)) for k, p in enumerate(true)]
+    given = true + np.array([[0, 0, math.radians(0.3)], [0, 0, -math.radians(0.3)]])  # relative heading 0.6 deg
+    wall = np.column_stack([np.full(121, 3.0), np.linspace(-1.5, 1.5, 121)])
+    stamps = [v.stamp_ns for v in views]
+    odo_t = np.array([0, 3_000_000_000], np.int64)
+    odo = np.zeros((2, 3))
+    wTb = given
+    (tri,), _ = locate_from_views(views, wTb, _Submap(wall, stamps, given).cov_aTb)
+    assert np.linalg.norm(tri.w_position[:2] - w_X[:2]) > 0.1  # measured 0.29 m: range x 0.6 deg / parallax
+    for points, laser_wins in ((wall, True), (np.vstack([wall, wall[40:80] - [1.2, 0.0]]), False)):
+        tl = triangulated_landmarks(views, [_Submap(points, stamps, given)], np.zeros((1, 3)), None, odo_t, odo, 0.5)
+        if laser_wins:
+            assert tl.laser_ranged == 2 and len(tl.ids) == 2 and tl.points == ()
+            assert all(np.linalg.norm(xy - w_X[:2]) < 0.03 for xy in tl.a_xy)  # measured 1.6 cm (sideways)
+            assert {o.method for o in tl.observations} == {"laser_range"}
+        else:  # the cabinet 1.2 m before the wall: laser ranges far from the triangulation, not used
+            assert tl.laser_ranged == 0 and tl.ids == ("O40",) and tl.observations[0].method == "triangulation"
