@@ -21,7 +21,8 @@ per-relation CSV has 6 decimals); a check line per log says so, and the script e
 
 Columns: transl / rot = mean ± sample std of the relation errors; matched = relations with a pose within
 0.05 s of both stamps / all relations (of the cut); max = largest translational error; run s = the child's
-wall time, pipeline s = ``report.json``'s total of the stages; RSS = the child's peak resident set; carto =
+wall time, cpu s = its user + system CPU time (what the run costs on one core whatever else the machine runs;
+the pipeline is single-threaded but for numba's and OpenCV's own threads), pipeline s = ``report.json``'s total of the stages; RSS = the child's peak resident set; carto =
 Cartographer's published error (Hess et al. 2016, Table II, as quoted in the data README); ratio = holoslam /
 Cartographer (translation, rotation); carto s = its published wall time for the whole log (Table V, 6-core
 workstation; not comparable with a cut).
@@ -62,8 +63,8 @@ def child(log: str, out: str) -> None:
     Path(out, "bench_child.json").write_text(json.dumps({"seconds": summary["seconds"]}))
 
 
-def run_child(log: Path, out: Path) -> tuple[float, float, int]:
-    """(wall s, peak RSS MB, exit code) of one child running the log into ``out``."""
+def run_child(log: Path, out: Path) -> tuple[float, float, float, int]:
+    """(wall s, CPU s (user + system), peak RSS MB, exit code) of one child running the log into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(log), str(out)]
     with open(out / "bench_child.log", "wb") as log_file:
@@ -72,7 +73,8 @@ def run_child(log: Path, out: Path) -> tuple[float, float, int]:
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
-    return wall, usage.ru_maxrss / 1024.0, proc.returncode  # ru_maxrss is in KiB on Linux
+    cpu = usage.ru_utime + usage.ru_stime
+    return wall, cpu, usage.ru_maxrss / 1024.0, proc.returncode  # ru_maxrss is in KiB on Linux
 
 
 def scorer_check(scorer: Path, tum: Path, rel_path: Path, errors, workdir: Path) -> tuple[bool, str]:
@@ -118,7 +120,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None) -> 
         rel = cut_relations(rel, cut.start_ns, cut.end_ns)
         rel_path = write_relations(work / f"{name}_first{duration:g}s.relations", rel)
     run_dir = work / "run"
-    wall, rss_mb, code = run_child(log, run_dir)
+    wall, cpu, rss_mb, code = run_child(log, run_dir)
     if code != 0:
         tail = (run_dir / "bench_child.log").read_text(errors="replace").strip().splitlines()[-3:]
         raise SystemExit(f"{name}: the run failed (exit {code}): {' | '.join(tail)}")
@@ -134,6 +136,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None) -> 
         "matched": f"{e.n_matched}/{e.n_relations}",
         "max_m": e.translation_max_m,
         "run_s": wall,
+        "cpu_s": cpu,
         "pipeline_s": float(pipeline_s),
         "rss_mb": rss_mb,
         "carto": CARTOGRAPHER[name],
@@ -144,7 +147,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None) -> 
 def print_table(rows: list[dict]) -> None:
     head = (
         f"{'log':<14}{'transl m (mean ± std)':>24}{'rot deg (mean ± std)':>22}{'matched':>12}{'max m':>8}"
-        f"{'run s':>8}{'pipeline s':>11}{'RSS MB':>8}   {'carto m / deg':<16}{'ratio':>14}{'carto s':>9}"
+        f"{'run s':>8}{'cpu s':>8}{'pipeline s':>11}{'RSS MB':>8}   {'carto m / deg':<16}{'ratio':>14}{'carto s':>9}"
     )
     print(head)
     for r in rows:
@@ -152,7 +155,7 @@ def print_table(rows: list[dict]) -> None:
         ratio = f"{r['transl'][0] / c['transl'][0]:.1f}x/{r['rot'][0] / c['rot'][0]:.1f}x"
         print(
             f"{r['log']:<14}{r['transl'][0]:>12.4f} ± {r['transl'][1]:<9.4f}{r['rot'][0]:>10.3f} ± {r['rot'][1]:<9.3f}"
-            f"{r['matched']:>12}{r['max_m']:>8.3f}{r['run_s']:>8.1f}{r['pipeline_s']:>11.1f}{r['rss_mb']:>8.0f}"
+            f"{r['matched']:>12}{r['max_m']:>8.3f}{r['run_s']:>8.1f}{r['cpu_s']:>8.1f}{r['pipeline_s']:>11.1f}{r['rss_mb']:>8.0f}"
             f"   {c['transl'][0]:.4f} / {c['rot'][0]:.3f}{ratio:>15}{c['wall_s']:>9.0f}"
         )
 
