@@ -261,8 +261,8 @@ class RoleChoice:
 
     def text(self) -> str:
         return (
-            f"{self.role}: {self.topic} used, not {', '.join(self.others)} ({self.rule}); a mapping line "
-            f"'{self.others[0]}: {self.role}' with '{self.topic}: ignored' chooses another"
+            f"{self.role}: {self.topic} used, not {', '.join(self.others)} ({self.rule}); the mapping line "
+            f"'{self.others[0]}: {self.role}' chooses another"
         )
 
 
@@ -299,8 +299,8 @@ _ROLE_RULES: tuple[tuple[str, Callable[[Role, _Topic], int], str], ...] = (
     (
         "unfiltered",
         _filtered,
-        "the unfiltered topic: holoslam filters and fuses itself (a filtered scan lost beams, filtered odometry "
-        "already fused the IMU)",
+        "the unfiltered topic, as holoslam filters and fuses itself: a filtered scan has lost beams, filtered "
+        "odometry has fused the IMU already",
     ),
     (
         "compressed",
