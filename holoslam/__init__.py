@@ -28,12 +28,12 @@ __version__ = "0.1.0"
 # public name -> module that defines it (imported on first access)
 _LAZY: dict[str, str] = {
     "run": "holoslam.pipeline",
-    "RunConfig": "holoslam.pipeline",
+    "RunConfig": "holoslam.config",
     "RunResult": "holoslam.pipeline",
     "run_log_to_folder": "holoslam.pipeline",
     "run_logs": "holoslam.pipeline",
     "format_run_report": "holoslam.pipeline",
-    "load_run_config": "holoslam.pipeline",
+    "load_run_config": "holoslam.config",
     "load_run": "holoslam.io.run_folder",
     "SavedRun": "holoslam.io.run_folder",
     "write_run": "holoslam.io.run_folder",
@@ -95,15 +95,14 @@ __all__ = [  # the names of _LAZY, spelled out for linters and ``from holoslam i
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs only; nothing is imported at run time
+    from holoslam.config import RunConfig, load_run_config
     from holoslam.io.datasets import bundled_household_log, find_dataset
     from holoslam.io.g2o import read_g2o
     from holoslam.io.mcap import read_log
     from holoslam.io.run_folder import SavedRun, load_run, write_run
     from holoslam.pipeline import (
-        RunConfig,
         RunResult,
         format_run_report,
-        load_run_config,
         run,
         run_log_to_folder,
         run_logs,

@@ -40,10 +40,10 @@ def test_import_holoslam_imports_no_heavy_module():
 
 def test_lazy_name_imports_its_module_only_on_access():
     out = _fresh(
-        "import json, sys, holoslam; a = 'holoslam.pipeline' in sys.modules; cfg = holoslam.RunConfig(); "
-        "b = 'holoslam.pipeline' in sys.modules; print(json.dumps([a, b, type(cfg).__module__]))"
+        "import json, sys, holoslam; a = 'holoslam.config' in sys.modules; cfg = holoslam.RunConfig(); "
+        "b = 'holoslam.config' in sys.modules; print(json.dumps([a, b, type(cfg).__module__]))"
     )
-    assert json.loads(out) == [False, True, "holoslam.pipeline"]
+    assert json.loads(out) == [False, True, "holoslam.config"]
 
 
 def test_every_public_name_resolves_to_its_module_object():
