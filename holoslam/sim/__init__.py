@@ -16,6 +16,10 @@ balcony; six doorways 0.95-1.2 m wide; 25 pieces of furniture; 35 objects ``O01`
 ``O22`` stands in the dining room's north-east corner behind the table, out of the arm's reach (0.9 m) from
 any free space: ``reachable`` is false for it alone (computed from the free space, not declared).
 
+Optional extras for tests (``SimConfig.wall_codes``, ``SimConfig.sizeless_labels``; both 0 by default, so
+the bundled log has neither): foreign QR codes fixed to walls (``World.codes``, photographed like labels and
+published on ``/tags``; the world JSON lists them under ``codes``) and labels printed without their size.
+
 The robot: a Pioneer III-like base (radius 0.25 m, <= 0.35 m/s, <= 35 deg/s, 0.4 m/s^2) on a tour that
 visits every room, stops and turns in front of every object it can approach, passes every doorway at least
 twice (in and out; a long run loops the tour), and comes back through the living room and dining room
