@@ -45,7 +45,7 @@ _LAZY: dict[str, str] = {
     "SimConfig": "holoslam.sim",
     "SimulatedRun": "holoslam.sim",
     "read_g2o": "holoslam.io.g2o",
-    "solve_g2o_file": "holoslam.solve",
+    "solve_g2o_file": "holoslam.jobs",
 }
 
 # submodules reachable as attributes (``holoslam.viz``) without an explicit ``import holoslam.viz``
@@ -100,6 +100,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs only; nothing is imported at run
     from holoslam.io.g2o import read_g2o
     from holoslam.io.mcap import read_log
     from holoslam.io.run_folder import SavedRun, load_run, write_run
+    from holoslam.jobs import solve_g2o_file
     from holoslam.pipeline import (
         RunResult,
         format_run_report,
@@ -108,13 +109,12 @@ if TYPE_CHECKING:  # for type checkers and IDEs only; nothing is imported at run
         run_logs,
     )
     from holoslam.sim import SimConfig, SimulatedRun, simulate_household, simulate_to_file
-    from holoslam.solve import solve_g2o_file
 
 
 def __getattr__(name: str) -> Any:
     """Import a public name or a submodule on first access (PEP 562) and cache it in the package namespace.
 
-    ``holoslam.solve`` is the submodule (the optimiser module); its ``solve_g2o_file`` is also a top-level name.
+    ``holoslam.solve`` is the submodule (the optimiser module); ``solve_g2o_file`` (from ``holoslam.jobs``) is a top-level name.
     """
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name]), name)

@@ -83,9 +83,9 @@ def cmd_simulate(a: argparse.Namespace) -> int:
 
 
 def cmd_inspect(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import inspect
+    from holoslam.jobs import inspect_log_file
 
-    text, data = inspect(a.log, mapping=a.mapping)
+    text, data = inspect_log_file(a.log, mapping=a.mapping)
     print(_json(data) if a.json else text)
     return EXIT_OK
 
@@ -110,7 +110,7 @@ def cmd_run(a: argparse.Namespace) -> int:
 
 
 def cmd_solve(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import solve_graph_file
+    from holoslam.jobs import solve_graph_file
 
     summary = solve_graph_file(
         a.input,
@@ -122,8 +122,75 @@ def cmd_solve(a: argparse.Namespace) -> int:
         kernel_parameter=a.kernel_parameter,
         noise=a.noise,
     )
-    print(_json(summary) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
+    d = summary.to_dict()
+    print(_json(d) if a.json else _solve_text(d))
     return EXIT_OK
+
+
+def _g(x: float | None) -> str:
+    return "-" if x is None else f"{x:.6g}"
+
+
+def _starts_lines(d: dict) -> list[str]:
+    """The starts of ``holoslam solve --init auto``: what each reached, whether they agree, and why the incremental
+    start ran or not."""
+    lines = []
+    for s in d["starts"]:
+        if s["failure"]:
+            lines.append(f"  {s['start']}: failed ({s['failure']})")
+            continue
+        how = f"E {_g(s['final_error'])} after {s['iterations']} iterations, {s['seconds']:.2f} s"
+        if s["start"] == d["initialisation"]:
+            how += ", kept"
+        elif s["reached"]:
+            how += f", reached the {s['reached']} start's solution (stopped there)"
+        else:
+            how += f", poses up to {_g(s['max_dxy_m'])} m / {_g(s['max_dtheta_rad'])} rad from the kept"
+        lines.append(f"  {s['start']}: {how}")
+    lines += [f"  {name}: not solved ({why})" for name, why in d["starts_skipped"]]
+    agree = {
+        True: "yes: every start ends at the kept solution's error",
+        False: "no: the lowest final error is kept",
+        None: "only one start ran",
+    }
+    lines.append(f"starts_agree: {agree[d['starts_agree']]}")
+    fits = f"{d['beyond_chi2']} of {d['measurements']} measurements beyond the 99.99% chi-square bound"
+    if d["fallback"] is None:
+        lines.append(f"fit: {fits}")
+    elif d["fallback_ran"]:
+        lines.append(
+            f"{d['fallback']}: ran, because the best of the starts above left more than {d['beyond_limit']}"
+            f" measurements beyond the 99.99% chi-square bound; now {fits}"
+        )
+    else:
+        lines.append(
+            f"{d['fallback']}: not run, the kept solution fits the measurements ({fits}; more than "
+            f"{d['beyond_limit']} would run it)"
+        )
+    return lines
+
+
+def _solve_text(d: dict) -> str:
+    lines = [
+        f"{k}: {v}"
+        for k, v in d.items()
+        if k
+        not in (
+            "starts",
+            "starts_skipped",
+            "starts_agree",
+            "beyond_chi2",
+            "measurements",
+            "beyond_limit",
+            "fallback",
+            "fallback_ran",
+            "candidates",
+        )
+    ]
+    if "starts" in d:
+        lines.append("starts:")
+        lines += _starts_lines(d)
+    return "\n".join(lines)
 
 
 def cmd_plan(a: argparse.Namespace) -> int:
@@ -146,7 +213,7 @@ def cmd_export(a: argparse.Namespace) -> int:
 
 
 def cmd_datasets(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import list_datasets
+    from holoslam.jobs import list_datasets
 
     rows = list_datasets()
     if a.json:
@@ -160,7 +227,7 @@ def cmd_datasets(a: argparse.Namespace) -> int:
 
 
 def cmd_tags(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import decode_tags
+    from holoslam.jobs import decode_tags
 
     failed = 0
     for item in decode_tags(a.images):
@@ -180,7 +247,7 @@ def cmd_tags(a: argparse.Namespace) -> int:
 
 
 def cmd_topology(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import topology_from_map_file
+    from holoslam.jobs import topology_from_map_file
 
     summary = topology_from_map_file(a.map, a.output)
     print("\n".join(f"{k}: {v}" for k, v in summary.items()))
@@ -283,9 +350,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", choices=["lm", "isam2"], default="lm")
     s.add_argument(
         "--init",
-        choices=["file", "odometry", "lago", "incremental", "auto"],
-        default="file",
-        help="initial guess; auto tries each and keeps the lowest final error",
+        choices=["auto", "file", "odometry", "lago", "chordal", "incremental"],
+        default=None,
+        help="start of the optimisation (default with lm: auto, LM from the file's guess and from the chordal "
+        "start, the lower kept, and the slow incremental start only when that solution disagrees with the "
+        "measurements; the output says what each start reached and whether they agree; with isam2: file)",
     )
     s.add_argument(
         "--kernel",

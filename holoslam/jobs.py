@@ -1,19 +1,39 @@
-"""One typed library call per CLI command (the commands whose job lives here; the older ones are in
-:mod:`holoslam.pipeline`). Each returns a result record that knows its numbers; the CLI turns it into text.
+"""One library call per light CLI command (solve, inspect, tags, topology, evaluate, datasets; the pipeline's
+own jobs are in :mod:`holoslam.pipeline`). Each imports only what its job uses, so that a command that solves a
+g2o file or reads a log's summary does not load the front end, the simulator or the compiled kernels. Each
+returns a result record (or JSON-able data) that knows its numbers; the CLI turns it into text.
 """
 
 from __future__ import annotations
 
+import math
+import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from holoslam.errors import ConfigError, IngestError
+from holoslam.errors import ConfigError, HoloslamError, IngestError
 
 if TYPE_CHECKING:
     from holoslam.evaluate import GroundTruthErrors, RelationErrors
+    from holoslam.graph.solution import Solution, StartsReport
+    from holoslam.solve import IterationHook, SolveOptions
 
-__all__ = ["Evaluation", "evaluate_trajectory", "trajectory_path"]
+__all__ = [
+    "Evaluation",
+    "evaluate_trajectory",
+    "trajectory_path",
+    "G2oSolveSummary",
+    "solve_g2o_file",
+    "solve_graph_file",
+    "SOLVE_METHODS",
+    "SOLVE_STARTS",
+    "inspect_log_file",
+    "list_datasets",
+    "decode_tags",
+    "topology_from_map_file",
+]
 
 
 @dataclass(frozen=True)
@@ -125,3 +145,291 @@ def _read_trajectory(path: Path) -> tuple[Any, Any]:
     if not np.all(np.isfinite(wTb)):
         raise IngestError(f"{path}: a pose holds a non-finite number (nan or inf); give finite poses")
     return stamps, wTb
+
+
+# ------------------------------------------------------------------------------------------- holoslam solve
+
+SOLVE_METHODS: dict[str, str] = {"lm": "batch", "isam2": "isam2"}  # CLI name -> holoslam.solve.Method value
+# CLI name -> holoslam.solve.Initialisation value ("file" is the file's own vertices, the problem's guess)
+SOLVE_STARTS: dict[str, str] = {
+    "file": "problem",
+    "odometry": "odometry",
+    "lago": "lago",
+    "chordal": "chordal",
+    "incremental": "incremental",
+    "auto": "auto",
+}
+_START_NAME = {v: k for k, v in SOLVE_STARTS.items()}
+
+
+def start_name(initialisation: Any) -> str:
+    """The CLI's name of a start (``file`` for the problem's own guess)."""
+    value = getattr(initialisation, "value", initialisation)
+    return _START_NAME.get(str(value), str(value))
+
+
+@dataclass(frozen=True)
+class G2oSolveSummary:
+    """What ``solve_g2o_file`` did: sizes, iterations, errors, times (read / build+solve / write), the start kept
+    and, for ``Initialisation.AUTO``, every start's outcome and whether they agree (``starts``)."""
+
+    in_path: str
+    out_path: str | None
+    num_poses: int
+    num_landmarks: int
+    num_factors: int
+    iterations: int
+    initial_error: float
+    final_error: float
+    seconds_read: float
+    seconds_solve: float
+    seconds_write: float
+    skipped: tuple[str, ...] = ()
+    initialisation: str = "problem"  # the start used (with AUTO: the kept one)
+    candidates: tuple[tuple[str, float], ...] = ()  # AUTO: (start, final error; nan = failed)
+    starts: StartsReport | None = None
+    tum: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able: every number, the starts as a list of records (CLI start names), their agreement and the
+        fallback decision."""
+        out: dict[str, Any] = {
+            k: getattr(self, k)
+            for k in (
+                "in_path", "out_path", "num_poses", "num_landmarks", "num_factors", "iterations",
+                "initial_error", "final_error", "seconds_read", "seconds_solve", "seconds_write",
+            )
+        }  # fmt: skip
+        out["skipped"] = list(self.skipped)
+        out["initialisation"] = start_name(self.initialisation)
+        out["candidates"] = [[start_name(c), e] for c, e in self.candidates]
+        if self.starts is not None:
+            r = self.starts
+            out["starts"] = [
+                {
+                    "start": start_name(o.initialisation),
+                    "final_error": o.final_error,
+                    "iterations": o.iterations,
+                    "seconds": o.seconds,
+                    "max_dxy_m": o.max_dxy,
+                    "max_dtheta_rad": o.max_dtheta,
+                    "reached": None if o.reached is None else start_name(o.reached),
+                    "failure": o.failure or None,
+                }
+                for o in r.outcomes
+            ]
+            out["starts_skipped"] = [[start_name(c), why] for c, why in r.skipped]
+            out["starts_agree"] = r.agree
+            out["beyond_chi2"] = r.beyond
+            out["measurements"] = r.measurements
+            out["beyond_limit"] = r.beyond_limit
+            out["fallback"] = None if r.fallback is None else start_name(r.fallback)
+            out["fallback_ran"] = r.fallback_ran
+        if self.tum is not None:
+            out["tum"] = self.tum
+        return out
+
+
+def solve_g2o_file(
+    in_path: str | Path,
+    out_path: str | Path | None = None,
+    method: Any = "batch",
+    initialisation: Any = "auto",
+    noise: Any = None,
+    options: SolveOptions | None = None,
+    iteration_hook: IterationHook | None = None,
+) -> tuple[G2oSolveSummary, Solution]:
+    """Read a 2D g2o / TORO / iSAM graph, optimise it with its first pose fixed (or the FIX vertices) and no robust
+    kernels, and write the optimised graph as g2o (when ``out_path`` is given). ``initialisation`` defaults to
+    ``AUTO``: LM from the file's guess and from the chordal start, the lower kept (see
+    :mod:`holoslam.graph.starts`). ``options`` (when given) replaces ``method`` and ``initialisation``."""
+    from holoslam.graph.build import BuildOptions
+    from holoslam.graph.problem import problem_from_g2o
+    from holoslam.io.g2o import TextNoise, parse_g2o, read_g2o_text
+    from holoslam.io.g2o_write import with_estimate, write_g2o
+    from holoslam.solve import Initialisation, Method, SolveOptions, solve
+
+    t0 = time.perf_counter()
+    text = read_g2o_text(in_path)
+    g = parse_g2o(text, source=str(in_path), noise=TextNoise.GTSAM_AUTO if noise is None else noise)
+    problem = problem_from_g2o(g, fix_first=True)
+    t1 = time.perf_counter()
+    opts = options or SolveOptions(
+        method=Method(method),
+        initialisation=Initialisation(initialisation),
+        reject_outliers=False,
+        detect_moved=False,
+        final_gaussian=False,
+        build=BuildOptions().without_kernels(),
+    )
+    sol = solve(problem, opts, iteration_hook)
+    t2 = time.perf_counter()
+    if out_path is not None:
+        lm_ids = [int(n) for n in sol.landmark_ids]
+        # measurements read from EDGE_SE2 lines are copied as they stand (exact, and fast)
+        write_g2o(
+            with_estimate(g, problem.pose_ids, sol.wTa, lm_ids, sol.w_landmarks), out_path, source_text=text
+        )
+    t3 = time.perf_counter()
+    nf = len(problem.relative) + len(problem.landmarks) + len(problem.priors)
+    summary = G2oSolveSummary(
+        in_path=str(in_path),
+        out_path=None if out_path is None else str(out_path),
+        num_poses=problem.num_poses,
+        num_landmarks=len(sol.landmark_ids),
+        num_factors=nf,
+        iterations=sol.iterations,
+        initial_error=sol.initial_error,
+        final_error=sol.final_error,
+        seconds_read=t1 - t0,
+        seconds_solve=t2 - t1,
+        seconds_write=t3 - t2,
+        skipped=tuple(f"{s.tag} x{s.count} (first at line {s.first_line})" for s in g.skipped),
+        initialisation=(sol.initialisation or Initialisation(opts.initialisation)).value,
+        candidates=tuple((c.value, e) for c, e in sol.candidates),
+        starts=sol.starts,
+    )
+    return summary, sol
+
+
+def solve_graph_file(
+    input_path: str | Path,
+    output: str | Path,
+    tum: str | Path | None = None,
+    method: str = "lm",
+    init: str | None = None,
+    kernel: str = "none",
+    kernel_parameter: float = 1.0,
+    noise: str = "gtsam_auto",
+) -> G2oSolveSummary:
+    """``holoslam solve``: optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result
+    (g2o, and TUM). ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices),
+    odometry, lago, chordal, incremental or auto (default with lm: LM from the file's guess and from the chordal
+    start, the lower kept, the incremental start only when that solution disagrees with the measurements; with
+    isam2: file). ``kernel`` (none, huber, cauchy, dcs, geman_mcclure; parameter in whitened units) puts a robust
+    kernel on every edge and landmark measurement, as g2o's ``-robustKernel`` does: a few wrong loop closures
+    then no longer bend the graph, at the price of a non-convex cost. ``noise`` says how the noise numbers of
+    EDGE2 / EDGE / ODOMETRY / LANDMARK lines read (g2o's EDGE_SE2 always carries information): gtsam_auto (as
+    gtsam's load2D), covariance, information (iSAM's own files such as victoriaPark.txt), toro_information or
+    sqrt_information."""
+    if init is None:
+        init = "file" if method == "isam2" else "auto"
+    if method not in SOLVE_METHODS or init not in SOLVE_STARTS:
+        raise ConfigError(
+            f"method must be one of {sorted(SOLVE_METHODS)} and init one of {sorted(SOLVE_STARTS)}"
+        )
+    from holoslam.graph.build import BuildOptions
+    from holoslam.graph.factors import NO_KERNEL, Kernel, RobustKernel
+    from holoslam.io.g2o import TextNoise
+    from holoslam.solve import Initialisation, Method, SolveOptions
+
+    noises = [n.value for n in TextNoise]
+    if noise not in noises:
+        raise ConfigError(f"noise {noise!r} is not one of {noises}")
+    kernels = [k.value for k in RobustKernel]
+    if kernel not in kernels:
+        raise ConfigError(f"kernel {kernel!r} is not one of {kernels}")
+    if not (math.isfinite(kernel_parameter) and kernel_parameter > 0):
+        raise ConfigError(f"the kernel parameter must be a finite number > 0, got {kernel_parameter}")
+    if not Path(input_path).is_file():
+        raise IngestError(f"graph file {input_path} does not exist")
+    robust = Kernel(RobustKernel(kernel), float(kernel_parameter))
+    # with a kernel: step (1) of solve's outlier scheme only (kernels, no chi2 rejection rounds)
+    options = SolveOptions(
+        method=Method(SOLVE_METHODS[method]),
+        initialisation=Initialisation(SOLVE_STARTS[init]),
+        reject_outliers=robust.kind is not RobustKernel.NONE,
+        max_rounds=0,
+        detect_moved=False,
+        final_gaussian=False,
+        build=BuildOptions(
+            loop_kernel=robust, landmark_kernel=robust, heading_kernel=NO_KERNEL, robust_kinds=("g2o",)
+        ),
+    )
+    summary, solution = solve_g2o_file(input_path, output, noise=TextNoise(noise), options=options)
+    if tum is None:
+        return summary
+    import numpy as np
+
+    from holoslam.io.trajectory import write_tum
+
+    ids = solution.pose_ids if solution.pose_ids is not None else np.arange(len(solution.wTa))
+    # g2o carries no time: the pose index (or vertex id) stands for seconds
+    write_tum(tum, np.asarray(ids, dtype=np.int64) * 1_000_000_000, solution.wTa)
+    from dataclasses import replace
+
+    return replace(summary, tum=str(tum))
+
+
+# -------------------------------------------------------------------------------- inspect, datasets, tags, maps
+
+
+def inspect_log_file(log: str | Path, mapping: str | Path | None = None) -> tuple[str, dict[str, Any]]:
+    """``holoslam inspect``: the channel table of a log (summary section only) as text and as JSON-able data."""
+    from holoslam.io.mcap import format_summary, inspect_log, summary_to_dict
+
+    s = inspect_log(log, mapping=mapping)
+    return format_summary(s), summary_to_dict(s)
+
+
+def list_datasets() -> list[dict[str, Any]]:
+    """``holoslam datasets``: the bundled and known datasets with where they are on this machine."""
+    from holoslam.io.datasets import find_dataset, load_manifest
+
+    rows = []
+    for name, entry in load_manifest().items():
+        path = find_dataset(name)
+        extra = entry.extra or {}
+        rows.append(
+            {
+                "name": name,
+                "kind": entry.where,
+                "file": entry.file,
+                "path": None if path is None else str(path),
+                "source": str(extra.get("how_to_get") or extra.get("source") or extra.get("url") or ""),
+                "licence": entry.licence,
+            }
+        )
+    return rows
+
+
+def decode_tags(images: Sequence[str]) -> list[dict[str, Any]]:
+    """``holoslam tags``: decode the QR codes of image files; an unreadable file yields an ``error`` item and the
+    others go on."""
+    from holoslam.vision.qr import decode_image_file, detection_to_json
+
+    out: list[dict[str, Any]] = []
+    for path in images:
+        try:
+            dets = decode_image_file(path)
+        except HoloslamError as e:
+            out.append({"image": path, "error": str(e)})
+            continue
+        out.extend(detection_to_json(d, path) for d in dets)
+    return out
+
+
+def topology_from_map_file(map_yaml: str | Path, output: str | Path) -> dict[str, Any]:
+    """``holoslam topology``: topology graph of a ROS map_server map written as GraphML (and JSON node-link
+    beside it)."""
+    from holoslam.io.graphs import write_graphml, write_node_link_json
+    from holoslam.io.grid import read_grid
+    from holoslam.maps.topology import cycle_rank, to_graphml_ready, topology_from_grid
+
+    grid = read_grid(map_yaml)
+    G = topology_from_grid(grid)
+    out = Path(output)
+    if not out.parent.exists():
+        raise ConfigError(f"folder {out.parent} does not exist; create it first")
+    ready = to_graphml_ready(G)
+    write_graphml(ready, out)
+    js = write_node_link_json(ready, out.with_suffix(".json"))
+    return {
+        "map": str(map_yaml),
+        "cells": f"{grid.shape[1]} x {grid.shape[0]} at {grid.resolution} m",
+        "nodes": G.number_of_nodes(),
+        "edges": G.number_of_edges(),
+        "independent_cycles": cycle_rank(G),
+        "graphml": str(out),
+        "json": str(js),
+    }

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -27,6 +26,13 @@ import numpy as np
 
 from holoslam import geometry as g
 from holoslam.errors import ConfigError, HoloslamError, IngestError
+from holoslam.jobs import (  # the light commands' jobs live in holoslam.jobs; kept here by their old names
+    decode_tags,
+    list_datasets,
+    solve_graph_file,
+    topology_from_map_file,
+)
+from holoslam.jobs import inspect_log_file as inspect
 
 __all__ = [
     "RunConfig",
@@ -885,82 +891,6 @@ def simulate(
     return simulate_to_file(out, cfg)
 
 
-def inspect(log: str | Path, mapping: str | Path | None = None) -> tuple[str, dict[str, Any]]:
-    """The channel table of a log (summary section only) as text and as JSON-able data."""
-    from holoslam.io.mcap import format_summary, inspect_log, summary_to_dict
-
-    s = inspect_log(log, mapping=mapping)
-    return format_summary(s), summary_to_dict(s)
-
-
-def solve_graph_file(
-    input_path: str | Path,
-    output: str | Path,
-    tum: str | Path | None = None,
-    method: str = "lm",
-    init: str = "file",
-    kernel: str = "none",
-    kernel_parameter: float = 1.0,
-    noise: str = "gtsam_auto",
-) -> dict[str, Any]:
-    """Optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result (g2o, and TUM).
-    ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices), odometry, lago,
-    incremental or auto. ``kernel`` (none, huber, cauchy, dcs, geman_mcclure; parameter in whitened units) puts a
-    robust kernel on every edge and landmark measurement, as g2o's ``-robustKernel`` does: a few wrong loop
-    closures then no longer bend the graph, at the price of a non-convex cost (start from a good guess).
-    ``noise`` says how the noise numbers of EDGE2 / EDGE / ODOMETRY / LANDMARK lines read (g2o's EDGE_SE2 always
-    carries information): gtsam_auto (as gtsam's load2D), covariance, information (iSAM's own files such as
-    victoriaPark.txt), toro_information or sqrt_information."""
-    from holoslam.graph.build import BuildOptions
-    from holoslam.graph.factors import NO_KERNEL, Kernel, RobustKernel
-    from holoslam.io.g2o import TextNoise
-    from holoslam.solve import Initialisation, Method, SolveOptions, solve_g2o_file
-
-    methods = {"lm": Method.BATCH, "isam2": Method.ISAM2}
-    inits = {
-        "file": Initialisation.PROBLEM,
-        "odometry": Initialisation.ODOMETRY,
-        "lago": Initialisation.LAGO,
-        "incremental": Initialisation.INCREMENTAL,
-        "auto": Initialisation.AUTO,
-    }
-    if method not in methods or init not in inits:
-        raise ConfigError(f"method must be one of {sorted(methods)} and init one of {sorted(inits)}")
-    noises = [n.value for n in TextNoise]
-    if noise not in noises:
-        raise ConfigError(f"noise {noise!r} is not one of {noises}")
-    kernels = [k.value for k in RobustKernel]
-    if kernel not in kernels:
-        raise ConfigError(f"kernel {kernel!r} is not one of {kernels}")
-    if not (math.isfinite(kernel_parameter) and kernel_parameter > 0):
-        raise ConfigError(f"the kernel parameter must be a finite number > 0, got {kernel_parameter}")
-    if not Path(input_path).is_file():
-        raise IngestError(f"graph file {input_path} does not exist")
-    robust = Kernel(RobustKernel(kernel), float(kernel_parameter))
-    # with a kernel: step (1) of solve's outlier scheme only (kernels, no chi2 rejection rounds)
-    options = SolveOptions(
-        method=methods[method],
-        initialisation=inits[init],
-        reject_outliers=robust.kind is not RobustKernel.NONE,
-        max_rounds=0,
-        detect_moved=False,
-        final_gaussian=False,
-        build=BuildOptions(
-            loop_kernel=robust, landmark_kernel=robust, heading_kernel=NO_KERNEL, robust_kinds=("g2o",)
-        ),
-    )
-    summary, solution = solve_g2o_file(input_path, output, noise=TextNoise(noise), options=options)
-    out = dataclasses.asdict(summary) if dataclasses.is_dataclass(summary) else dict(summary)
-    if tum is not None:
-        from holoslam.io.trajectory import write_tum
-
-        ids = solution.pose_ids if solution.pose_ids is not None else np.arange(len(solution.wTa))
-        # g2o carries no time: the pose index (or vertex id) stands for seconds
-        write_tum(tum, np.asarray(ids, dtype=np.int64) * 1_000_000_000, solution.wTa)
-        out["tum"] = str(tum)
-    return {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v)) for k, v in out.items()}
-
-
 def plan_to_object(
     run_dir: str | Path, object_id: str, from_xy: tuple[float, float] | None = None
 ) -> dict[str, Any]:
@@ -1019,64 +949,3 @@ def export_run(
 
     saved = load_run(run_dir)
     return export_saved(saved, Path(to) if to is not None else Path(run_dir), set(formats))
-
-
-def list_datasets() -> list[dict[str, Any]]:
-    """The bundled and known datasets with where they are on this machine."""
-    from holoslam.io.datasets import find_dataset, load_manifest
-
-    rows = []
-    for name, entry in load_manifest().items():
-        path = find_dataset(name)
-        extra = entry.extra or {}
-        rows.append(
-            {
-                "name": name,
-                "kind": entry.where,
-                "file": entry.file,
-                "path": None if path is None else str(path),
-                "source": str(extra.get("how_to_get") or extra.get("source") or extra.get("url") or ""),
-                "licence": entry.licence,
-            }
-        )
-    return rows
-
-
-def decode_tags(images: Sequence[str]) -> list[dict[str, Any]]:
-    """Decode the QR codes of image files; an unreadable file yields an ``error`` item and the others go on."""
-    from holoslam.vision.qr import decode_image_file, detection_to_json
-
-    out: list[dict[str, Any]] = []
-    for path in images:
-        try:
-            dets = decode_image_file(path)
-        except HoloslamError as e:
-            out.append({"image": path, "error": str(e)})
-            continue
-        out.extend(detection_to_json(d, path) for d in dets)
-    return out
-
-
-def topology_from_map_file(map_yaml: str | Path, output: str | Path) -> dict[str, Any]:
-    """Topology graph of a ROS map_server map written as GraphML (and JSON node-link beside it)."""
-    from holoslam.io.graphs import write_graphml, write_node_link_json
-    from holoslam.io.grid import read_grid
-    from holoslam.maps.topology import cycle_rank, to_graphml_ready, topology_from_grid
-
-    grid = read_grid(map_yaml)
-    G = topology_from_grid(grid)
-    out = Path(output)
-    if not out.parent.exists():
-        raise ConfigError(f"folder {out.parent} does not exist; create it first")
-    ready = to_graphml_ready(G)
-    write_graphml(ready, out)
-    js = write_node_link_json(ready, out.with_suffix(".json"))
-    return {
-        "map": str(map_yaml),
-        "cells": f"{grid.shape[1]} x {grid.shape[0]} at {grid.resolution} m",
-        "nodes": G.number_of_nodes(),
-        "edges": G.number_of_edges(),
-        "independent_cycles": cycle_rank(G),
-        "graphml": str(out),
-        "json": str(js),
-    }

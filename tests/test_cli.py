@@ -130,9 +130,10 @@ def test_solve_g2o_from_the_gtsam_wheel(tmp_path, capsys):
     assert summary["final_error"] < summary["initial_error"]
     graph, _ = gtsam.load2D(src)
     assert len((tmp_path / "out.tum").read_text().splitlines()) == 1 + summary["num_poses"]
-    # the optimised file reads back with gtsam itself
+    # the optimised file reads back with gtsam itself, every edge (FIX is written last: gtsam stops at it)
     g2, v2 = gtsam.readG2o(str(tmp_path / "out.g2o"))
     assert v2.size() == summary["num_poses"] + summary["num_landmarks"]
+    assert g2.size() == graph.size()
 
 
 def test_datasets_lists_bundled_and_wheel_data(capsys):

@@ -155,7 +155,7 @@ SOLVE_G2O = [
 @FUZZ
 @given(lines=st.lists(st.sampled_from(SOLVE_G2O), min_size=1, max_size=10))
 def test_solve_g2o_file_on_what_parses(tmp_path_factory, lines):
-    from holoslam.solve import solve_g2o_file
+    from holoslam.jobs import solve_g2o_file
 
     p = tmp_path_factory.mktemp("solve") / "g.g2o"
     p.write_text("\n".join(lines) + "\n")

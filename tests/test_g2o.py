@@ -8,8 +8,9 @@ import pytest
 
 from holoslam.errors import G2oFormatError, GraphError
 from holoslam.graph.problem import problem_from_g2o
-from holoslam.io.g2o import G2oGraph, TextNoise, parse_g2o, read_g2o, write_g2o
-from holoslam.solve import solve_g2o_file
+from holoslam.io.g2o import G2oGraph, TextNoise, parse_g2o, read_g2o
+from holoslam.io.g2o_write import write_g2o
+from holoslam.jobs import solve_g2o_file
 
 SMALL = """# a tiny graph
 VERTEX_SE2 0 0 0 0

@@ -110,9 +110,9 @@ def test_isam2_polish_is_the_only_lm(monkeypatch):
     ran = []
     real = solve_mod._batch
 
-    def spy(graph, values, options, hook, errors=None):
+    def spy(graph, values, options, hook, errors=None, stop=None):
         ran.append(options.max_iterations)
-        return real(graph, values, options, hook, errors)
+        return real(graph, values, options, hook, errors, stop)
 
     monkeypatch.setattr(solve_mod, "_batch", spy)
     sol = solve(problem, replace(ISAM2, isam2_final_lm_iterations=2))

@@ -94,13 +94,36 @@ def test_isam2_matches_direct_gtsam(vp_head: Path, reference: tuple[float, float
     assert sol.final_error == pytest.approx(reference[1], rel=1e-6)
 
 
-def test_auto_picks_the_incremental_start(vp_head: Path, reference: tuple[float, float]) -> None:
+def test_auto_reaches_the_incremental_optimum(vp_head: Path, reference: tuple[float, float]) -> None:
+    """AUTO's chordal start (rotations from the odometry tree, positions and landmarks from one linear solve over
+    every sighting) lands where the incremental start lands; LM from the file's chain is trapped."""
     e_lm, e_inc = reference
     problem = problem_from_g2o(read_g2o(vp_head))
     sol = solve(problem, replace(_options(), initialisation=Initialisation.AUTO))
     got = dict(sol.candidates)
-    assert sol.initialisation is Initialisation.INCREMENTAL
+    assert sol.initialisation is Initialisation.CHORDAL
     assert sol.final_error == pytest.approx(e_inc, rel=1e-6)
     assert got[Initialisation.PROBLEM] == pytest.approx(e_lm, rel=1e-6)  # LM from the file's chain: trapped
+    assert sol.starts is not None and sol.starts.agree is False and sol.starts.fits
+    assert not sol.starts.fallback_ran  # the chordal solution explains the sightings: no incremental pass
+
+
+def test_auto_runs_the_incremental_start_when_the_best_does_not_fit(
+    vp_head: Path, reference: tuple[float, float]
+) -> None:
+    """With the file's chain as the only candidate, LM is trapped (0.8 % of the measurements beyond the 99.99 %
+    chi-square bound, where 0.01 % is expected): the incremental start runs and is kept."""
+    e_lm, e_inc = reference
+    problem = problem_from_g2o(read_g2o(vp_head))
+    opts = replace(_options(), initialisation=Initialisation.AUTO, auto_candidates=(Initialisation.PROBLEM,))
+    sol = solve(problem, opts)
+    got = dict(sol.candidates)
+    assert sol.starts is not None and sol.starts.fallback_ran and sol.starts.fits
+    assert sol.initialisation is Initialisation.INCREMENTAL
+    assert sol.final_error == pytest.approx(e_inc, rel=1e-6)
+    assert got[Initialisation.PROBLEM] == pytest.approx(e_lm, rel=1e-6)
     # the odometry tree has no loops: the chain satisfies every odometry measurement, LAGO would return it
-    assert Initialisation.LAGO not in got
+    both = (Initialisation.PROBLEM, Initialisation.LAGO)
+    lago = solve(problem, replace(opts, auto_candidates=both, auto_fallback=None))
+    assert Initialisation.LAGO not in dict(lago.candidates)
+    assert [c for c, _why in lago.starts.skipped] == [Initialisation.LAGO]

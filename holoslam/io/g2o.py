@@ -23,7 +23,8 @@ Speed: the lines are grouped by tag in one pass and each tag's numbers are conve
 (numpy's C parser); the 3x3 / 2x2 inverses are closed-form batches (:mod:`holoslam.graph.linalg`). A text with
 comments, lower-case tags or any malformed line goes through the line-by-line reader, which reports the problem.
 
-Everything is kept as covariances in the returned :class:`G2oGraph` (the writer converts back to information).
+Everything is kept as covariances in the returned :class:`G2oGraph` (the writer, :mod:`holoslam.io.g2o_write`,
+converts back to information).
 A malformed line raises :class:`~holoslam.errors.G2oFormatError` with the file, line number, the line and what is
 wrong. Tags the reader does not know are listed in ``G2oGraph.skipped`` (or raise with ``strict=True``); known
 tags holoslam does not use (EQUIV: TORO's equivalence of two vertices) are listed there too.
@@ -31,7 +32,6 @@ tags holoslam does not use (EQUIV: TORO's equivalence of two vertices) are liste
 
 from __future__ import annotations
 
-import math
 import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -42,7 +42,14 @@ import numpy as np
 
 from holoslam.errors import G2oFormatError
 
-__all__ = ["TextNoise", "G2oGraph", "SkippedTag", "read_g2o", "parse_g2o", "to_g2o_text", "write_g2o"]
+__all__ = [
+    "TextNoise",
+    "G2oGraph",
+    "SkippedTag",
+    "read_g2o",
+    "parse_g2o",
+    "read_g2o_text",
+]
 
 
 class TextNoise(str, Enum):
@@ -515,11 +522,11 @@ def parse_g2o(
     )
 
 
-def read_g2o(path: str | Path, noise: TextNoise = TextNoise.GTSAM_AUTO, strict: bool = False) -> G2oGraph:
-    """Read a 2D g2o / TORO / iSAM text graph file."""
+def read_g2o_text(path: str | Path) -> str:
+    """The text of a graph file, with every way it can be unreadable said as a G2oFormatError."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8", errors="strict")
+        return path.read_text(encoding="utf-8", errors="strict")
     except FileNotFoundError:
         raise G2oFormatError(f"{path}: no such file") from None
     except OSError as e:  # a directory, no permission
@@ -528,40 +535,8 @@ def read_g2o(path: str | Path, noise: TextNoise = TextNoise.GTSAM_AUTO, strict: 
         ) from None
     except UnicodeDecodeError as e:
         raise G2oFormatError(f"{path}: not a text file ({e.reason} at byte {e.start})") from None
-    return parse_g2o(text, source=str(path), noise=noise, strict=strict)
 
 
-def _fmt(x: float) -> str:
-    return repr(float(x)) if math.isfinite(x) else str(x)
-
-
-def to_g2o_text(graph: G2oGraph) -> str:
-    """The g2o text of a graph: VERTEX_SE2, VERTEX_XY, FIX, EDGE_SE2 and EDGE_SE2_XY (information matrices,
-    upper triangle), floats written with full precision so that a write/read round trip is exact to 1 ulp."""
-    out: list[str] = []
-    for vid, (x, y, t) in zip(graph.vertex_ids, graph.vertex_poses, strict=True):
-        out.append(f"VERTEX_SE2 {int(vid)} {_fmt(x)} {_fmt(y)} {_fmt(t)}")
-    for pid, (x, y) in zip(graph.point_ids, graph.point_positions, strict=True):
-        out.append(f"VERTEX_XY {int(pid)} {_fmt(x)} {_fmt(y)}")
-    for f in graph.fixed_ids:
-        out.append(f"FIX {int(f)}")
-    info = np.linalg.inv(graph.edge_cov) if graph.edge_cov.shape[0] else np.zeros((0, 3, 3))
-    iu = np.triu_indices(3)
-    for i, j, m, I in zip(graph.edge_i, graph.edge_j, graph.edge_measured, info, strict=True):
-        vals = " ".join(_fmt(v) for v in (*m, *0.5 * (I + I.T)[iu]))
-        out.append(f"EDGE_SE2 {int(i)} {int(j)} {vals}")
-    linfo = np.linalg.inv(graph.landmark_cov) if graph.landmark_cov.shape[0] else np.zeros((0, 2, 2))
-    for i, lid, m, I in zip(
-        graph.landmark_pose, graph.landmark_id, graph.landmark_measured, linfo, strict=True
-    ):
-        I = 0.5 * (I + I.T)
-        vals = " ".join(_fmt(v) for v in (m[0], m[1], I[0, 0], I[0, 1], I[1, 1]))
-        out.append(f"EDGE_SE2_XY {int(i)} {int(lid)} {vals}")
-    return "\n".join(out) + "\n"
-
-
-def write_g2o(graph: G2oGraph, path: str | Path) -> Path:
-    """Write a graph as g2o text (see :func:`to_g2o_text`)."""
-    path = Path(path)
-    path.write_text(to_g2o_text(graph), encoding="utf-8")
-    return path
+def read_g2o(path: str | Path, noise: TextNoise = TextNoise.GTSAM_AUTO, strict: bool = False) -> G2oGraph:
+    """Read a 2D g2o / TORO / iSAM text graph file."""
+    return parse_g2o(read_g2o_text(path), source=str(Path(path)), noise=noise, strict=strict)

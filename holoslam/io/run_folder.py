@@ -191,7 +191,7 @@ def write_run(
     progress: Callable[..., None] | None = None,
 ) -> list[Path]:
     """Write every output file of a ``RunResult`` into ``out_dir`` (created if needed); returns the paths."""
-    from holoslam.io.g2o import write_g2o
+    from holoslam.io.g2o_write import write_g2o
     from holoslam.io.graphs import write_graph_files
     from holoslam.io.grid import write_grid, write_grid_png
     from holoslam.io.planning import write_planning
