@@ -246,11 +246,46 @@ def cmd_tags(a: argparse.Namespace) -> int:
     return EXIT_FAILED if failed and failed == len(a.images) else EXIT_OK
 
 
-def cmd_topology(a: argparse.Namespace) -> int:
-    from holoslam.jobs import topology_from_map_file
+def _topology_config(a: argparse.Namespace):
+    """(topology, holographic, robot) sections for ``holoslam topology``: the run configuration's (``--config``;
+    without one the run's defaults, read without loading a run's whole configuration, and no robot: no objects
+    to reach) with the topology options given on the command line: one set of defaults for ``holoslam run``
+    and ``holoslam topology``."""
+    import dataclasses
 
-    summary = topology_from_map_file(a.map, a.output)
-    print("\n".join(f"{k}: {v}" for k, v in summary.items()))
+    if a.config is not None:
+        from holoslam.config import load_run_config
+
+        cfg = load_run_config(a.config)
+        tc, hc, robot = cfg.topology, cfg.holographic, cfg.robot
+    else:
+        from holoslam.maps.settings import HolographicConfig, TopologyConfig
+
+        tc, hc, robot = TopologyConfig(), HolographicConfig(), None
+    cleaning = tc.cleaning
+    over = {
+        k: v
+        for k, v in (
+            ("min_free_area_m2", a.min_free_area),
+            ("min_obstacle_area_m2", a.min_obstacle_area),
+            ("unknown_islands", a.unknown_islands),
+        )
+        if v is not None
+    }
+    if over:
+        cleaning = dataclasses.replace(cleaning, **over)
+    top = {k: v for k, v in (("close_cells", a.close_cells), ("erode_cells", a.erode_cells)) if v is not None}
+    return dataclasses.replace(tc, cleaning=cleaning, **top), hc, robot
+
+
+def cmd_topology(a: argparse.Namespace) -> int:
+    from holoslam.jobs import map_topology
+
+    topology, holographic, robot = _topology_config(a)
+    result = map_topology(
+        a.map, a.output, topology=topology, holographic=holographic, robot=robot, rooms_png=a.rooms, png=a.png
+    )
+    print(_json(result.to_dict()) if a.json else result.to_text())
     return EXIT_OK
 
 
@@ -424,9 +459,44 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="one JSON object per decoded code")
     s.set_defaults(func=cmd_tags)
 
-    s = sub.add_parser("topology", help="topology graph of a ROS map_server map (PGM/PNG + YAML)")
+    s = sub.add_parser(
+        "topology",
+        help="topology graph of a ROS map_server map (PGM/PNG + YAML); with --rooms / --png its rooms too",
+        description="The topology graph of a map, built as 'holoslam run' builds it (same settings and defaults: "
+        "the run configuration's topology section, or --config). With --rooms or --png the rooms, doorways and "
+        "places of the holographic graph too, written beside the GraphML as <name>_holographic.graphml/.json.",
+    )
     s.add_argument("map", type=Path, help="map YAML")
     s.add_argument("-o", "--output", required=True, type=Path, help="GraphML to write (JSON beside it)")
+    s.add_argument(
+        "--rooms",
+        type=Path,
+        metavar="ROOMS.png",
+        help="write the room label image: 16-bit PNG the map's size, 0 = not a room, ids = the room nodes' ids",
+    )
+    s.add_argument("--png", type=Path, metavar="PICTURE.png", help="draw the map, its rooms, topology and places")
+    s.add_argument("--config", type=Path, help="YAML run configuration (its topology, holographic, robot sections)")
+    s.add_argument(
+        "--min-free-area",
+        type=float,
+        metavar="M2",
+        help="cleaning: free regions smaller are dropped (default: the run's, 0.25 m^2)",
+    )
+    s.add_argument(
+        "--min-obstacle-area",
+        type=float,
+        metavar="M2",
+        help="cleaning: obstacle islands smaller are filled (default: the run's, 0.05 m^2)",
+    )
+    s.add_argument(
+        "--unknown-islands",
+        choices=["obstacle", "free"],
+        help="cleaning: unknown cells count as obstacle, or islands of unknown cells only are free "
+        "(default: the run's, obstacle)",
+    )
+    s.add_argument("--close-cells", type=int, metavar="N", help="open free space by a disc first (default 0)")
+    s.add_argument("--erode-cells", type=int, metavar="N", help="erode free space by a disc first (default 0)")
+    s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_topology)
     return p
 

@@ -21,7 +21,8 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, TypeVar
 
-from holoslam.errors import ConfigError
+from holoslam.errors import ConfigError, MapError
+from holoslam.maps.settings import HolographicConfig, TopologyConfig
 from holoslam.submaps.frontend import FrontEndConfig
 
 __all__ = [
@@ -49,6 +50,8 @@ _MOVED_KEYS = {
     ("PlanningConfig", "robot_radius_m"): "robot.radius_m",
     ("HolographicConfig", "robot_radius_m"): "robot.radius_m",
     ("HolographicConfig", "arm_reach_m"): "robot.arm_reach_m",
+    ("HolographicConfig", "doorway_width_m"): "holographic.rooms.door_width_max_m",
+    ("HolographicConfig", "min_room_area_m2"): "holographic.rooms.min_room_area_m2",
 }
 
 
@@ -138,14 +141,14 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], where: str = "config") -
         if not isinstance(key, str) or key not in fields:
             moved = _MOVED_KEYS.get((cls.__name__, str(key)))
             if moved is not None:
-                raise ConfigError(f"{where}: {key!r} is now {moved!r} (one robot description); move it there")
+                raise ConfigError(f"{where}: {key!r} is now {moved!r}; move it there")
             close = difflib.get_close_matches(str(key), list(fields), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else f"; valid keys: {', '.join(sorted(fields))}"
             raise ConfigError(f"{where}: unknown key {key!r}{hint}")
         kwargs[key] = _convert(hints[key], value, f"{where}.{key}")
     try:
         obj = cls(**kwargs)
-    except (TypeError, ValueError) as e:
+    except (TypeError, ValueError, MapError) as e:
         raise ConfigError(f"{where}: {e}") from None
     return obj
 
@@ -261,17 +264,6 @@ class GridConfig:
 
 
 @dataclass(frozen=True)
-class TopologyConfig:
-    """Thinning topology: spurs shorter than ``prune_spur_m`` (or ``spur_clearance_factor`` x the clearance at
-    their junction) are pruned; ``close_cells`` closes gaps in obstacles (scan holes) before thinning."""
-
-    prune_spur_m: float = 0.3
-    spur_clearance_factor: float = 1.5
-    erode_cells: int = 0
-    close_cells: int = 1
-
-
-@dataclass(frozen=True)
 class RobotConfig:
     """The robot description: one base footprint and one arm, for every stage that asks how big the robot is or
     how far it reaches: the configuration space of the planning graph (free space eroded by ``radius_m``), the
@@ -302,14 +294,6 @@ class RobotConfig:
                 raise ValueError(f"{name} must be a finite number of metres >= 0, got {v!r}")
         if not self.reach_z_min_m <= self.reach_z_max_m:
             raise ValueError(f"reach_z_min_m {self.reach_z_min_m} is above reach_z_max_m {self.reach_z_max_m}")
-
-
-@dataclass(frozen=True)
-class HolographicConfig:
-    """Place detection thresholds of the holographic graph (the robot's size and reach: ``robot``)."""
-
-    doorway_width_m: float = 1.3
-    min_room_area_m2: float = 1.0
 
 
 @dataclass(frozen=True)

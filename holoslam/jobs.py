@@ -16,8 +16,10 @@ from typing import TYPE_CHECKING, Any
 from holoslam.errors import ConfigError, HoloslamError, IngestError
 
 if TYPE_CHECKING:
+    from holoslam.config import RobotConfig
     from holoslam.evaluate import GroundTruthErrors, RelationErrors
     from holoslam.graph.solution import Solution, StartsReport
+    from holoslam.maps.settings import HolographicConfig, TopologyConfig
     from holoslam.solve import IterationHook, SolveOptions
 
 __all__ = [
@@ -33,6 +35,8 @@ __all__ = [
     "list_datasets",
     "decode_tags",
     "topology_from_map_file",
+    "MapTopology",
+    "map_topology",
 ]
 
 
@@ -409,27 +413,160 @@ def decode_tags(images: Sequence[str]) -> list[dict[str, Any]]:
     return out
 
 
-def topology_from_map_file(map_yaml: str | Path, output: str | Path) -> dict[str, Any]:
-    """``holoslam topology``: topology graph of a ROS map_server map written as GraphML (and JSON node-link
-    beside it)."""
-    from holoslam.io.graphs import write_graphml, write_node_link_json
-    from holoslam.io.grid import read_grid
+def topology_from_map_file(map_yaml: str | Path, output: str | Path, **kwargs: Any) -> dict[str, Any]:
+    """``holoslam topology`` as a dict: :func:`map_topology`'s summary (kept for callers of this name)."""
+    return map_topology(map_yaml, output, **kwargs).to_dict()
+
+
+# ---------------------------------------------------------------------------------------------- topology
+
+
+@dataclass(frozen=True)
+class MapTopology:
+    """What ``holoslam topology`` made of a map: its size, the cleaning applied, the topology's counts, and
+    (when rooms were asked for) the rooms, doorways, wide openings and holographic places; times (s) and the
+    files written."""
+
+    map: str
+    cells: str
+    cleaning: str
+    nodes: int
+    edges: int
+    components: int
+    independent_cycles: int
+    topology_s: float
+    files: tuple[str, ...]
+    rooms: int | None = None
+    doorways: int | None = None
+    wide_openings: int | None = None
+    places: str | None = None
+    rooms_s: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        import dataclasses
+
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+    def to_text(self) -> str:
+        d = self.to_dict()
+        d["files"] = ", ".join(self.files)
+        return "\n".join(f"{k}: {v}" for k, v in d.items())
+
+
+def map_topology(
+    map_yaml: str | Path,
+    output: str | Path,
+    *,
+    topology: TopologyConfig | None = None,
+    holographic: HolographicConfig | None = None,
+    robot: RobotConfig | None = None,
+    rooms_png: str | Path | None = None,
+    png: str | Path | None = None,
+) -> MapTopology:
+    """Topology graph of a ROS map_server map written as GraphML (and JSON node-link beside it), built as a run
+    builds it (``topology``: the run configuration's section, cleaning, opening, spur pruning; default the
+    run's). With ``rooms_png`` or ``png`` the rooms and the holographic graph's places are found too
+    (``holographic`` section; ``robot`` for the reach model, default ``ReachModel()``: the graph has no objects)
+    and the holographic graph is written beside the topology (``<name>_holographic``):
+    ``rooms_png`` gets the room label image (16-bit, the map image's size and row order, 0 = not a room, ids =
+    the ``room_id`` of the room nodes ``room:<id>``), ``png`` a picture of the map with its rooms, topology and
+    places."""
+    import time
+
+    from holoslam.io.graphs import write_graph_files, write_graphml, write_node_link_json
+    from holoslam.io.grid import read_grid, write_label_png
+    from holoslam.maps.cleaning import CleaningReport
+    from holoslam.maps.holographic import ReachModel, build_holographic
+    from holoslam.maps.passages import EdgePaths
+    from holoslam.maps.rooms import rooms_of_grid
+    from holoslam.maps.settings import HolographicConfig, TopologyConfig
     from holoslam.maps.topology import cycle_rank, to_graphml_ready, topology_from_grid
 
-    grid = read_grid(map_yaml)
-    G = topology_from_grid(grid)
+    tc = topology or TopologyConfig()
+    hc = holographic or HolographicConfig()
     out = Path(output)
-    if not out.parent.exists():
-        raise ConfigError(f"folder {out.parent} does not exist; create it first")
+    for target in (out, rooms_png, png):
+        if target is not None and not Path(target).parent.is_dir():
+            raise ConfigError(f"folder {Path(target).parent} does not exist; create it first")
+    grid = read_grid(map_yaml)
+    t0 = time.perf_counter()
+    G = topology_from_grid(
+        grid,
+        prune_spur_m=tc.prune_spur_m,
+        spur_clearance_factor=tc.spur_clearance_factor,
+        erode_cells=tc.erode_cells,
+        close_cells=tc.close_cells,
+        cleaning=tc.cleaning,
+    )
+    t_topology = time.perf_counter() - t0
     ready = to_graphml_ready(G)
-    write_graphml(ready, out)
-    js = write_node_link_json(ready, out.with_suffix(".json"))
-    return {
-        "map": str(map_yaml),
-        "cells": f"{grid.shape[1]} x {grid.shape[0]} at {grid.resolution} m",
-        "nodes": G.number_of_nodes(),
-        "edges": G.number_of_edges(),
-        "independent_cycles": cycle_rank(G),
-        "graphml": str(out),
-        "json": str(js),
-    }
+    files = [str(write_graphml(ready, out)), str(write_node_link_json(ready, out.with_suffix(".json")))]
+    rep = CleaningReport(**{k[len("cleaned_") :]: v for k, v in G.graph.items() if k.startswith("cleaned_")})
+    c = tc.cleaning
+    cleaning = (
+        f"free regions < {c.min_free_area_m2:g} m^2 dropped: {rep.free_regions_dropped} "
+        f"({rep.free_cells_dropped} cells); obstacle islands < {c.min_obstacle_area_m2:g} m^2 filled: "
+        f"{rep.islands_filled} ({rep.island_cells_filled} cells"
+        + (f", {rep.unknown_islands_filled} of unknown cells only" if c.unknown_islands == "free" else "")
+        + f"); unknown cells count as {c.unknown_islands}; opening {tc.close_cells} cells, erosion "
+        f"{tc.erode_cells} cells; left: {rep.free_regions} free regions, {rep.islands} obstacle islands"
+    )
+    import networkx as nx
+
+    base = dict(
+        map=str(map_yaml),
+        cells=f"{grid.shape[1]} x {grid.shape[0]} at {grid.resolution} m",
+        cleaning=cleaning,
+        nodes=G.number_of_nodes(),
+        edges=G.number_of_edges(),
+        components=nx.number_connected_components(G) if G.number_of_nodes() else 0,
+        independent_cycles=cycle_rank(G),
+        topology_s=round(t_topology, 3),
+    )
+    if rooms_png is None and png is None:
+        return MapTopology(**base, files=tuple(files))
+    t0 = time.perf_counter()
+    ep = EdgePaths(G)
+    rooms = rooms_of_grid(grid, G, hc.rooms, ep)
+    rb = robot
+    reach = (
+        ReachModel()
+        if rb is None
+        else ReachModel(rb.radius_m, rb.arm_reach_m, rb.reach_z_min_m, rb.reach_z_max_m, rb.reach_through_m)
+    )
+    H = build_holographic(grid, G, reach_model=reach, params=hc.places, rooms=rooms, edge_paths=ep)
+    t_rooms = time.perf_counter() - t0
+    places: dict[str, int] = {}
+    for _n, place in H.nodes(data="place"):
+        places[place] = places.get(place, 0) + 1
+    files += [str(p) for p in write_graph_files(H, out.parent, out.stem + "_holographic")]
+    if rooms_png is not None:
+        files.append(str(write_label_png(rooms.labels, rooms_png)))
+    if png is not None:
+        from holoslam import viz
+
+        fig = viz.map_figure(
+            grid,
+            topology=G,
+            holographic=H,
+            rooms=rooms.labels,
+            title=f"{_map_name(map_yaml)}: {rooms.n_rooms} rooms; topology {G.number_of_nodes()} nodes, "
+            f"{G.number_of_edges()} edges",
+        )
+        fig.savefig(png, dpi=110)
+        files.append(str(png))
+    return MapTopology(
+        **base,
+        files=tuple(files),
+        rooms=rooms.n_rooms,
+        doorways=sum(1 for d in rooms.doorways if d.kind == "door"),
+        wide_openings=sum(1 for d in rooms.doorways if d.kind == "opening"),
+        places=", ".join(f"{k} {v}" for k, v in sorted(places.items())),
+        rooms_s=round(t_rooms, 3),
+    )
+
+
+def _map_name(map_yaml: str | Path) -> str:
+    """A map's name for a title: the YAML's stem, or its folder's name for a run folder's ``map.yaml``."""
+    p = Path(map_yaml)
+    return p.parent.name if p.stem == "map" and p.parent.name else p.stem

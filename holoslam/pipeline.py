@@ -108,6 +108,7 @@ class RunResult:
     holographic: Any  # nx.Graph
     planning: Any  # TwoLayerGraph
     report: dict[str, Any]
+    rooms: Any = None  # holoslam.maps.rooms.RoomSegmentation: ids = the holographic graph's room nodes
 
 
 def reestimate_anchors(problem: Any) -> np.ndarray:
@@ -252,8 +253,10 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     """The main job on one log: ingest, locate objects, build and optimise the graph, build the maps and
     graphs. Raises ``IngestError`` when the log lacks what a run needs (odometry and laser scans)."""
     from holoslam.io.mcap import read_log
-    from holoslam.maps.holographic import PlaceParams, build_holographic
+    from holoslam.maps.holographic import build_holographic
     from holoslam.maps.occupancy import build_grid
+    from holoslam.maps.passages import EdgePaths
+    from holoslam.maps.rooms import rooms_of_grid
     from holoslam.maps.topology import topology_from_grid
     from holoslam.planning.twolayer import build_two_layer
     from holoslam.solve import CovarianceScope, Method, SolveOptions, solve
@@ -359,6 +362,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             spur_clearance_factor=cfg.topology.spur_clearance_factor,
             erode_cells=cfg.topology.erode_cells,
             close_cells=cfg.topology.close_cells,
+            cleaning=cfg.topology.cleaning,
         )
 
     with _stage(progress, timings, "holographic graph"):
@@ -372,6 +376,8 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             }
             for sm in fe.submaps
         }
+        edge_paths = EdgePaths(topology)
+        rooms = rooms_of_grid(grid, topology, cfg.holographic.rooms, edge_paths)
         holo = build_holographic(
             grid,
             topology,
@@ -379,11 +385,10 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             submap_ids=[sm.index for sm in fe.submaps],
             objects=objects,
             reach_model=reach_model(cfg.robot),
-            params=PlaceParams(
-                doorway_width_m=cfg.holographic.doorway_width_m,
-                min_room_area_m2=cfg.holographic.min_room_area_m2,
-            ),
+            params=cfg.holographic.places,
             submap_features=submap_features,
+            rooms=rooms,
+            edge_paths=edge_paths,
         )
 
     with _stage(progress, timings, "planning graph"):
@@ -430,6 +435,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         holographic=holo,
         planning=planning,
         report=report,
+        rooms=rooms,
     )
 
 

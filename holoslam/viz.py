@@ -29,6 +29,7 @@ __all__ = [
     "covariance_ellipse",
     "map_figure",
     "trajectory_figure",
+    "draw_rooms",
 ]
 
 PLACE_COLOURS = {"room": "tab:red", "doorway": "tab:green", "crossing": "tab:blue", "dead_end": "tab:purple"}
@@ -55,6 +56,21 @@ def draw_grid(ax: Axes, grid: OccupancyGrid) -> list[Any]:
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
+    return [im]
+
+
+def draw_rooms(ax: Axes, grid: OccupancyGrid, labels: np.ndarray, alpha: float = 0.45) -> list[Any]:
+    """A room label image ((H, W), 0 = none, grid row order) as translucent colours over the map, one colour per
+    room id (a fixed palette cycled by id, so neighbours rarely share one)."""
+    from matplotlib import colormaps
+
+    lab = np.asarray(labels)
+    pal = colormaps["tab20"](np.arange(20))
+    rgba = np.zeros(lab.shape + (4,))
+    on = lab > 0
+    rgba[on] = pal[(lab[on] * 7) % 20]
+    rgba[on, 3] = alpha
+    im = ax.imshow(rgba, origin="lower", extent=_extent(grid), interpolation="nearest", zorder=1)
     return [im]
 
 
@@ -255,14 +271,17 @@ def map_figure(
     route: Route | np.ndarray | None = None,
     title: str | None = None,
     size_in: float = 8.0,
+    rooms: np.ndarray | None = None,
 ) -> Figure:
-    """A new figure of the grid with any of: topology, planning layer, holographic graph, route."""
+    """A new figure of the grid with any of: room labels, topology, planning layer, holographic graph, route."""
     from matplotlib.figure import Figure
 
     h, w = grid.shape
     fig = Figure(figsize=(size_in, size_in * h / max(w, 1) + 0.5))
     ax = fig.add_subplot(1, 1, 1)
     draw_grid(ax, grid)
+    if rooms is not None:
+        draw_rooms(ax, grid, rooms)
     if planning is not None:
         draw_planning(ax, planning, layer=planning_layer)
     if topology is not None:

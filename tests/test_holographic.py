@@ -356,14 +356,15 @@ def _cluttered_offices(seed: int, res: float = RES) -> np.ndarray:
     return free
 
 
-def _segment_by_redrawing(cands, cut_lines, nav, free, clr, res, p):
+def _segment_by_redrawing(cands, cut_lines, nav, free, clr, res, r):
     """The region merging as first written: every round redraws every remaining cut into the robot space and
-    labels the whole map again (the reference of the incremental ``doorways.segment_regions``)."""
+    labels the whole map again, with the rules of ``rooms.merge_round`` written out per cut (the reference of
+    the incremental ``doorways.segment_regions``)."""
     import cv2
 
     from holoslam.maps.doorways import _cut_segments, _side_walks
 
-    fragment_cells = max(p.fragment_area_m2, p.min_room_area_m2) / (res * res)
+    fragment_cells = r.min_room_area_m2 / (res * res)
 
     def draw(cs):
         m = nav.astype(np.uint8)
@@ -376,7 +377,7 @@ def _segment_by_redrawing(cands, cut_lines, nav, free, clr, res, p):
         mx = np.zeros(n_l)
         np.maximum.at(mx, lb.ravel(), clr.ravel())
         merge_ar = ar.copy()
-        thin = mx < p.min_room_clearance_m
+        thin = mx < r.min_room_clearance_m
         merge_ar[thin] = np.minimum(merge_ar[thin], fragment_cells - 0.5)
         sd = []
         for rc, d in cs:
@@ -392,16 +393,9 @@ def _segment_by_redrawing(cands, cut_lines, nav, free, clr, res, p):
         n_lab, lab, area, merge_area, mx, sides = draw(cands)
         keep = [a != b and a > 0 and b > 0 for a, b in sides]
         if all(keep):
-            pairs: dict[tuple[int, int], list[int]] = {}
-            for i, (a, b) in enumerate(sides):
-                pairs.setdefault((min(a, b), max(a, b)), []).append(i)
-            parallel = [ii for ii in pairs.values() if len(ii) > 1]
             small = {k for k in range(1, n_lab) if merge_area[k] < fragment_cells}
             touching = [i for i, (a, b) in enumerate(sides) if a in small or b in small]
-            if parallel:
-                for i in min(parallel, key=lambda ii: min(merge_area[k] for k in sides[ii[0]])):
-                    keep[i] = False
-            elif touching:
+            if touching:
                 k_small = min(
                     (k for i in touching for k in sides[i] if k in small), key=lambda k: merge_area[k]
                 )
@@ -420,7 +414,7 @@ def _segment_by_redrawing(cands, cut_lines, nav, free, clr, res, p):
                     (min(mx[a], mx[b]) / max(clr[cands[i][0][0], cands[i][0][1]], 1e-9), i)
                     for i, (a, b) in enumerate(sides)
                 ]
-                weak = [q for q in weak if q[0] < p.room_to_doorway_clearance]
+                weak = [q for q in weak if q[0] < r.room_to_door_clearance]
                 if not weak:
                     break
                 keep[min(weak)[1]] = False
@@ -431,31 +425,42 @@ def _segment_by_redrawing(cands, cut_lines, nav, free, clr, res, p):
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 @pytest.mark.parametrize("compiled", [True, False])
 def test_incremental_region_merging_equals_redrawing(seed, compiled):
-    """doorways.segment_regions (cuts drawn once, cells given back per dropped cut, union-find) gives the
-    partition of redrawing all cuts and relabelling the map every round: same doorways, labels, areas and
-    sides, with the numba kernel and with its Python fallback."""
+    """doorways.segment_regions (cuts drawn once, cells given back per dropped cut, union-find) with the rules
+    of rooms.merge_round gives the partition of redrawing all cuts and relabelling the map every round: same
+    doorways, labels, areas and sides, with the numba kernel and with its Python fallback."""
     from unittest import mock
 
     import cv2
 
     from holoslam.maps import doorways
-    from holoslam.maps.holographic import PlaceParams
+    from holoslam.maps.passages import EdgePaths
+    from holoslam.maps.rooms import RoomRules, merge_round
     from holoslam.maps.topology import clearance_map
 
     free = _cluttered_offices(seed)
     grid = OccupancyGrid.from_free_mask(free, RES)
     topo = topology_from_grid(grid, close_cells=1)
-    p, rr = PlaceParams(), 0.25
+    r, rr = RoomRules(), 0.25
     clr = clearance_map(free, RES)
+    ep = EdgePaths(topo)
     cands, lines = doorways.orient_cuts(
-        doorways.doorway_candidates(topo, clr, RES, p, 2 * rr), free, clr, RES
+        doorways.doorway_candidates(topo, clr, RES, r, 2 * rr)
+        + doorways.opening_candidates(ep, clr, RES, r.door_width_max_m, r.opening_width_max_m, r.window_m),
+        free,
+        clr,
+        RES,
     )
     rad = int(np.floor(rr / RES))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1))
     nav = cv2.dilate((clr >= rr).astype(np.uint8), disc).view(bool) & free
+    cut_clr = np.array([clr[c[0][0], c[0][1]] for c in cands])
+
+    def rules(a, b, active, area, mx):
+        return merge_round(a, b, cut_clr[active], area, mx, r, RES)
+
     with mock.patch.object(doorways, "kernels", doorways.kernels if compiled else (lambda: None)):
-        seg = doorways.segment_regions(cands, lines, nav, free, clr, RES, p)
-    ref_cuts, n_lab, lab, area, sides = _segment_by_redrawing(cands, lines, nav, free, clr, RES, p)
+        seg = doorways.segment_regions(cands, lines, nav, free, clr, RES, rules)
+    ref_cuts, n_lab, lab, area, sides = _segment_by_redrawing(cands, lines, nav, free, clr, RES, r)
     assert len(cands) > len(ref_cuts) > 0  # rules dropped cuts and some doorways remain
     assert [c[0].tolist() for c in seg.cuts] == [c[0].tolist() for c in ref_cuts]
     assert seg.n_labels == n_lab and np.array_equal(seg.labels, lab) and np.array_equal(seg.area, area)

@@ -40,6 +40,8 @@ __all__ = [
     "encode_pgm",
     "decode_pgm",
     "grid_picture",
+    "write_label_png",
+    "read_label_png",
 ]
 
 MODES = ("trinary", "scale", "raw")
@@ -303,3 +305,33 @@ def write_grid_png(grid: OccupancyGrid, path: str | Path, scale: int = 1) -> Pat
         raise MapError(f"PNG encoding of the grid picture for {path} failed")
     path.write_bytes(buf.tobytes())
     return path
+
+
+def write_label_png(labels: np.ndarray, path: str | Path) -> Path:
+    """Write a label image of a grid ((H, W) integers in the grid's row order, row 0 = lowest y; 0 = none) as a
+    16-bit grey PNG the size of the map, rows as in the map's image (first row = largest y, as ``map.pgm``), so
+    pixel (i, j) of the PNG is pixel (i, j) of the map image. Raises ``MapError`` for ids above 65535."""
+    import cv2
+
+    path = Path(path)
+    lab = np.asarray(labels)
+    if lab.ndim != 2 or (lab.size and (lab.min() < 0 or lab.max() > 65535)):
+        raise MapError(f"{path}: a label image needs 2-D ids in 0..65535, got shape {lab.shape}")
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(np.flipud(lab)).astype(np.uint16))
+    if not ok:
+        raise MapError(f"PNG encoding of the label image {path} failed")
+    try:
+        path.write_bytes(buf.tobytes())
+    except OSError as exc:
+        raise MapError(f"cannot write {path}: {exc.strerror or exc}") from exc
+    return path
+
+
+def read_label_png(path: str | Path) -> np.ndarray:
+    """A label PNG written by :func:`write_label_png` -> (H, W) int32 in the grid's row order."""
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None or img.ndim != 2:
+        raise MapError(f"{path}: not a 1-channel label image")
+    return np.ascontiguousarray(np.flipud(img)).astype(np.int32)

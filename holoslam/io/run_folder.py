@@ -10,6 +10,8 @@ Files (all under the folder the caller names; nothing is written elsewhere)::
     map.pgm + map.yaml      occupancy grid (ROS map_server), map.png picture
     topology.graphml/.json  thinning topology
     holographic.graphml/.json  holographic graph (kind = environment | object; objects keyed by id)
+    rooms.png               room label image: 16-bit PNG the map's size (rows as map.pgm), 0 = not a room,
+                            k = the room node room:<k> (its room_id) of the holographic graph
     planning.json           two-layer planning graph
     report.json, report.txt the run report
     results.mcap            Foxglove view of the results
@@ -154,7 +156,9 @@ def _scene(stamps, wTb, dr, wTa, grid, objects, topology, holographic):
     )
 
 
-def _pictures(out: Path, wTb, dr, wTa, cov_wTa, grid, topology, holographic, planning, gt=None) -> list[Path]:
+def _pictures(
+    out: Path, wTb, dr, wTa, cov_wTa, grid, topology, holographic, planning, gt=None, rooms=None
+) -> list[Path]:
     from holoslam import viz
 
     written = []
@@ -173,7 +177,10 @@ def _pictures(out: Path, wTb, dr, wTa, cov_wTa, grid, topology, holographic, pla
             "map_topology.png",
             viz.map_figure(grid, topology=topology, title="occupancy grid and thinning topology"),
         ),
-        ("holographic.png", viz.map_figure(grid, holographic=holographic, title="holographic graph")),
+        (
+            "holographic.png",
+            viz.map_figure(grid, holographic=holographic, rooms=rooms, title="holographic graph and rooms"),
+        ),
         ("planning.png", viz.map_figure(grid, planning=planning, title="two-layer planning graph (regions)")),
     ):
         p = out / name
@@ -193,7 +200,7 @@ def write_run(
     """Write every output file of a ``RunResult`` into ``out_dir`` (created if needed); returns the paths."""
     from holoslam.io.g2o_write import write_g2o
     from holoslam.io.graphs import write_graph_files
-    from holoslam.io.grid import write_grid, write_grid_png
+    from holoslam.io.grid import write_grid, write_grid_png, write_label_png
     from holoslam.io.planning import write_planning
     from holoslam.io.results_mcap import write_results_mcap
     from holoslam.io.trajectory import write_tum
@@ -215,6 +222,8 @@ def write_run(
     written.append(write_grid_png(result.grid, out / "map.png"))
     written += list(write_graph_files(to_graphml_ready(result.topology), out, "topology"))
     written += list(write_graph_files(result.holographic, out, "holographic"))
+    if getattr(result, "rooms", None) is not None:
+        written.append(write_label_png(result.rooms.labels, out / "rooms.png"))
     written.append(write_planning(result.planning, out / "planning.json"))
     (out / "report.json").write_text(dumps(result.report, indent=2))  # strict JSON: NaN/inf -> null
     (out / "report.txt").write_text(format_run_report(result.report) + "\n")
@@ -242,6 +251,7 @@ def write_run(
             result.topology,
             result.holographic,
             result.planning,
+            rooms=None if getattr(result, "rooms", None) is None else result.rooms.labels,
         )
     return written
 
@@ -393,5 +403,21 @@ def export_saved(saved: SavedRun, to: Path, formats: set[str]) -> list[Path]:
             saved.topology,
             saved.holographic,
             saved.planning,
+            rooms=_saved_rooms(saved.folder, saved.grid),
         )
     return written
+
+
+def _saved_rooms(folder: Path, grid) -> np.ndarray | None:
+    """The room label image of a saved run (``rooms.png``), None when it has none or it does not fit the map."""
+    from holoslam.errors import MapError
+    from holoslam.io.grid import read_label_png
+
+    p = Path(folder) / "rooms.png"
+    if not p.is_file():
+        return None
+    try:
+        lab = read_label_png(p)
+    except MapError:
+        return None
+    return lab if lab.shape == grid.shape else None

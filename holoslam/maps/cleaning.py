@@ -49,9 +49,9 @@ class MapCleaning:
     (default: unknown counts as an obstacle) or ``"free"`` (islands of unknown cells only are filled). Zero
     areas turn the corresponding step off."""
 
-    min_free_area_m2: float = 0.25
-    min_obstacle_area_m2: float = 0.05
-    unknown_islands: str = "obstacle"
+    min_free_area_m2: float = 0.25  # m^2: a free region smaller than a robot's footprint (0.5 x 0.5 m) is dropped
+    min_obstacle_area_m2: float = 0.05  # m^2: an obstacle island smaller (a table leg, sensor noise) is filled
+    unknown_islands: str = "obstacle"  # obstacle: unknown cells are not free (map_server); free: unknown-only islands filled
 
     def __post_init__(self) -> None:
         for name in ("min_free_area_m2", "min_obstacle_area_m2"):

@@ -1,6 +1,6 @@
-"""Doorways and rooms of the holographic graph (:mod:`holoslam.maps.holographic`, whose docstring states the
-rules): doorway candidates along the topology, the cut across each candidate's gap, and the region merging that
-drops cuts until the ones left are doorways.
+"""The geometry of room segmentation (:mod:`holoslam.maps.rooms`, whose docstring states the rules): doorway and
+opening candidates along the topology skeleton, the cut across each candidate's gap, and the incremental region
+merging that drops cuts, round by round as the rules say, until the ones left are doorways.
 
 Region merging is incremental: every cut's cells are drawn once (each cut on a canvas of its own bounding box,
 so a cell knows how many cuts cover it), the robot space with all cuts drawn is labelled once (4-connected),
@@ -21,24 +21,19 @@ import numpy as np
 
 from holoslam.maps.passages import kernels
 
-__all__ = ["doorway_candidates", "orient_cuts", "segment_regions", "RegionSegmentation"]
+__all__ = [
+    "doorway_candidates",
+    "opening_candidates",
+    "orient_cuts",
+    "segment_regions",
+    "RegionSegmentation",
+]
 
 
-def doorway_candidates(topology, clr: np.ndarray, res: float, p, min_width_m: float = 0.0, edge_paths=None):
-    """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges (node cells
-    included): a skeleton cell whose free width (2 x clearance) lies in [``min_width_m``,
-    ``doorway_width_m``] and is the narrowest within ``doorway_window_m`` along the skeleton (one per plateau,
-    one per place). Beyond a junction the skeleton goes on; towards an endpoint (a spur running into a wall or
-    a furniture corner, clearance falling to its tip) there is no candidate within half a window of the tip.
-    Whether a candidate separates anything is decided later by the regions it cuts. All edges at once: their
-    paths concatenated with ``half`` a window of padding (+inf beyond a junction, -inf beyond an endpoint)
-    between them, one sliding minimum."""
-    from holoslam.maps.passages import EdgePaths
-
-    ep = edge_paths if edge_paths is not None else EdgePaths(topology)
-    if len(ep) == 0:
-        return []
-    half = max(int(round(0.5 * p.doorway_window_m / res)), 1)
+def _padded_clearance(ep, clr: np.ndarray, half: int):
+    """The skeleton clearance of all edges in one buffer, each edge padded with ``half`` cells of +inf beyond a
+    junction (the space goes on) and -inf beyond an endpoint (a spur's tip): (buffer, per-cell clearance,
+    edge of each cell, index of each cell in the buffer)."""
     cells, starts = ep.cells, ep.starts
     lens = np.diff(starts)
     n_edges, m = lens.shape[0], cells.shape[0]
@@ -54,8 +49,82 @@ def doorway_candidates(topology, clr: np.ndarray, res: float, p, min_width_m: fl
     )
     body = pstarts[edge] + half + local
     buf[body] = c
+    return buf, c, edge, body
+
+
+def _directions(ep, idx: np.ndarray, edge: np.ndarray):
+    """The skeleton direction (row, col) at the cells ``idx`` (from 3 cells before to 3 after on its edge) and
+    which of them have one."""
+    cells, starts = ep.cells, ep.starts
+    lens = np.diff(starts)
+    e = edge[idx]
+    i = idx - starts[e]
+    lo = starts[e] + np.maximum(i - 3, 0)
+    hi = starts[e] + np.minimum(i + 3, lens[e] - 1)
+    d = (cells[hi] - cells[lo]).astype(np.float64)
+    return d, d.any(axis=1)
+
+
+def opening_candidates(
+    edge_paths, clr: np.ndarray, res: float, min_width_m: float, max_width_m: float, window_m: float
+):
+    """(cell, skeleton direction) of each wide-opening candidate: along the skeleton, a run of cells whose free
+    width (2 x clearance) lies in (``min_width_m``, ``max_width_m``] and within one cell of the narrowest within
+    ``window_m`` (a plateau, e.g. a bay as wide as its mouth). A short run (no longer than its half width)
+    gives its middle cell; a longer one each end beyond which the clearance rises by more than a cell (the
+    mouth of a bay, both ends of a narrowing), not an end that runs into a spur's tip."""
+    ep = edge_paths
+    if len(ep) == 0:
+        return []
+    half = max(int(round(0.5 * window_m / res)), 1)
+    buf, c, edge, body = _padded_clearance(ep, clr, half)
+    view = np.lib.stride_tricks.sliding_window_view(buf, 2 * half + 1)
+    win_min = view.min(axis=1)[body - half]
+    ok = (c <= win_min + res) & (2.0 * c > min_width_m) & (2.0 * c <= max_width_m)
+    idx = np.flatnonzero(ok)
+    if idx.shape[0] == 0:
+        return []
+    brk = np.flatnonzero((np.diff(idx) > 1) | (np.diff(edge[idx]) != 0)) + 1
+    gs = np.concatenate([[0], brk])
+    ge = np.concatenate([brk, [idx.shape[0]]]) - 1
+    first, last = idx[gs], idx[ge]
+    v = np.minimum.reduceat(c[idx], gs)
+    # the largest clearance within a window before the run's first cell and after its last (pads included:
+    # +inf beyond a junction is a rise, -inf beyond a spur's tip is none)
+    wmax = np.lib.stride_tricks.sliding_window_view(buf, half).max(axis=1)
+    before = wmax[body[first] - half]
+    after = wmax[body[last] + 1]
+    rise_a, rise_b = before > v + res, after > v + res
+    short = (last - first) * res <= v
+    mid = idx[(gs + ge) // 2]
+    pick = np.concatenate(
+        [mid[short & (rise_a | rise_b)], first[~short & rise_a], last[~short & rise_b]]
+    )
+    pick = np.unique(pick)
+    d, has = _directions(ep, pick, edge)
+    return [(ep.cells[j].copy(), dv) for j, dv in zip(pick[has].tolist(), d[has], strict=True)]
+
+
+def doorway_candidates(topology, clr: np.ndarray, res: float, p, min_width_m: float = 0.0, edge_paths=None):
+    """(cell (row, col), skeleton direction) of each doorway candidate along the topology edges (node cells
+    included): a skeleton cell whose free width (2 x clearance) lies in [``min_width_m``,
+    ``p.door_width_max_m``] and is the narrowest within ``p.window_m`` along the skeleton (one per plateau,
+    one per place). Beyond a junction the skeleton goes on; towards an endpoint (a spur running into a wall or
+    a furniture corner, clearance falling to its tip) there is no candidate within half a window of the tip.
+    Whether a candidate separates anything is decided later by the regions it cuts. All edges at once: their
+    paths concatenated with ``half`` a window of padding (+inf beyond a junction, -inf beyond an endpoint)
+    between them, one sliding minimum."""
+    from holoslam.maps.passages import EdgePaths
+
+    ep = edge_paths if edge_paths is not None else EdgePaths(topology)
+    if len(ep) == 0:
+        return []
+    half = max(int(round(0.5 * p.window_m / res)), 1)
+    cells, starts = ep.cells, ep.starts
+    lens = np.diff(starts)
+    buf, c, edge, body = _padded_clearance(ep, clr, half)
     win_min = np.lib.stride_tricks.sliding_window_view(buf, 2 * half + 1).min(axis=1)[body - half]
-    narrow = (2.0 * c <= p.doorway_width_m) & (2.0 * c >= min_width_m)
+    narrow = (2.0 * c <= p.door_width_max_m) & (2.0 * c >= min_width_m)
     idx = np.flatnonzero(narrow & (c <= win_min) & (lens[edge] >= 3))
     if idx.shape[0] == 0:
         return []
@@ -63,17 +132,12 @@ def doorway_candidates(topology, clr: np.ndarray, res: float, p, min_width_m: fl
     gs = np.concatenate([[0], brk])
     gl = np.diff(np.concatenate([gs, [idx.shape[0]]]))
     mid = idx[gs + gl // 2]
-    e = edge[mid]
-    i = local[mid]
-    lo = starts[e] + np.maximum(i - 3, 0)
-    hi = starts[e] + np.minimum(i + 3, lens[e] - 1)
-    direction = (cells[hi] - cells[lo]).astype(np.float64)
-    ok = direction.any(axis=1)
+    direction, ok = _directions(ep, mid, edge)
     out = [(cells[j].copy(), dv) for j, dv in zip(mid[ok].tolist(), direction[ok], strict=True)]
     if not out:
         return []
     # one candidate per place (two edges meeting at a junction both find it): the narrowest wins
-    sep = 0.5 * p.doorway_window_m / res
+    sep = 0.5 * p.window_m / res
     pos = cells[mid[ok]].astype(np.float64)
     order = np.argsort(c[mid[ok]], kind="stable")
     kept_xy = np.empty((len(out), 2))
@@ -91,9 +155,23 @@ def doorway_candidates(topology, clr: np.ndarray, res: float, p, min_width_m: fl
 def orient_cuts(cands, free: np.ndarray, clr: np.ndarray, res: float):
     """The critical line of each candidate's gap: from the cell's nearest obstacle cell p1 to the nearest
     obstacle cell p2 on the other side (``(p2 - rc) . (p1 - rc) < 0``), whatever way the skeleton bends there.
-    Returns ([(cell, direction along the passage = perpendicular to p1 p2)], {cell: (p1, p2)})."""
+    Returns ([(cell, direction along the passage = perpendicular to p1 p2)], {cell: (p1, p2)}). Compiled
+    (``_holographic_fast.cut_lines``) when numba is there, the same lines."""
     h, w = free.shape
     out, lines = [], {}
+    fast = kernels()
+    if fast is not None and cands:
+        cells = np.array([c[0] for c in cands], dtype=np.int64).reshape(-1, 2)
+        reach = (np.ceil(2.0 * clr[cells[:, 0], cells[:, 1]] / res) + 4).astype(np.int64)
+        p1s, p2s, ok = fast.cut_lines(np.ascontiguousarray(free), cells, reach)
+        for (rc, d), p1, p2, has in zip(cands, p1s.astype(np.float64), p2s.astype(np.float64), ok, strict=True):
+            if not has:
+                out.append((rc, d))
+                continue
+            n = p2 - p1
+            out.append((rc, np.array([n[1], -n[0]])))
+            lines[(int(rc[0]), int(rc[1]))] = (p1, p2)
+        return out, lines
     for rc, d in cands:
         k = int(np.ceil(2.0 * clr[rc[0], rc[1]] / res)) + 4
         r0, r1, c0, c1 = max(rc[0] - k, 0), min(rc[0] + k + 1, h), max(rc[1] - k, 0), min(rc[1] + k + 1, w)
@@ -250,8 +328,10 @@ class _Regions:
         self.parent = np.arange(cap, dtype=np.int64)
         self.area = np.zeros(cap)
         self.area[:n] = np.bincount(self.lab, minlength=n)
+        from holoslam.maps.rooms import _label_max
+
         self.mx = np.zeros(cap)
-        np.maximum.at(self.mx, self.lab, clr_flat)
+        self.mx[:n] = _label_max(clr_flat, self.lab, n)
         self.next = n
         self.w = nav.shape[1]
         self.size = self.lab.shape[0]
@@ -312,49 +392,6 @@ class _Regions:
             r = pr
 
 
-def _merge_round(a, b, cut_clr, area, mx, fragment_cells: float, p) -> np.ndarray | None:
-    """Which of the cuts (region ids ``a``, ``b`` on their two sides, 0 = none; clearance at the cut) stay
-    after one round of the rules of :func:`segment_regions`; None when no rule drops anything."""
-    keep = (a != b) & (a > 0) & (b > 0)
-    if not keep.all():
-        return keep  # rule 1: all at once
-
-    def merge_area(k):
-        ar = area[k]
-        return np.where(mx[k] < p.min_room_clearance_m, np.minimum(ar, fragment_cells - 0.5), ar)
-
-    ma, mb = merge_area(a), merge_area(b)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    _u, first, inv, counts = np.unique(
-        lo * (int(hi.max(initial=0)) + 1) + hi, return_index=True, return_inverse=True, return_counts=True
-    )
-    par = np.flatnonzero(counts > 1)
-    if par.shape[0]:  # rule 2: the pair of regions (first found first) with the smallest merge area
-        order = np.argsort(first[par])
-        par = par[order]
-        fi = first[par]
-        keep[inv == par[np.argmin(np.minimum(ma[fi], mb[fi]))]] = False
-        return keep
-    sa, sb = ma < fragment_cells, mb < fragment_cells
-    touching = sa | sb
-    if touching.any():  # rule 3: the smallest fragment (first found first) through its widest opening
-        ks = np.column_stack([np.where(sa, a, -1), np.where(sb, b, -1)]).ravel()
-        kv = np.column_stack([ma, mb]).ravel()
-        sel = ks >= 0
-        k_small = ks[sel][np.argmin(kv[sel])]
-        hit = touching & ((a == k_small) | (b == k_small))
-        other = np.where(hit, a + b - k_small, 0)
-        opening = np.where(hit, cut_clr / np.maximum(mx[other], 1e-9), -np.inf)
-        keep[np.argmax(opening)] = False
-        return keep
-    ratio = np.minimum(mx[a], mx[b]) / np.maximum(cut_clr, 1e-9)
-    weak = ratio < p.room_to_doorway_clearance
-    if not weak.any():
-        return None
-    keep[np.argmin(np.where(weak, ratio, np.inf))] = False  # rule 4: the weakest constriction
-    return keep
-
-
 def segment_regions(
     cands,
     cut_lines: dict,
@@ -362,27 +399,17 @@ def segment_regions(
     free: np.ndarray,
     clr: np.ndarray,
     res: float,
-    p,
+    merge_round,
 ) -> RegionSegmentation:
-    """Region merging of the module docstring of :mod:`holoslam.maps.holographic` on the robot space ``nav``
-    (bool (H, W)) cut by the candidates ``cands`` [(cell, direction)] (``cut_lines``: the obstacle-to-obstacle
-    line of each oriented cell), one cut dropped per round, in this order of the rules:
-
-    1. a cut whose two sides are one region (or no region) separates nothing (all such cuts go at once);
-    2. two regions joined by two or more cuts are one room around furniture (an island, a table);
-    3. a fragment (merge area < fragment_area_m2) joins a neighbour, smallest fragment first: the one its cut
-       opens into most widely relative to the neighbour's max clearance, so the pieces of a cluttered room
-       join each other (similar widths) rather than the wide room behind a doorway;
-    4. a cut between two regions hardly wider than the gap itself (max clearance < room_to_doorway_clearance
-       x the gap's half width) is a constriction inside one room: the weakest such cut goes.
-
-    The merge area of a region without room for a standing robot (max clearance below
-    ``min_room_clearance_m``: a strip between furniture and a wall) is below the fragment size whatever its
-    true area."""
+    """Region merging on the robot space ``nav`` (bool (H, W)) cut by the candidates ``cands``
+    [(cell, direction)] (``cut_lines``: the obstacle-to-obstacle line of each oriented cell): every round,
+    ``merge_round(a, b, active, area, mx)`` is given the region (union-find root, 0 = none) on each side of the
+    cuts still drawn (``active``: their indices in ``cands``) with every region's area (cells) and largest
+    clearance (m), and returns which of them stay (bool per active cut), or None when no rule drops anything
+    (the rules are :func:`holoslam.maps.rooms.merge_round`)."""
     import cv2
 
     h, w = nav.shape
-    fragment_cells = max(p.fragment_area_m2, p.min_room_area_m2) / (res * res)
     clr_flat = clr.reshape(-1)
     nav_flat = nav.reshape(-1)
     cut_cells, walks = [], []
@@ -398,7 +425,6 @@ def segment_regions(
     total = int(sum(cc.shape[0] for cc in cut_cells))
     regions = _Regions(nav, cover, clr_flat, total)
     side_walks = _Walks(walks, regions.lab)
-    cut_clr = np.array([clr[rc[0], rc[1]] for rc, _d in cands], dtype=np.float64)
 
     def drop(j: int) -> None:
         cc = cut_cells[j]
@@ -411,7 +437,7 @@ def segment_regions(
     while True:
         two = np.column_stack([2 * active, 2 * active + 1]).ravel()
         rt = regions.roots(side_walks.labels(regions.lab, two))
-        keep = _merge_round(rt[0::2], rt[1::2], cut_clr[active], regions.area, regions.mx, fragment_cells, p)
+        keep = merge_round(rt[0::2], rt[1::2], active, regions.area, regions.mx)
         if keep is None:
             break
         for j in active[~keep].tolist():

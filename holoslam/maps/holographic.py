@@ -3,42 +3,28 @@
 The graph is a ``networkx.Graph`` (simple: two places are joined by at most one passage). Every node has
 ``kind`` = ``"environment"`` or ``"object"``.
 
-**Environment nodes** (V_e, carrying {H, L_m}), keyed ``"room:<i>"``, ``"door:<i>"``, ``"crossing:<i>"``,
+**Environment nodes** (V_e, carrying {H, L_m}), keyed ``"room:<id>"``, ``"door:<i>"``, ``"crossing:<i>"``,
 ``"dead_end:<i>"``, with ``place`` = room | doorway | crossing | dead_end, position ``x``, ``y`` (world m),
-``region`` (room label) and their local frame: ``anchor`` (index of the nearest submap anchor, -1 without
+``region`` (room id) and their local frame: ``anchor`` (index of the nearest submap anchor, -1 without
 anchors), ``submap`` (its submap id), ``frame_x``, ``frame_y``, ``frame_theta`` (wTa of that anchor; without
 anchors the frame is the node's position with theta 0). L_m is summarised by scalars: ``submap``, ``area_m2``
 (rooms), ``clearance`` (m), and ``feat_<name>`` counts when the caller gives per-submap feature counts (H).
 
-How the places are found (vectorised on the grid, Python loops only over places and cuts; the doorway and
-region code is :mod:`holoslam.maps.doorways`, the passages :mod:`holoslam.maps.passages`):
+How the places are found (vectorised on the grid, Python loops only over places and cuts; the passages are
+:mod:`holoslam.maps.passages`):
 
-- *Doorways*: door-like constrictions of the free space. Candidates are skeleton cells (topology edge paths)
-  whose free width (2 x clearance) lies between the robot's diameter and ``doorway_width_m`` and is the
-  narrowest within ``doorway_window_m`` along the skeleton. Each candidate cuts the passage by the line from
-  its nearest obstacle cell to the nearest obstacle cell on the other side. With all cuts drawn into the space
-  the robot fits in, the free space falls into regions, and the regions are merged by dropping cuts, one per
-  round, by these rules in this order: (1) a cut with the same region (or none) on both sides separates
-  nothing; (2) two regions joined by two or more cuts are one room around furniture (an island, a table); (3)
-  a *fragment* (less than ``fragment_area_m2`` of robot space, or no point ``min_room_clearance_m`` from
-  obstacles) joins a neighbour, smallest fragment first, through the cut that opens most widely relative to
-  that neighbour's largest clearance, so the pieces of a cluttered room (balcony, study) join each other
-  rather than the wide room behind their doorway, and a fragment in front of a doorway joins the room it
-  belongs to rather than the one behind the door; (4) a cut between regions whose largest clearance is less
-  than ``room_to_doorway_clearance`` x the cut's clearance is a constriction inside one room: the weakest
-  goes. The cuts left are the doorways; rooms in a loop (each reachable through two doors) keep them all.
-  The merging is incremental (each dropped cut gives its cells back to the regions it touched), the same
-  partition round for round as redrawing every cut and relabelling the map (tested).
-  Known limits: two real doors between the same two rooms count as one room around furniture (rule 2), and a
-  room with less than ``fragment_area_m2`` of robot space joins a neighbour (both measured on the simulated
-  households: true rooms have at least 3.8 m2 of robot space, clutter pockets at most 2.7 m2).
-- *Rooms* (open areas): the 4-connected regions of the robot space with the doorway cuts drawn in; every
-  region of at least ``min_room_area_m2`` is a room, whatever clutter is inside, its node sits at its cell
-  farthest from obstacles.
+- *Rooms* and *doorways*: the room segmentation of :mod:`holoslam.maps.rooms` (its docstring states the rules
+  and their settings, :class:`~holoslam.maps.rooms.RoomRules`, in metres and m^2 set by building physics: door
+  widths, the smallest room, wall thickness, furniture size). Room node ``room:<id>`` is room ``id`` (1, 2, ...)
+  of its label image (``room_id``; the same ids as ``rooms.png``), at the room's cell farthest from obstacles,
+  with ``area_m2`` its free floor area. Doorway node ``door:<i>`` is a cut left after merging, with
+  ``width_m`` and ``door_kind`` (``door`` or ``opening``, a wide opening between rooms).
 - *Crossings* and *dead ends*: topology junctions in narrow space (free width at most ``corridor_width_m``)
-  are corridor crossings; topology endpoints in narrow space whose edge is at least ``dead_end_min_length_m``
-  long and narrow on average are dead-end corridors. Junctions and endpoints in open rooms (and room corners)
-  belong to the room node; places within ``doorway_depth_m`` of a doorway are the doorway.
+  where at least three branches at least ``branch_min_length_m`` long meet are corridor crossings; topology
+  endpoints in narrow space whose edge is at least ``branch_min_length_m`` long and narrow on average are
+  dead-end corridors (shorter branches are niches and corners: on a scanned map, ragged walls make many). Junctions and endpoints in open rooms (and room corners)
+  belong to the room node; places within ``doorway_depth_m`` of a doorway are the doorway. ``region`` is the
+  room id under a place (0: none).
 
 **Environment edges** (E_e, {S_ij, w_ij}): doorway - room on each side; crossing / dead end - the room
 (region) containing it. ``passage`` is S_ij: the waypoints (K, 2) world metres of the shortest path along the
@@ -74,9 +60,9 @@ import numpy as np
 
 from holoslam.errors import MapError, PlanningError
 from holoslam.geometry import between, inverse, transform_points
-from holoslam.maps.doorways import doorway_candidates, orient_cuts, segment_regions
 from holoslam.maps.grid import OccupancyGrid
 from holoslam.maps.passages import EdgePaths, SkeletonPaths
+from holoslam.maps.rooms import RoomRules, RoomSegmentation, segment_rooms
 
 if TYPE_CHECKING:
     import networkx as nx
@@ -138,17 +124,12 @@ class ReachModel:
 
 @dataclass(frozen=True, slots=True)
 class PlaceParams:
-    """Thresholds of place detection (module docstring)."""
+    """Thresholds of the corridor places (module docstring); rooms and doorways follow
+    :class:`~holoslam.maps.rooms.RoomRules`."""
 
-    doorway_width_m: float = 1.3
-    doorway_depth_m: float = 2.0
-    dead_end_min_length_m: float = 1.0
-    corridor_width_m: float = 1.4
-    min_room_area_m2: float = 1.0
-    min_room_clearance_m: float = 0.45
-    fragment_area_m2: float = 3.0
-    room_to_doorway_clearance: float = 1.1
-    doorway_window_m: float = 0.6
+    doorway_depth_m: float = 2.0  # m: a junction or endpoint this near a doorway is the doorway's place
+    branch_min_length_m: float = 1.0  # m: a dead-end corridor, and 3 branches of a crossing, are this long (less: a niche)
+    corridor_width_m: float = 1.4  # m: a corridor is at most this wide (two people pass: 1.2-1.4 m)
 
 
 def _nearest_anchor(xy: np.ndarray, anchors: np.ndarray | None) -> np.ndarray:
@@ -167,10 +148,16 @@ def build_holographic(
     reach_model: ReachModel | None = None,
     params: PlaceParams | None = None,
     submap_features: Mapping[int, Mapping[str, int]] | None = None,
+    room_rules: RoomRules | None = None,
+    rooms: RoomSegmentation | None = None,
+    edge_paths: EdgePaths | None = None,
 ) -> nx.Graph:
     """Build the holographic graph (module docstring) from the global grid, its topology graph
     (``holoslam.maps.topology``), the optimised submap anchors wTa (K, 3) with their submap ids, and the
-    objects. Raises ``MapError`` for malformed inputs."""
+    objects. The rooms and doorways are ``rooms`` when given (``holoslam.maps.rooms.rooms_of_grid`` of this
+    grid and topology: the caller keeps its label image, whose ids are the room nodes'), else segmented here
+    with ``room_rules``; ``edge_paths``: the topology's ``passages.EdgePaths`` when the caller has them. Raises
+    ``MapError`` for malformed inputs."""
     import cv2
     import networkx as nx
 
@@ -193,47 +180,29 @@ def build_holographic(
         rc = np.asarray(rc, dtype=np.float64).reshape(-1, 2)
         return np.column_stack([ox + (rc[:, 1] + 0.5) * res, oy + (rc[:, 0] + 0.5) * res])
 
-    # ---- doorways and rooms -------------------------------------------------------------------------------
-    rr_cells = reach_model.robot_radius_m / res
-    edge_paths = EdgePaths(topology)
-    cands, cut_lines = orient_cuts(
-        doorway_candidates(topology, clr, res, p, 2.0 * reach_model.robot_radius_m, edge_paths),
-        free,
-        clr,
-        res,
-    )
-    # the space the robot can use: free cells covered by a robot-sized disc that fits (a morphological
-    # opening); gaps in walls and between furniture narrower than the robot are not passages
-    rad = max(int(np.floor(rr_cells)), 1)
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1))
-    nav = cv2.dilate((clr >= reach_model.robot_radius_m).astype(np.uint8), disc).view(bool) & free
-    min_room_cells = p.min_room_area_m2 / (res * res)
-    seg = segment_regions(cands, cut_lines, nav, free, clr, res, p)
-    cands, n_lab, lab, area, sides = seg.cuts, seg.n_labels, seg.labels, seg.area, seg.sides
-    # rooms: labels with enough area; node at max clearance
-    room_labels = [int(k) for k in np.nonzero(area >= min_room_cells)[0] if k != 0]
-    flat_lab, flat_clr = lab.ravel(), clr.ravel()
-    mx = np.zeros(n_lab)
-    np.maximum.at(mx, flat_lab, flat_clr)
-    at_max = np.flatnonzero(flat_clr == mx[flat_lab])
-    last = np.full(n_lab, -1, dtype=np.int64)
-    np.maximum.at(last, flat_lab[at_max], at_max)  # the last cell (raster order) of the largest clearance
-    room_cell = {k: np.array(np.unravel_index(last[k], lab.shape)) for k in room_labels}
+    # ---- rooms and doorways -------------------------------------------------------------------------------
+    edge_paths = edge_paths if edge_paths is not None else EdgePaths(topology)
+    if rooms is None:
+        rooms = segment_rooms(free, res, edge_paths, room_rules, clearance=clr)
+    elif rooms.labels.shape != free.shape:
+        raise MapError(f"room labels are {rooms.labels.shape}, the grid {free.shape}; segment this grid's rooms")
+    lab = rooms.labels
 
     # safe space for the base, and its components (reach model connectivity)
     safe = (clr >= reach_model.robot_radius_m).astype(np.uint8)
     _, safe_lab = cv2.connectedComponents(safe, connectivity=8)
 
     G = nx.Graph(kind="holographic", resolution=res)
-    places: list[tuple[str, str, np.ndarray, int]] = []  # key, place, cell, region label
-    for i, k in enumerate(room_labels):
-        places.append((f"room:{i}", "room", room_cell[k], k))
+    places: list[tuple[str, str, np.ndarray, int]] = []  # key, place, cell, room id
+    for k in range(1, rooms.n_rooms + 1):
+        places.append((f"room:{k}", "room", rooms.room_cells[k - 1], k))
     door_keys = []
-    for i, ((rc, _d), (a, b)) in enumerate(zip(cands, sides, strict=False)):
-        places.append((f"door:{i}", "doorway", rc, 0))
-        door_keys.append((f"door:{i}", a, b))
+    for i, dw in enumerate(rooms.doorways):
+        places.append((f"door:{i}", "doorway", np.array(dw.cell), 0))
+        door_keys.append((f"door:{i}", *dw.rooms))
+    room_cell = {k: rooms.room_cells[k - 1] for k in range(1, rooms.n_rooms + 1)}
     # crossings and dead ends in narrow space
-    door_xy = rc_to_xy(np.array([c[0] for c in cands])) if cands else np.zeros((0, 2))
+    door_xy = rc_to_xy(np.array([d.cell for d in rooms.doorways])) if rooms.doorways else np.zeros((0, 2))
     n_cross = n_dead = 0
     for _n, d in topology.nodes(data=True):
         kind = d.get("kind")
@@ -245,6 +214,10 @@ def build_holographic(
         xy = rc_to_xy(np.array([r, c]))[0]
         if door_xy.shape[0] and np.min(np.hypot(*(door_xy - xy).T)) < p.doorway_depth_m:
             continue
+        if kind == "junction":
+            lengths = [float(ed.get("length", 0.0)) for _a, _b, ed in topology.edges(_n, data=True)]
+            if sum(1 for v in lengths if v >= p.branch_min_length_m) < 3:
+                continue
         if kind == "endpoint":
             # a dead-end corridor: the edge leading to the endpoint is long and narrow on average
             inc = [ed for _a, _b, ed in topology.edges(_n, data=True) if "path" in ed]
@@ -252,7 +225,7 @@ def build_holographic(
                 continue
             pth = np.asarray(inc[0]["path"], dtype=np.int64).reshape(-1, 2)
             if (
-                float(inc[0].get("length", 0.0)) < p.dead_end_min_length_m
+                float(inc[0].get("length", 0.0)) < p.branch_min_length_m
                 or 2.0 * float(np.mean(clr[pth[:, 0], pth[:, 1]])) > p.corridor_width_m
             ):
                 continue
@@ -289,7 +262,12 @@ def build_holographic(
             frame_theta=float(frames[i, 2]),
         )
         if place == "room":
-            attrs["area_m2"] = float(area[region] * res * res)
+            attrs["room_id"] = int(region)
+            attrs["area_m2"] = float(rooms.area_m2[region - 1])
+        elif place == "doorway":
+            dw = rooms.doorways[int(key.split(":")[1])]
+            attrs["width_m"] = dw.width_m
+            attrs["door_kind"] = dw.kind
         if submap_features and sub in submap_features:
             for fk, fv in submap_features[sub].items():
                 attrs[f"feat_{fk}"] = int(fv)

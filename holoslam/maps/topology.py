@@ -54,6 +54,7 @@ cells x resolution), ``min_clearance`` (metres).
 from __future__ import annotations
 
 import gc
+import weakref
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -97,11 +98,38 @@ __all__ = [
 ]
 
 
+_LAST: dict[str, tuple] = {}
+
+
+def _reuse(kind: str, source: np.ndarray, key, compute):
+    """The last result of ``compute`` for this very ``source`` array (the same object, still alive: a weak
+    reference) and ``key``, else a new one. The maps stages ask for the same cleaned free space and clearance
+    of one grid several times (topology, rooms, holographic graph); results are read-only."""
+    import weakref
+
+    hit = _LAST.get(kind)
+    if hit is not None and hit[0]() is source and hit[1] == key:
+        return hit[2]
+    out = compute()
+    out.setflags(write=False)
+    try:
+        _LAST[kind] = (weakref.ref(source), key, out)
+    except TypeError:  # pragma: no cover - ndarrays take weak references
+        pass
+    return out
+
+
 def clearance_map(free: np.ndarray, resolution: float = 1.0) -> np.ndarray:
-    """(H, W) float64: Euclidean distance (metres) from each free cell's centre to the nearest non-free cell
-    (cells outside the grid count as non-free); 0 on non-free cells. One exact cv2.distanceTransform
-    (DIST_MASK_PRECISE) on a zero-bordered uint8 copy, scaled to metres in the same pass as the float64
-    conversion."""
+    """(H, W) float64, read-only: Euclidean distance (metres) from each free cell's centre to the nearest
+    non-free cell (cells outside the grid count as non-free); 0 on non-free cells. One exact
+    cv2.distanceTransform (DIST_MASK_PRECISE) on a zero-bordered uint8 copy, scaled to metres in the same pass as
+    the float64 conversion (the last result is reused for the same ``free`` array object)."""
+    if isinstance(free, np.ndarray) and free.dtype == bool:
+        return _reuse("clearance", free, float(resolution), lambda: _clearance(free, resolution))
+    return _clearance(free, resolution)
+
+
+def _clearance(free: np.ndarray, resolution: float) -> np.ndarray:
     import cv2
 
     m = np.ascontiguousarray(np.asarray(free, dtype=bool)).view(np.uint8)
@@ -368,6 +396,9 @@ def topology_from_grid(
     report = None
     if cleaning is not None:
         free, report = clean_free(grid, cleaning, free)
+        if not (erode_cells or close_cells):  # what cleaned_free gives for this grid: kept for the next stages
+            free.setflags(write=False)
+            _LAST["cleaned"] = (weakref.ref(grid.occupancy), (grid.free_thresh, cleaning), free)
     skel = thin(free)
     G = skeleton_to_graph(
         skel,
@@ -393,7 +424,9 @@ def cleaned_free(grid: OccupancyGrid, topology) -> np.ndarray:
     from holoslam.maps.cleaning import MapCleaning, clean_free
 
     c = MapCleaning.from_graph_attrs(getattr(topology, "graph", {}))
-    return grid.free if c is None else clean_free(grid, c)[0]
+    if c is None:
+        return grid.free
+    return _reuse("cleaned", grid.occupancy, (grid.free_thresh, c), lambda: clean_free(grid, c)[0])
 
 
 def path_to_string(path: np.ndarray) -> str:
