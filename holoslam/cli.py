@@ -76,7 +76,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
 
     summary = simulate(
         a.output, seed=a.seed, duration_s=a.duration, image_rate_hz=a.image_rate, noise_scale=a.noise_scale,
-        wall_codes=a.wall_codes, sizeless_labels=a.sizeless_labels,
+        wall_codes=a.wall_codes, sizeless_labels=a.sizeless_labels, profile=a.profile,
     )
     print(_json(summary) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
     return EXIT_OK
@@ -373,6 +373,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--image-rate", type=float, default=None, help="max camera snapshots per second")
     s.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise by this")
+    s.add_argument("--profile", default="default",
+                   help="the robot: default, noisy (3x every noise), skid-steer (another odometer); see holoslam.sim.profiles")
     s.add_argument("--wall-codes", type=int, default=0, help="foreign QR codes on the walls (0-12)")
     s.add_argument("--sizeless-labels", type=int, default=0, help="labels printed without their size (0-8)")
     s.add_argument("--json", action="store_true")

@@ -45,13 +45,19 @@ __all__ = [
 
 T = TypeVar("T")
 
-# settings that moved: (section class, old key) -> where they are now
+# settings that moved or went: (section class, old key) -> what to do instead
+_ROBOT = "(one robot description); move it there"
+_RATE = ("is gone: a per-step sigma depends on how often the odometry is published; the random walks are "
+         "sigma_s_per_sqrt_m, odo_sigma_turn_per_sqrt_rad and odo_sigma_heading_per_sqrt_m, the floor sigma_floor_m/rad")
 _MOVED_KEYS = {
-    ("PlanningConfig", "robot_radius_m"): "robot.radius_m",
-    ("HolographicConfig", "robot_radius_m"): "robot.radius_m",
-    ("HolographicConfig", "arm_reach_m"): "robot.arm_reach_m",
-    ("HolographicConfig", "doorway_width_m"): "holographic.rooms.door_width_max_m",
-    ("HolographicConfig", "min_room_area_m2"): "holographic.rooms.min_room_area_m2",
+    ("PlanningConfig", "robot_radius_m"): f"is now 'robot.radius_m' {_ROBOT}",
+    ("HolographicConfig", "robot_radius_m"): f"is now 'robot.radius_m' {_ROBOT}",
+    ("HolographicConfig", "arm_reach_m"): f"is now 'robot.arm_reach_m' {_ROBOT}",
+    ("HolographicConfig", "doorway_width_m"): "is now 'holographic.rooms.door_width_max_m'; move it there",
+    ("HolographicConfig", "min_room_area_m2"): "is now 'holographic.rooms.min_room_area_m2'; move it there",
+    ("FrontEndConfig", "default_heading_sigma"): "is now 'frontend.dead_reckoning.compass_sigma' (one compass default)",
+    **{("DeadReckoningConfig", k): _RATE for k in ("sigma_s_per_m", "sigma_s_floor", "odo_sigma_dtheta_per_rad",
+                                                   "odo_sigma_dtheta_per_m", "odo_sigma_dtheta_floor")},
 }
 
 
@@ -141,7 +147,7 @@ def from_mapping(cls: type[T], data: Mapping[str, Any], where: str = "config") -
         if not isinstance(key, str) or key not in fields:
             moved = _MOVED_KEYS.get((cls.__name__, str(key)))
             if moved is not None:
-                raise ConfigError(f"{where}: {key!r} is now {moved!r}; move it there")
+                raise ConfigError(f"{where}: {key!r} {moved}")
             close = difflib.get_close_matches(str(key), list(fields), n=1)
             hint = f"; did you mean {close[0]!r}?" if close else f"; valid keys: {', '.join(sorted(fields))}"
             raise ConfigError(f"{where}: unknown key {key!r}{hint}")

@@ -620,6 +620,12 @@ def _report(
             # the dead-reckoning noise model's covariances were multiplied by this to agree with the log's own
             # scan matches (1: the model already did)
             "dead_reckoning_inflation": round(float(fe.dead_reckoning_inflation), 3),
+            # the odometer noise model: the log's own propagated covariance, or the defaults, and why
+            "odometry_noise": fe.odometry_noise.to_dict() if fe.odometry_noise is not None else None,
+            # anchor pairs joined by loop closures; each pair's closures together count as one measurement
+            "loop_pairs": int(fe.loop_groups),
+            # dead-reckoning segments beyond the chi-square 95 % gate against their scan match (slips), down-weighted
+            "dead_reckoning_slips": int(fe.dead_reckoning_slips),
         },
         "factors": factors,
         "solver": {
@@ -729,8 +735,12 @@ def format_run_report(report: dict[str, Any]) -> str:
         lines.append(
             f"  local SLAM: {sm['nodes']} nodes matched into submaps, {sm['scans_localised_between_nodes']} scans "
             f"localised between them; dead-reckoning covariance x{sm['dead_reckoning_inflation']} (calibrated "
-            "against the scan matches)"
+            f"against the scan matches; {sm.get('dead_reckoning_slips', 0)} slipped segments down-weighted), loop "
+            f"closures between {sm.get('loop_pairs', 0)} anchor pairs (each pair's count as one)"
         )
+    on = sm.get("odometry_noise")
+    if on:
+        lines.append(f"  odometry noise: {on['source']} ({on['reason']})")
     lines.append("  factors: " + ", ".join(f"{k} {n}" for k, n in report["factors"].items()))
     s = report["solver"]
     lines.append(
@@ -872,10 +882,13 @@ def simulate(
     noise_scale: float = 1.0,
     wall_codes: int = 0,
     sizeless_labels: int = 0,
+    profile: str = "default",
 ) -> dict[str, Any]:
     """Write a simulated reference-household log (``holoslam.sim``) to ``output``; ``wall_codes`` foreign QR codes
-    on walls and ``sizeless_labels`` labels without a printed size can be added (``holoslam.sim.world``)."""
-    from holoslam.sim import SimConfig, simulate_to_file
+    on walls and ``sizeless_labels`` labels without a printed size can be added (``holoslam.sim.world``).
+    ``profile``: the robot (``holoslam.sim.profiles``: default, noisy, skid-steer), ``noise_scale`` on top."""
+    from holoslam.sim import simulate_to_file
+    from holoslam.sim.profiles import profile_config
 
     if noise_scale < 0 or not np.isfinite(noise_scale):
         raise ConfigError(f"--noise-scale must be a non-negative number, got {noise_scale}")
@@ -888,7 +901,7 @@ def simulate(
         kw["duration_s"] = duration_s
     if image_rate_hz is not None:
         kw["image_rate_hz"] = image_rate_hz
-    cfg = SimConfig(**kw)
+    cfg = profile_config(profile, **kw)
     if noise_scale != 1.0:
         cfg = cfg.with_noise_scale(noise_scale)
     out = Path(output)

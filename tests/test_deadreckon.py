@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -100,7 +101,9 @@ def test_compass_bias_cancels_and_disturbance_falls_back():
     # a local magnetic disturbance of +0.3 rad between 2.0 s and 3.5 s after the start
     dist = (hs > t[0] + 2_000_000_000) & (hs < t[0] + 3_500_000_000)
     yaw_d = g.wrap(yaw + 0.3 * dist)
-    cfg = DeadReckoningConfig(compass_sigma=1e-3)
+    # a near-perfect compass and a good odometer (the gate's width is their disagreement's sigma: with the default
+    # turn walk, 0.02 rad per sqrt(rad), a 1 s window turning 0.8 rad tolerates 0.07 rad)
+    cfg = DeadReckoningConfig(compass_sigma=1e-3, odo_sigma_turn_per_sqrt_rad=0.005)
     clean = dead_reckon(t, odo, int(t[0]), int(t[-1]), start=P[0], heading_stamps_ns=hs, heading_yaw=yaw,
                         config=cfg)
     np.testing.assert_allclose(clean.end[:2], P[-1, :2], atol=2e-3)
@@ -111,7 +114,7 @@ def test_compass_bias_cancels_and_disturbance_falls_back():
                       config=cfg)
     assert not dis.compass_used.all() and dis.compass_used.mean() > 0.5
     ignore_gate = dead_reckon(t, odo, int(t[0]), int(t[-1]), start=P[0], heading_stamps_ns=hs,
-                              heading_yaw=yaw_d, config=DeadReckoningConfig(compass_sigma=1e-3, gate=1e9))
+                              heading_yaw=yaw_d, config=replace(cfg, gate=1e9))
     err_gate = np.hypot(*(dis.end[:2] - P[-1, :2]))
     err_raw = np.hypot(*(ignore_gate.end[:2] - P[-1, :2]))
     assert err_gate < 0.5 * err_raw  # the fallback kept the disturbance from bending the path
@@ -129,12 +132,10 @@ def _mc(cfg, use_compass, runs=1500, seed=1):
     an = None
     for k in range(runs + 1):
         noisy = k > 0
-        sig_s = np.sqrt((cfg.sigma_s_per_m * np.abs(s_true) + cfg.sigma_s_floor) ** 2
-                        + cfg.sigma_s_per_sqrt_m**2 * np.abs(s_true))
+        sig_s = np.sqrt(cfg.sigma_s_per_sqrt_m**2 * np.abs(s_true))
         scale = rng.normal(0, cfg.sigma_scale) if noisy else 0.0  # one systematic error per run
         s = s_true * (1 + scale) + (rng.normal(0, 1, s_true.size) * sig_s if noisy else 0)
-        var_o = (cfg.odo_sigma_dtheta_per_rad * np.abs(d_true) + cfg.odo_sigma_dtheta_per_m * np.abs(s_true)
-                 + cfg.odo_sigma_dtheta_floor) ** 2
+        var_o = cfg.odo_sigma_turn_per_sqrt_rad**2 * np.abs(d_true) + cfg.odo_sigma_heading_per_sqrt_m**2 * np.abs(s_true)
         turn = rng.normal(0, cfg.odo_sigma_turn_scale) if noisy else 0.0
         drift = rng.normal(0, cfg.odo_sigma_drift_per_m) if noisy else 0.0
         d = d_true + (rng.normal(0, 1, d_true.size) * np.sqrt(var_o) + turn * d_true + drift * np.abs(s_true)
@@ -157,9 +158,8 @@ def _mc(cfg, use_compass, runs=1500, seed=1):
 @pytest.mark.parametrize("use_compass,systematic", [(True, False), (False, False), (True, True), (False, True)])
 def test_covariance_matches_monte_carlo(use_compass, systematic):
     k = 1.0 if systematic else 0.0  # with the correlated scale / slip / turn-scale / drift terms or without
-    cfg = DeadReckoningConfig(sigma_s_per_m=0.05, sigma_s_floor=0.002, compass_sigma=0.02,
-                              odo_sigma_dtheta_per_rad=0.1, odo_sigma_dtheta_per_m=0.05,
-                              odo_sigma_dtheta_floor=0.002, gate=1e9, sigma_s_per_sqrt_m=0.02 * k,
+    cfg = DeadReckoningConfig(sigma_s_per_sqrt_m=0.02, compass_sigma=0.02, odo_sigma_turn_per_sqrt_rad=0.05,
+                              odo_sigma_heading_per_sqrt_m=0.03, sigma_floor_m=0.0, sigma_floor_rad=0.0, gate=1e9,
                               sigma_scale=0.05 * k, odo_sigma_turn_scale=0.05 * k, odo_sigma_drift_per_m=0.05 * k)
     an, mc = _mc(cfg, use_compass)
     sd_an, sd_mc = np.sqrt(np.diag(an)), np.sqrt(np.diag(mc))
@@ -193,7 +193,7 @@ def test_eq15_invariant(a, b):
 def test_systematic_scale_error_grows_linearly_with_distance():
     # a straight 1 m and 4 m drive: with only the correlated scale error the along-track sigma is
     # sigma_scale * distance (independent per-step noise would grow like sqrt(distance / step))
-    cfg = DeadReckoningConfig(sigma_s_per_m=0.0, sigma_s_floor=0.0, sigma_s_per_sqrt_m=0.0, sigma_scale=0.015,
+    cfg = DeadReckoningConfig(sigma_floor_m=0.0, sigma_floor_rad=0.0, sigma_s_per_sqrt_m=0.0, sigma_scale=0.015,
                               use_compass=False)
     for L in (1.0, 4.0):
         t = np.arange(0, 201, dtype=np.int64) * 50_000_000
@@ -215,3 +215,28 @@ def test_interpolate_poses_matches_whole_stream_unwrap():
         got = interpolate_poses(t, P, q)
         np.testing.assert_allclose(got[:, :2], want[:, :2], atol=1e-12)
         assert np.all(np.abs(g.wrap(got[:, 2] - want[:, 2])) < 1e-12)
+
+
+def _straight(L: float, hz: float) -> tuple[np.ndarray, np.ndarray]:
+    n = int(round(L / 0.3 * hz)) + 1  # at 0.3 m/s
+    t = np.arange(n, dtype=np.int64) * int(round(1e9 / hz))
+    return t, np.column_stack([np.linspace(0, L, n), np.zeros(n), np.zeros(n)])
+
+
+@pytest.mark.parametrize("hz", [5.0, 20.0, 100.0])
+def test_the_covariance_does_not_depend_on_the_odometry_rate(hz):
+    # every random term is a random walk in the distance driven (or the angle turned), the floor is once per
+    # segment: the same 3 m drive gives the same covariance at 5, 20 or 100 Hz (a per-step sigma would not)
+    cfg = DeadReckoningConfig(use_compass=False, sigma_lateral_per_sqrt_m=0.004, sigma_scale=0.0,
+                              odo_sigma_turn_scale=0.0, odo_sigma_drift_per_m=0.0)
+    t, P = _straight(3.0, hz)
+    cov = dead_reckon(t, P, int(t[0]), int(t[-1]), config=cfg).cov_aTb_end
+    f2, r2 = cfg.sigma_floor_m**2, cfg.sigma_floor_rad**2
+    assert cov[0, 0] == pytest.approx(cfg.sigma_s_per_sqrt_m**2 * 3.0 + f2, rel=1e-9)
+    # sideways: the lateral walk plus the heading walk's lever arm, integral of (3 - x) over x: 3^3 / 3
+    want_yy = cfg.sigma_lateral_per_sqrt_m**2 * 3.0 + cfg.odo_sigma_heading_per_sqrt_m**2 * 9.0 + f2
+    assert cov[1, 1] == pytest.approx(want_yy, rel=0.02 if hz == 5.0 else 0.01)
+    assert cov[2, 2] == pytest.approx(cfg.odo_sigma_heading_per_sqrt_m**2 * 3.0 + r2, rel=1e-9)
+    # standing still: the floor only
+    still = dead_reckon(t, np.zeros_like(P), int(t[0]), int(t[-1]), config=cfg).cov_aTb_end
+    np.testing.assert_allclose(np.diag(still), [f2, f2, r2], rtol=1e-9)

@@ -93,15 +93,15 @@ def test_eq16_by_hand():
 
 
 PROGRESS_CALLS: list[tuple[int, int]] = []  # what the fixture's front end reported
+# the dead-reckoning noise model of the synthetic log above: 2 mm slip and 0.002 rad wheel-heading noise per
+# 1.5 cm step (random walks of 0.016 m and 0.016 rad per sqrt(m)), its 2 % scale error within sigma_scale
+SYNTHETIC_DR = DeadReckoningConfig(sigma_s_per_sqrt_m=0.016, odo_sigma_heading_per_sqrt_m=0.016)
 
 
 @pytest.fixture(scope="module")
 def frontend_run():
     log, obs, t, wTb = make_log()
-    # the dead-reckoning noise model of the synthetic log above (2 % scale error taken as random, 2 mm slip,
-    # 0.002 rad wheel-heading noise per step)
-    dr = DeadReckoningConfig(sigma_s_per_m=0.03, sigma_s_floor=0.002, odo_sigma_dtheta_per_rad=0.02,
-                             odo_sigma_dtheta_per_m=0.0, odo_sigma_dtheta_floor=0.002)
+    dr = SYNTHETIC_DR
     from holoslam.pipeline import reestimate_anchors
 
     PROGRESS_CALLS.clear()
@@ -268,8 +268,7 @@ def test_object_whose_two_sightings_disagree_is_ambiguous(frontend_run):
     bad = ObjectObservation(mine[1].stamp_ns, name, mine[1].payload, mine[1].b_position + np.array([1.5, 0.0, 0.0]),
                             mine[1].cov_b_position)
     others = [o for o in obs if o.object_id != name]
-    dr = DeadReckoningConfig(sigma_s_per_m=0.03, sigma_s_floor=0.002, odo_sigma_dtheta_per_rad=0.02,
-                             odo_sigma_dtheta_per_m=0.0, odo_sigma_dtheta_floor=0.002)
+    dr = SYNTHETIC_DR
     fe2 = build_problem(log, others + [mine[0], bad], FrontEndConfig(dead_reckoning=dr, build_grids=False))
     assert fe2.ambiguous_objects == (name,)
     assert name not in set(fe2.problem.landmarks.landmark)
@@ -286,8 +285,7 @@ def test_initial_landmark_is_the_agreeing_majority_not_the_first_sighting(fronte
     first = mine[0]
     bad = ObjectObservation(first.stamp_ns - 1, name, first.payload, first.b_position + np.array([0.0, 1.5, 0.0]),
                             first.cov_b_position)  # a wrong sighting before all the good ones
-    dr = DeadReckoningConfig(sigma_s_per_m=0.03, sigma_s_floor=0.002, odo_sigma_dtheta_per_rad=0.02,
-                             odo_sigma_dtheta_per_m=0.0, odo_sigma_dtheta_floor=0.002)
+    dr = SYNTHETIC_DR
     fe2 = build_problem(log, [bad, *obs], FrontEndConfig(dead_reckoning=dr, build_grids=False))
     init = fe2.problem.initial_landmarks[name]
     # the initial estimate (world frame of the first anchor = the truth's first pose, up to drift) is near the

@@ -38,6 +38,8 @@ class SimConfig:
     odom_drift_deg_per_m: float = 0.5  # heading drift from unequal wheel radii
     odom_turn_sigma: float = 0.02  # rad per sqrt(rad) turned
     odom_heading_sigma_deg: float = 0.2  # heading random walk while driving, deg per sqrt(m)
+    odom_lateral_sigma: float = 0.0  # sideways slip the odometer does not see, m per sqrt(m) (0: differential)
+    odom_covariance: str = "propagated"  # what the odometry driver publishes: propagated | constant | zero
     compass_rate_hz: float = 10.0
     compass_sigma_deg: float = 1.5
     compass_bias_deg: float = 2.0
@@ -70,6 +72,9 @@ class SimConfig:
             ("odom_slip_sigma", self.odom_slip_sigma >= 0, ">= 0"),
             ("odom_turn_sigma", self.odom_turn_sigma >= 0, ">= 0"),
             ("odom_heading_sigma_deg", self.odom_heading_sigma_deg >= 0, ">= 0"),
+            ("odom_lateral_sigma", self.odom_lateral_sigma >= 0, ">= 0"),
+            ("odom_covariance", self.odom_covariance in ("propagated", "constant", "zero"),
+             "propagated, constant or zero"),
             ("compass_sigma_deg", self.compass_sigma_deg >= 0, ">= 0"),
             ("laser_sigma", self.laser_sigma >= 0, ">= 0"),
             ("wall_codes", 0 <= self.wall_codes <= 12, "0..12"),
@@ -91,6 +96,7 @@ class SimConfig:
             "odom_drift_deg_per_m",
             "odom_turn_sigma",
             "odom_heading_sigma_deg",
+            "odom_lateral_sigma",
             "compass_sigma_deg",
             "compass_bias_deg",
             "compass_disturbance_scale",
@@ -104,6 +110,9 @@ class SimConfig:
         for extra in ("wall_codes", "sizeless_labels"):  # the reference household's log stays as it was
             if not getattr(self, extra):
                 del d[extra]
+        for name, default in (("odom_lateral_sigma", 0.0), ("odom_covariance", "propagated")):
+            if getattr(self, name) == default:  # likewise: absent from a differential-drive profile's metadata
+                del d[name]
         d["generator"] = "holoslam.sim.simulate_household"
         d["world"] = "reference_household (seed 002)"
         return d
@@ -146,6 +155,8 @@ def simulate_household(config: SimConfig = SimConfig()) -> SimulatedRun:
         drift=math.radians(config.odom_drift_deg_per_m),
         turn_sigma=config.odom_turn_sigma,
         heading_sigma=math.radians(config.odom_heading_sigma_deg),
+        lateral_sigma=config.odom_lateral_sigma,
+        covariance=config.odom_covariance,
     )
     com = compass(
         world,

@@ -44,8 +44,9 @@ def to_log_data(run, source: str = "simulated household") -> LogData:
         # back from the ROS convention (covariance of x, y, yaw in odom) to the body frame
         J = np.array([[c[k], s[k], 0.0], [-s[k], c[k], 0.0], [0.0, 0.0, 1.0]])
         cov = J @ odo.cov_odomTb[k] @ J.T
-        odometry.append(
-            Odometry(int(st), Pose2.from_array(odo.odomTb[k]), 0.5 * (cov + cov.T), float(odo.speed[k]))
+        odometry.append(  # all zeros: unknown, as the log reader gives it
+            Odometry(int(st), Pose2.from_array(odo.odomTb[k]), 0.5 * (cov + cov.T) if cov.any() else None,
+                     float(odo.speed[k]))
         )
     com = run.compass
     headings = [

@@ -13,9 +13,14 @@ Odometer (``odometry``), 20 Hz. Per step k the true motion in the base frame is 
   + heading_sigma^2 * |ds|) (default turn scale +2 %, drift 0.5 deg per metre from unequal wheel
   radii, turn_sigma 0.02 rad per sqrt(rad), heading_sigma 0.2 deg per sqrt(m)); the wheel-odometry heading
   therefore drifts without bound.
+- sideways: with ``odom_lateral_sigma`` > 0 (a skid-steer or castor-dragged base) the base also slips sideways
+  by N(0, lateral_sigma^2 * |ds|) per step, which the odometer does not see (0 by default: a differential
+  drive does not move sideways).
 - The odometer integrates odomTb_{k+1} = odomTb_k ∘ (ds_meas, 0, dtheta_meas) from the identity and reports
-  its first-order covariance, propagated from the per-step noise, in the ROS convention (the covariance of
-  the numbers x, y, yaw in the odom frame).
+  what ``odom_covariance`` says a driver publishes: ``propagated`` (default), its first-order covariance
+  propagated from the per-step random noise, in the ROS convention (the covariance of the numbers x, y, yaw in
+  the odom frame); ``constant``, a fixed diagonal (x, y 1e-3 m^2, yaw 0.03 rad^2, as diff_drive_controller's
+  pose_covariance_diagonal parameter); ``zero``, all zeros ("unknown").
 
 Digital compass (``compass``), 10 Hz: yaw_meas = yaw_true + compass_bias + disturbance(x, y) + N(0,
 compass_sigma^2); default sigma 1.5 deg, bias 2.0 deg. disturbance(x, y) = sum_i A_i * (1 - d_i / R)^2 for
@@ -70,6 +75,7 @@ __all__ = [
     "qr_modules",
 ]
 
+ODOM_COVARIANCES = ("propagated", "constant", "zero")  # what the simulated odometry driver publishes
 LASER_MOUNT = (0.12, 0.0, 0.30)  # bTl: x, y, z (yaw 0)
 PTZ_MOUNT = (0.05, 0.0, 1.10)  # bTptz: x, y, z (axes of the base)
 F0 = 525.0
@@ -164,8 +170,12 @@ def odometry(
     drift: float = math.radians(0.5),
     turn_sigma: float = 0.02,
     heading_sigma: float = math.radians(0.2),
+    lateral_sigma: float = 0.0,
+    covariance: str = "propagated",
 ) -> OdometryStream:
     """Wheel odometry from the true trajectory (see the module docstring for the model)."""
+    if covariance not in ODOM_COVARIANCES:
+        raise ValueError(f"odometry covariance {covariance!r}: expected one of {ODOM_COVARIANCES}")
     d = compose(inverse(wTb[:-1]), wTb[1:])  # true body-frame increments
     ds = d[:, 0]
     dth = d[:, 2]
@@ -177,6 +187,9 @@ def odometry(
     ds_meas = np.where(events, ds_meas * rng.uniform(1.5, 3.0, n), ds_meas)
     sig_th = np.sqrt(turn_sigma**2 * np.abs(dth) + heading_sigma**2 * ads)
     dth_meas = (1.0 + turn_scale) * dth + drift * ds + rng.standard_normal(n) * sig_th
+    # sideways slip the odometer does not see: the true motion has it, so the odometry lacks it (drawn after
+    # the other noise, so a differential drive's stream is what it always was)
+    lat = rng.standard_normal(n) * lateral_sigma * np.sqrt(ads) if lateral_sigma > 0 else np.zeros(n)
     # integrate (sequential by nature; floats in a loop are cheap at 20 Hz)
     P = np.zeros((n + 1, 3))
     C = np.zeros((n + 1, 3, 3))
@@ -184,8 +197,8 @@ def odometry(
     cov = np.zeros((3, 3))
     for k in range(n):
         c, s = math.cos(th), math.sin(th)
-        x += c * ds_meas[k]
-        y += s * ds_meas[k]
+        x += c * ds_meas[k] + s * lat[k]
+        y += s * ds_meas[k] - c * lat[k]
         th += dth_meas[k]
         # body-frame covariance propagation: cov' = Ad(u^-1) cov Ad(u^-1)^T + Q
         u = ds_meas[k]
@@ -207,6 +220,10 @@ def odometry(
     J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1], J[:, 2, 2] = c, -s, s, c, 1.0
     C = J @ C @ np.transpose(J, (0, 2, 1))
     C[0] = np.diag([1e-9, 1e-9, 1e-9])
+    if covariance == "constant":
+        C[:] = np.diag([1e-3, 1e-3, 0.03])
+    elif covariance == "zero":
+        C[:] = 0.0
     dt = np.diff(stamps_ns).astype(np.float64) * 1e-9
     speed = np.r_[0.0, ds_meas / dt]
     rate = np.r_[0.0, dth_meas / dt]

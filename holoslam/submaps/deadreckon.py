@@ -28,22 +28,28 @@ Inputs:
 
 Covariance (analytic, first order, GTSAM's right-perturbation convention, in the final pose's own frame): the
 error of the final pose is a linear function of independent noise sources, each mapped through the Jacobian of
-its step and the adjoint of the remaining motion, ``Ad(between(P_j, P_{k+1}))``:
+its step and the adjoint of the remaining motion, ``Ad(between(P_j, P_{k+1}))``. Every random term is a random
+walk in the distance driven or the angle turned (variance proportional to |s_k| or |dtheta_k|), so the
+covariance of a segment does not depend on how often the odometry is published:
 
-* distance noise per step, sigma_s = ``sigma_s_per_m`` |s_k| + ``sigma_s_floor``;
+* distance slip, variance ``sigma_s_per_sqrt_m``^2 |s_k|, and lateral slip ``sigma_lateral_per_sqrt_m``^2 |s_k|;
 * for compass steps, the compass readings' white noise (sigma from the log, else ``compass_sigma``). A heading
   change is the difference of two interpolated readings, so consecutive changes are negatively correlated
   and the heading error does not grow with the number of steps; this is modelled exactly through the
   interpolation weights;
-* for odometry steps, an independent heading-change noise sigma_o = ``odo_sigma_dtheta_per_rad`` |dtheta| +
-  ``odo_sigma_dtheta_per_m`` |s| + ``odo_sigma_dtheta_floor``;
-* the start pose's covariance;
+* for odometry steps, heading-change noise of variance ``odo_sigma_turn_per_sqrt_rad``^2 |dtheta_k| +
+  ``odo_sigma_heading_per_sqrt_m``^2 |s_k|;
+* the start pose's covariance, and once per segment a floor (``sigma_floor_m``, ``sigma_floor_rad``);
 * systematic errors, each one unknown per integrated segment (so fully correlated over its steps): the odometer
-  scale (``sigma_scale``: s_k -> (1 + e) s_k, sensitivity sum_k F_k s_k), random slip growing with the square
-  root of the distance (``sigma_s_per_sqrt_m``, per step sigma^2 |s_k|), and for odometry-heading steps the turn
-  scale (``odo_sigma_turn_scale``) and a heading drift per metre (``odo_sigma_drift_per_m``, unequal wheels).
-  Without them the per-step independent distance noise averages out and a 3 m segment with a 1.5 % scale error
-  is reported about ten times too confident.
+  scale (``sigma_scale``: s_k -> (1 + e) s_k, sensitivity sum_k F_k s_k), and for odometry-heading steps the
+  turn scale (``odo_sigma_turn_scale``) and a heading drift per metre (``odo_sigma_drift_per_m``, unequal
+  wheels). Without them the per-step noise averages out and a 3 m segment with a 1.5 % scale error is reported
+  about ten times too confident.
+
+The defaults (``DeadReckoningConfig``) describe an uncalibrated differential-drive base and a consumer digital
+compass, each value with its physical source beside it. Where the log's odometry carries its own propagated
+covariance, its random-walk rates replace the defaults' (``holoslam.submaps.odometry_noise``); the front end then
+scales the dead-reckoning covariances by what the log's own scan matches say (``FrontEnd.dead_reckoning_inflation``).
 
 Not modelled: the correlation between consecutive dead-reckoning segments (the same scale error, the compass
 reading shared at their common anchor).
@@ -73,22 +79,43 @@ __all__ = [
 
 @dataclass(frozen=True, slots=True)
 class DeadReckoningConfig:
-    """Noise model and options of dead reckoning (defaults match the reference household simulator)."""
+    """Noise model and options of dead reckoning (module docstring). The defaults describe an uncalibrated
+    differential-drive household base (a Pioneer-class robot: 0.33 m wheelbase, rubber tyres about 5 cm wide) and
+    a consumer tilt-compensated compass; the random-walk rates give way to the log's own odometry covariance when
+    it is a plausible propagated one (``use_log_covariance``, ``holoslam.submaps.odometry_noise``)."""
 
-    sigma_s_per_m: float = 0.02  # distance sigma per metre travelled
-    sigma_s_floor: float = 0.0005  # metres per step
-    compass_sigma: float = 0.03  # rad, used when the log gives no sigma
-    odo_sigma_dtheta_per_rad: float = 0.02
-    odo_sigma_dtheta_per_m: float = 0.01
-    odo_sigma_dtheta_floor: float = 0.0005  # rad per step
-    sigma_s_per_sqrt_m: float = 0.01  # random slip: distance sigma grows with sqrt(metres travelled)
-    sigma_scale: float = 0.02  # odometer scale error, one unknown per segment (fully correlated over its steps)
-    odo_sigma_turn_scale: float = 0.02  # odometry turn scale error, correlated over a segment's odometry steps
-    odo_sigma_drift_per_m: float = 0.01  # rad per metre: heading drift (unequal wheels), correlated likewise
-    use_compass: bool = True
+    # m/sqrt(m): random wheel slip on floor joints, rugs and thresholds (the non-systematic error of Borenstein &
+    # Feng's classification of odometry errors); 1 cm after 1 m, 10 cm after 100 m
+    sigma_s_per_sqrt_m: float = 0.01
+    # m/sqrt(m): sideways slip; 0: a differential drive cannot move sideways (its lateral error comes from its
+    # heading error, which is modelled)
+    sigma_lateral_per_sqrt_m: float = 0.0
+    # fraction: odometer scale error, one unknown per segment: the effective wheel radius of rubber tyres changes
+    # by 1-3 % with load, wear, pressure and carpet versus hard floor
+    sigma_scale: float = 0.02
+    # rad/sqrt(rad): random heading error of the wheel odometry while turning (tyre scrub; 3 deg per turn round)
+    odo_sigma_turn_per_sqrt_rad: float = 0.02
+    # rad/sqrt(m): random heading error while driving (uneven floor, thresholds); 0.2 deg after 1 m
+    odo_sigma_heading_per_sqrt_m: float = 0.0035
+    # fraction: turn scale error, one unknown per segment: the effective wheelbase lies somewhere within the tyres'
+    # contact width, +-2.5 cm on 0.33 m (uniform: 4.4 % sigma)
+    odo_sigma_turn_scale: float = 0.044
+    # rad/m: heading drift from unequal wheel diameters, one unknown per segment: 0.3 % difference over a 0.33 m
+    # wheelbase
+    odo_sigma_drift_per_m: float = 0.01
+    # rad: compass white noise when the log gives none: 2 deg, a consumer tilt-compensated compass module's
+    # specified heading accuracy (e.g. Honeywell HMC6343: 2 deg RMS)
+    compass_sigma: float = 0.035
+    # m and rad, once per segment: odometry and scans are stamped by different clocks; a few milliseconds of
+    # jitter at 0.4 m/s and 0.5 rad/s
+    sigma_floor_m: float = 0.002
+    sigma_floor_rad: float = 0.002  # rad, likewise
+    use_compass: bool = True  # heading changes from the compass where it agrees with the odometry (Eq. 14)
+    # the log's own odometry covariance, when it is a plausible propagated one, gives the random-walk rates above
+    use_log_covariance: bool = True
     gate: float = 4.0  # compass/odometry consistency gate in sigmas
-    window_ns: int = 1_000_000_000
-    midpoint: bool = True
+    window_ns: int = 1_000_000_000  # ns: the sliding window of the compass/odometry consistency test
+    midpoint: bool = True  # Eq. 14 with the heading at the middle of each step (exact on arcs)
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,16 +199,18 @@ def odometry_increments(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _step_increments(s: np.ndarray, dth: np.ndarray, midpoint: bool) -> tuple[np.ndarray, np.ndarray]:
-    """SE(2) increments u_k (N, 3) and the Jacobians (N, 3, 2) of their right perturbation w.r.t. (s, dtheta)."""
+    """SE(2) increments u_k (N, 3) and the Jacobians (N, 3, 3) of their right perturbation w.r.t. (s, dtheta,
+    lateral slip)."""
     h = 0.5 if midpoint else 0.0
     a = h * dth
     u = np.column_stack([s * np.cos(a), s * np.sin(a), dth])
-    # d(translation)/d(s, dth) in the start frame, then rotated into the increment's own frame.
-    Jt = np.zeros((s.size, 2, 2))
+    # d(translation)/d(s, dth, lateral) in the start frame, then rotated into the increment's own frame.
+    Jt = np.zeros((s.size, 2, 3))
     Jt[:, 0, 0], Jt[:, 1, 0] = np.cos(a), np.sin(a)
     Jt[:, 0, 1], Jt[:, 1, 1] = -h * s * np.sin(a), h * s * np.cos(a)
+    Jt[:, 0, 2], Jt[:, 1, 2] = -np.sin(a), np.cos(a)
     RT = np.transpose(g.rot2(dth), (0, 2, 1))
-    J = np.zeros((s.size, 3, 2))
+    J = np.zeros((s.size, 3, 3))
     J[:, :2, :] = RT @ Jt
     J[:, 2, 1] = 1.0
     return u, J
@@ -251,8 +280,7 @@ def dead_reckon(
     s, dth_o = odometry_increments(samples)
     start = np.zeros(3) if start is None else np.asarray(start, dtype=np.float64).reshape(3)
     cov0 = np.zeros((3, 3)) if cov_start is None else np.asarray(cov_start, dtype=np.float64)
-    var_o = (cfg.odo_sigma_dtheta_per_rad * np.abs(dth_o) + cfg.odo_sigma_dtheta_per_m * np.abs(s)
-             + cfg.odo_sigma_dtheta_floor) ** 2
+    var_o = cfg.odo_sigma_turn_per_sqrt_rad**2 * np.abs(dth_o) + cfg.odo_sigma_heading_per_sqrt_m**2 * np.abs(s)
     use_c = np.zeros(s.size, dtype=bool)
     dth = dth_o.copy()
     have_compass = cfg.use_compass and heading_stamps_ns is not None and len(heading_stamps_ns) >= 2
@@ -271,10 +299,11 @@ def dead_reckon(
     _, J = _step_increments(s, dth, cfg.midpoint)
     end = poses[-1]
     Ad = batch_adjoint(g.between(np.broadcast_to(end, poses[1:].shape), poses[1:]))  # Ad(P_end^-1 P_{k+1})
-    M = Ad @ J  # (N, 3, 2): end-pose sensitivity to (s_k, dtheta_k)
-    F, G = M[:, :, 0], M[:, :, 1]
-    sig_s = cfg.sigma_s_per_m * np.abs(s) + cfg.sigma_s_floor
-    cov = np.einsum("k,ki,kj->ij", sig_s**2 + cfg.sigma_s_per_sqrt_m**2 * np.abs(s), F, F)
+    M = Ad @ J  # (N, 3, 3): end-pose sensitivity to (s_k, dtheta_k, lateral slip)
+    F, G, L = M[:, :, 0], M[:, :, 1], M[:, :, 2]
+    cov = np.einsum("k,ki,kj->ij", cfg.sigma_s_per_sqrt_m**2 * np.abs(s), F, F)
+    if cfg.sigma_lateral_per_sqrt_m > 0.0:
+        cov += np.einsum("k,ki,kj->ij", cfg.sigma_lateral_per_sqrt_m**2 * np.abs(s), L, L)
     cov += np.einsum("k,ki,kj->ij", np.where(use_c, 0.0, var_o), G, G)
     # systematic errors: one scale factor for all steps of the segment (s_k -> (1 + e) s_k), one turn scale
     # and one drift rate for its odometry-heading steps; each maps through the summed sensitivities
@@ -294,6 +323,8 @@ def dead_reckon(
         cov += np.einsum("m,mi,mj->ij", hsig**2, S, S)
     A0 = g.adjoint(g.between(end, poses[0]))
     cov += A0 @ cov0 @ A0.T
+    if t1_ns > t0_ns:
+        cov += np.diag([cfg.sigma_floor_m**2, cfg.sigma_floor_m**2, cfg.sigma_floor_rad**2])
     return DeadReckoning(st, poses, 0.5 * (cov + cov.T), use_c)
 
 

@@ -1,0 +1,69 @@
+"""Robots with other noise, mapped with the same defaults (issue 13): holoslam is never told which simulator
+profile wrote a log; its dead-reckoning model comes from the log's own odometry covariance when that is a
+propagated one (default, noisy) or from its documented defaults (skid-steer publishes a constant placeholder),
+calibrated against the log's scan matches. On each profile the anchors must beat dead reckoning and their 95 %
+ellipses must hold 90-99 % of the true anchors (pooled over two 300 s logs, 52 anchors; the logs are short to
+keep the suite fast)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
+
+SEEDS = (21, 22)
+DURATION_S = 300.0
+
+
+def _map(profile: str, seed: int, folder) -> dict:
+    from holoslam.evaluate import trajectory_errors, truth_at
+    from holoslam.io.mcap import read_log
+    from holoslam.pipeline import reestimate_anchors, run_build_options
+    from holoslam.sim import simulate_to_file
+    from holoslam.sim.profiles import profile_config
+    from holoslam.solve import CovarianceScope, SolveOptions, solve
+    from holoslam.submaps.frontend import build_problem
+
+    path = folder / f"{profile}_{seed}.mcap"
+    simulate_to_file(path, profile_config(profile, seed=seed, duration_s=DURATION_S, image_rate_hz=0.0))
+    log, _ = read_log(path)
+    # as a run does (holoslam.pipeline.run): the default front end, loops re-estimated, the run's kernels
+    fe = build_problem(log, optimize=reestimate_anchors)
+    sol = solve(fe.problem, SolveOptions(covariances=CovarianceScope.ANCHORS, build=run_build_options()))
+    gt_t, gt = log.ground_truth_arrays()
+    true = truth_at(fe.anchor_stamps_ns, gt_t, gt)
+    te = trajectory_errors(sol.wTa, true, sol.cov_wTa)
+    de = trajectory_errors(truth_at(fe.anchor_stamps_ns, fe.dr_stamps_ns, fe.dr_wTb), true)
+    return {
+        "err2": te.position_errors_m**2,
+        "dr_err2": de.position_errors_m**2,
+        "inside": round(te.coverage95 * te.n_coverage),
+        "n": te.n_coverage,
+        "noise": fe.odometry_noise.source,
+    }
+
+
+# measured 2026-12-02 on seeds 21 and 22, pooled: anchors / dead reckoning RMSE, 95 % coverage
+#   default     13.6 mm / 66 mm (4.9x), 50 of 52 inside (0.96)
+#   noisy       19.9 mm / 181 mm (9.1x), 49 of 52 (0.94)
+#   skid-steer  14.3 mm / 183 mm (12.8x), 49 of 52 (0.94)
+# A 300 s drive leaves the default robot's compass-aided dead reckoning only 6-7 cm off, so its 10x shows on
+# the 500 s bundled log (tests/test_cli.py: 7.8 mm against 89 mm); the noisy robot's 3x laser noise holds its
+# anchors at about 2 cm (7-11x over a whole tour).
+@pytest.mark.parametrize(
+    "profile, noise_from, max_rmse, min_ratio",
+    [
+        ("default", "log", 0.027, 3.0),
+        ("noisy", "log", 0.040, 5.0),
+        ("skid-steer", "defaults", 0.029, 10.0),
+    ],
+)
+def test_a_robot_profile_maps_with_the_same_defaults(profile, noise_from, max_rmse, min_ratio, tmp_path):
+    runs = [_map(profile, seed, tmp_path) for seed in SEEDS]
+    assert [r["noise"] for r in runs] == [noise_from] * len(SEEDS)
+    rmse = float(np.sqrt(np.mean(np.concatenate([r["err2"] for r in runs]))))
+    dr = float(np.sqrt(np.mean(np.concatenate([r["dr_err2"] for r in runs]))))
+    coverage = sum(r["inside"] for r in runs) / sum(r["n"] for r in runs)
+    assert rmse < max_rmse and dr >= min_ratio * rmse, (rmse, dr)
+    assert 0.90 <= coverage <= 0.99, coverage
