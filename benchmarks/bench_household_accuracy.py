@@ -18,7 +18,9 @@ laser and tf only; scan-only loop closures).
 Printed per row: anchors, anchor position RMSE (m) and heading RMSE (deg) for dead reckoning (DR) and the graph,
 the ratio DR/graph, the object RMSE (m) for DR (sightings placed with the DR anchor poses, averaged per object)
 and the graph, the fraction of true anchor positions in their 95 % ellipses (``cov95``, after alignment; the
-first-anchor gauge variant in ``cov95@0``), for corrupted variants the ratio to clean, and for ``moved3`` how
+first-anchor gauge variant in ``cov95@0``), for corrupted variants the ratio to clean (``/clean``: the larger of
+the anchor ratio and the object ratio, objects compared over those both runs located, ``compare_to_clean``) with
+``n/cl`` the objects located by the variant and by the clean run (a lost object is not hidden), and for ``moved3`` how
 many of the moved objects the solver reported as moved; ``skip`` the observations the front end skipped (before
 the first anchor: an object seen there loses that sighting, which can leave a moved object one sighting before
 its move, too few to tell a move from a bad sighting). ``obj≥2`` is the object RMSE over the confirmed objects
@@ -156,6 +158,7 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
         dr_obj=od.rmse_m,
         obj=oe.rmse_m,
         n_obj=oe.n_matched,
+        obj_errors=dict(oe.errors_m),
         obj2=oc.rmse_m,
         n_once=len(sol.landmark_ids) - len(conf),
         cov95=te.coverage95,
@@ -190,16 +193,37 @@ def variants(log, obs, name, rng_seed, quick):
     return rows
 
 
+def compare_to_clean(m: dict, clean: dict) -> dict:
+    """A variant's objects against the clean run's: the object RMSE ratio over the objects both runs located
+    (an object the variant lost cannot lower its RMSE), how many each matched, and which the variant lost."""
+    common = sorted(set(m["obj_errors"]) & set(clean["obj_errors"]))
+
+    def rmse(errors: dict) -> float:
+        v = np.array([errors[k] for k in common])
+        return float(np.sqrt(np.mean(v**2))) if v.size else float("nan")
+
+    ratio = rmse(m["obj_errors"]) / rmse(clean["obj_errors"]) if common else float("nan")
+    return {
+        "obj_ratio": ratio,
+        "pos_ratio": m["pos"] / clean["pos"],
+        "matched": len(m["obj_errors"]),
+        "clean_matched": len(clean["obj_errors"]),
+        "lost": sorted(set(clean["obj_errors"]) - set(m["obj_errors"])),
+    }
+
+
 def print_table(rows):
     hdr = (
         f"{'log':18s} {'variant':19s} {'anch':>4s} {'DR m':>6s} {'graph m':>7s} {'ratio':>5s} {'DR°':>5s} "
         f"{'graph°':>6s} {'DR obj':>6s} {'obj m':>6s} {'n':>3s} {'obj≥2':>6s} {'n1':>2s} {'cov95':>5s} "
-        f"{'cov95@0':>7s} {'/clean':>6s} {'/cl≥2':>6s} "
+        f"{'cov95@0':>7s} {'/clean':>6s} {'n/cl':>6s} {'/cl≥2':>6s} "
         f"{'moved':>5s} {'skip':>4s} {'loops':>5s} {'fe s':>5s}"
     )
     print(hdr)
     for name, var, m, clean in rows:
-        rel = f"{max(m['pos'] / clean['pos'], m['obj'] / clean['obj']):6.2f}" if clean else f"{'':6s}"
+        cmp = compare_to_clean(m, clean) if clean else None
+        rel = f"{max(cmp['pos_ratio'], cmp['obj_ratio']):6.2f}" if cmp else f"{'':6s}"
+        kept = f"{cmp['matched']}/{cmp['clean_matched']}" if cmp else ""
         rel2 = f"{max(m['pos'] / clean['pos'], m['obj2'] / clean['obj2']):6.2f}" if clean else f"{'':6s}"
         mv = (
             f"{len(set(m['moved_found']) & set(m['moved_expected']))}/{len(m['moved_expected'])}"
@@ -210,7 +234,7 @@ def print_table(rows):
             f"{name:18s} {var:19s} {m['anchors']:4d} {m['dr_pos']:6.3f} {m['pos']:7.4f} "
             f"{m['dr_pos'] / m['pos']:5.1f} {m['dr_head']:5.2f} {m['head']:6.3f} {m['dr_obj']:6.3f} "
             f"{m['obj']:6.3f} {m['n_obj']:3d} {m['obj2']:6.3f} {m['n_once']:2d} {m['cov95']:5.2f} "
-            f"{m['cov95_0']:7.2f} {rel} {rel2} {mv:>5s} {m['skipped']:4d} "
+            f"{m['cov95_0']:7.2f} {rel} {kept:>6s} {rel2} {mv:>5s} {m['skipped']:4d} "
             f"{m['loops']:5d} {m['fe_s']:5.1f}",
             flush=True,
         )

@@ -38,9 +38,14 @@ def test_run_writes_every_file_of_the_output_folder(household_run):
     report = json.loads((household_run / "report.json").read_text())
     assert report["objects"]["count"] == 35
     acc = report["accuracy"]
-    assert acc["anchors"]["rmse_m"] < 0.05
-    assert acc["anchors"]["rmse_m"] < acc["anchors_dead_reckoning"]["rmse_m"]
-    assert acc["objects"]["matched"] == 35 and acc["objects"]["rmse_m"] < 0.1
+    # measured 2026-12-02: anchors 7.8 mm (dead reckoning 89 mm), objects 8.8 mm; bounds within 2x of them
+    assert acc["anchors"]["rmse_m"] < 0.016
+    assert acc["anchors"]["rmse_m"] < 0.1 * acc["anchors_dead_reckoning"]["rmse_m"]
+    assert acc["objects"]["matched"] == 35 and acc["objects"]["rmse_m"] < 0.018
+    # the covariances are honest: the 95 % ellipses hold 90-100 % of the true anchors and objects (measured 42 of
+    # 43 anchors, 34 of 35 objects; at 43 anchors all inside is still a 1-in-9 draw of honest 95 % ellipses)
+    assert 0.90 <= acc["anchors"]["coverage95"] <= 1.0
+    assert 0.90 <= acc["objects"]["coverage95"] <= 1.0
     assert "solver" in (household_run / "report.txt").read_text()
 
 
