@@ -72,21 +72,14 @@ def measure(name: str, grid, repeat: int, counts: bool = True) -> dict:
     from holoslam.maps.holographic import build_holographic
     from holoslam.maps.passages import EdgePaths
     from holoslam.maps.rooms import rooms_of_grid
-    from holoslam.maps.topology import cycle_rank, topology_from_grid
+    from holoslam.maps.topology import cycle_rank, topology_from_grid, topology_from_settings
     from holoslam.pipeline import RunConfig, reach_model
 
     cfg = RunConfig()
     tc, hc = cfg.topology, cfg.holographic
 
     def topo():
-        return topology_from_grid(
-            grid,
-            prune_spur_m=tc.prune_spur_m,
-            spur_clearance_factor=tc.spur_clearance_factor,
-            erode_cells=tc.erode_cells,
-            close_cells=tc.close_cells,
-            cleaning=tc.cleaning,
-        )
+        return topology_from_settings(grid, tc)
 
     def holo(T):  # the stage as the pipeline runs it: rooms, then the graph on them
         ep = EdgePaths(T)

@@ -52,20 +52,13 @@ def segment(grid):
     """(topology, rooms) of a grid as ``holoslam topology --rooms`` makes them (the run's defaults)."""
     from holoslam.config import RunConfig
     from holoslam.maps.rooms import rooms_of_grid
-    from holoslam.maps.topology import topology_from_grid
+    from holoslam.maps.topology import topology_from_settings
 
     cfg = RunConfig()
     tc = cfg.topology
     c0 = time.process_time()
     t0 = time.perf_counter()
-    topo = topology_from_grid(
-        grid,
-        prune_spur_m=tc.prune_spur_m,
-        spur_clearance_factor=tc.spur_clearance_factor,
-        erode_cells=tc.erode_cells,
-        close_cells=tc.close_cells,
-        cleaning=tc.cleaning,
-    )
+    topo = topology_from_settings(grid, tc)
     t1 = time.perf_counter()
     rooms = rooms_of_grid(grid, topo, cfg.holographic.rooms)
     t2 = time.perf_counter()

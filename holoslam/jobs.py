@@ -480,7 +480,7 @@ def map_topology(
     from holoslam.maps.passages import EdgePaths
     from holoslam.maps.rooms import rooms_of_grid
     from holoslam.maps.settings import HolographicConfig, TopologyConfig
-    from holoslam.maps.topology import cycle_rank, to_graphml_ready, topology_from_grid
+    from holoslam.maps.topology import cycle_rank, to_graphml_ready, topology_from_settings
 
     tc = topology or TopologyConfig()
     hc = holographic or HolographicConfig()
@@ -490,14 +490,7 @@ def map_topology(
             raise ConfigError(f"folder {Path(target).parent} does not exist; create it first")
     grid = read_grid(map_yaml)
     t0 = time.perf_counter()
-    G = topology_from_grid(
-        grid,
-        prune_spur_m=tc.prune_spur_m,
-        spur_clearance_factor=tc.spur_clearance_factor,
-        erode_cells=tc.erode_cells,
-        close_cells=tc.close_cells,
-        cleaning=tc.cleaning,
-    )
+    G = topology_from_settings(grid, tc)
     t_topology = time.perf_counter() - t0
     ready = to_graphml_ready(G)
     files = [str(write_graphml(ready, out)), str(write_node_link_json(ready, out.with_suffix(".json")))]

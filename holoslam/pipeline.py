@@ -257,7 +257,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     from holoslam.maps.occupancy import build_grid
     from holoslam.maps.passages import EdgePaths
     from holoslam.maps.rooms import rooms_of_grid
-    from holoslam.maps.topology import topology_from_grid
+    from holoslam.maps.topology import topology_from_settings
     from holoslam.planning.twolayer import build_two_layer
     from holoslam.solve import CovarianceScope, Method, SolveOptions, solve
     from holoslam.submaps.frontend import build_problem
@@ -355,15 +355,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         )
 
     with _stage(progress, timings, "topology (thinning)"):
-        topology = topology_from_grid(
-            grid,
-            anchors_wTa=sol.wTa,
-            prune_spur_m=cfg.topology.prune_spur_m,
-            spur_clearance_factor=cfg.topology.spur_clearance_factor,
-            erode_cells=cfg.topology.erode_cells,
-            close_cells=cfg.topology.close_cells,
-            cleaning=cfg.topology.cleaning,
-        )
+        topology = topology_from_settings(grid, cfg.topology, anchors_wTa=sol.wTa)
 
     with _stage(progress, timings, "holographic graph"):
         submap_features = {

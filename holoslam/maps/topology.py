@@ -370,6 +370,20 @@ def cycle_rank(G: nx.Graph) -> int:
     return G.number_of_edges() - G.number_of_nodes() + nx.number_connected_components(G)
 
 
+def topology_from_settings(grid: OccupancyGrid, settings, anchors_wTa: np.ndarray | None = None) -> nx.MultiGraph:
+    """:func:`topology_from_grid` with the run configuration's topology section
+    (:class:`holoslam.maps.settings.TopologyConfig`): the one place its fields become the call's options."""
+    return topology_from_grid(
+        grid,
+        anchors_wTa=anchors_wTa,
+        prune_spur_m=settings.prune_spur_m,
+        spur_clearance_factor=settings.spur_clearance_factor,
+        erode_cells=settings.erode_cells,
+        close_cells=settings.close_cells,
+        cleaning=settings.cleaning,
+    )
+
+
 def topology_from_grid(
     grid: OccupancyGrid,
     *,
