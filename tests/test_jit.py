@@ -1,5 +1,5 @@
-"""holoslam's numba policy (``holoslam._jit``): the settings of the kernels, and a cached kernel recompiled when
-a kernel file it calls into changes (numba alone looks at the caller's own file only)."""
+"""holoslam's numba policy (``holoslam._jit``): the settings of the kernels, and a cached kernel recompiled
+when a kernel file it calls into changes (numba alone looks at the caller's own file only)."""
 
 from __future__ import annotations
 
@@ -25,7 +25,10 @@ def _run(tmp_path: Path, code: str) -> str:
     return out.stdout.strip()
 
 
-def test_a_cached_kernel_is_rebuilt_when_a_kernel_it_calls_in_another_file_changes(tmp_path):
+@pytest.mark.parametrize(
+    ("imports", "call"), [("from probe_callee import f", "f()"), ("import probe_callee as m", "m.f()")]
+)
+def test_a_cached_kernel_is_rebuilt_when_a_kernel_it_calls_in_another_file_changes(tmp_path, imports, call):
     callee = textwrap.dedent(
         """
         import numba as nb
@@ -39,14 +42,14 @@ def test_a_cached_kernel_is_rebuilt_when_a_kernel_it_calls_in_another_file_chang
     (tmp_path / "probe_callee.py").write_text(callee)
     (tmp_path / "probe_caller.py").write_text(
         textwrap.dedent(
-            """
+            f"""
             import numba as nb
             from holoslam._jit import JIT
-            from probe_callee import f
+            {imports}
 
             @nb.njit(**JIT)
             def g():
-                return f() + 10
+                return {call} + 10
             """
         )
     )

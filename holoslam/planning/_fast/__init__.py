@@ -16,8 +16,8 @@ Every kernel is a plain function of numpy arrays; this package re-exports the on
 * :mod:`.queries` -- :func:`query`, one whole planning query between two located points (regions at the
   points from a bucket index, corridor, paths, checks), and the greedy corridor shortcut
   (:func:`shortcut_corridor_adj`).
-* :mod:`.build` -- the build kernels of the two-layer graph: :func:`label_image`, :func:`block_edges` (layer 1)
-  and :func:`grow_regions` (layer 2).
+* :mod:`.build` -- the build kernels of the two-layer graph: :func:`label_image`, :func:`block_edges`
+  (layer 1) and :func:`grow_regions` (layer 2).
 """
 
 from holoslam.planning._fast.astar import WORKSPACE_DTYPE, corridor_astar

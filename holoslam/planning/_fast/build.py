@@ -1,7 +1,7 @@
 """Compiled build kernels of the two-layer planning graph (:mod:`holoslam.planning.twolayer`; numba,
-:mod:`holoslam._jit` policy): :func:`label_image`, :func:`block_edges` (layer-1 adjacency from the label image)
-and :func:`grow_regions` (layer 2), each tested equal to the numpy reference it replaced (4000 x 4000 tiled
-household: both layers 2.4 s -> 1.0 s).
+:mod:`holoslam._jit` policy): :func:`label_image`, :func:`block_edges` (layer-1 adjacency from the label
+image) and :func:`grow_regions` (layer 2), each tested equal to the numpy reference it replaced (4000 x 4000
+tiled household: both layers 2.4 s -> 1.0 s).
 """
 
 from __future__ import annotations
