@@ -315,7 +315,7 @@ def region_buckets(regions: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndar
 
 
 def _query_arrays(planner: RoutePlanner) -> tuple:
-    """The arrays of :func:`holoslam.planning._fast.query` in its groups (graph, links, locate, grid),
+    """The arrays of :func:`holoslam.planning._fast.query` in their groups (graph, links, locate, grid),
     derived once per planner (by :func:`build_planner`). The ports are renumbered in a spatial order (regions along a Z-order curve of
     their centres, each region's ports numbered on first sight), so the ports of one region, which the
     search meets together, sit together in memory; the per-port arrays are in that order and ``pslot``
@@ -467,8 +467,21 @@ def plan_path(
             "planning graph"
         )
     c = planner._cache.get("query") or _query_arrays(planner)
+    graph, links, locate, grid = c
     wp, regs, length, status = planner.kernels.query(
-        *c, su, sv, rs, gu, gv, rg, HEURISTIC_WEIGHT, EPS_CELLS, _workspace(planner)
+        *graph,
+        *links,
+        *locate,
+        *grid,
+        su,
+        sv,
+        rs,
+        gu,
+        gv,
+        rg,
+        HEURISTIC_WEIGHT,
+        EPS_CELLS,
+        *_workspace(planner),
     )
     if status == 1:  # pragma: no cover - the component check above makes this unreachable
         raise PlanningError("no route found between connected regions; rebuild the planning graph")

@@ -261,7 +261,7 @@ def _to_world(pts, world):
 
 
 @nb.njit(**JIT)
-def query(graph, links, locate, grid, su, sv, rs, gu, gv, rg, hw, eps, scratch):
+def _query(graph, links, locate, grid, su, sv, rs, gu, gv, rg, hw, eps, scratch):
     """One whole query between two located points (start (su, sv) in region ``rs``, goal (gu, gv) in ``rg``,
     same component): corridor A* over the ports, corridor trimmed to the last region holding the start and
     the first holding the goal, the funnel path through it and through its greedy shortcut (the shorter
@@ -294,3 +294,27 @@ def query(graph, links, locate, grid, su, sv, rs, gu, gv, rg, hw, eps, scratch):
     pts, ok = _pull_and_validate(bits, tclear, gh, gw, raw, eps)
     wp = _to_world(pts, world)
     return wp, _unique_runs(regs), _length(wp), 0 if ok else 2
+
+
+# fmt: off
+@nb.njit(**JIT)
+def query(
+    rp_ptr, rp_id, rp_uv, node, ea, eb,  # graph
+    cuv, port_portal, pp, pslot, rptr, rids, E, boxes,  # links
+    regions, bptr, bids, bgrid,  # locate
+    bits, tclear, gh, gw, world,  # grid
+    su, sv, rs, gu, gv, rg, hw, eps,
+    ws, hn, hk, rlast,  # scratch
+):
+    """:func:`_query` (see there) with the arrays of its groups as separate arguments: numba dispatches flat
+    array arguments faster than nested tuples of them (23 arrays: 5.9 against 7.4 us a call, where a query
+    on the household takes about 25 us)."""
+    return _query(
+        (rp_ptr, rp_id, rp_uv, node, ea, eb),
+        (cuv, port_portal, pp, pslot, rptr, rids, E, boxes),
+        (regions, bptr, bids, bgrid),
+        (bits, tclear, gh, gw, world),
+        su, sv, rs, gu, gv, rg, hw, eps,
+        (ws, hn, hk, rlast),
+    )
+# fmt: on
