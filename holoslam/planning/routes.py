@@ -15,9 +15,11 @@ touches the grid cell by cell except the final exact segment checks.
    it (convexity: its ports are no closer through it). The heuristic is the larger of the Euclidean distance
    and 14 ALT landmark bounds ``|d(l, goal) - d(l, v)|`` (landmarks picked farthest-first, their distances
    precomputed by ``scipy.sparse.csgraph.dijkstra`` in :func:`build_planner`; 14 so that a port's coordinates
-   and landmark distances fill one 64-byte row); both are consistent, and the search weights the heuristic
-   by ``HEURISTIC_WEIGHT`` = 1.2 (weighted A*: the corridor costs at most 1.2 times the port-graph optimum,
-   and the funnel below only shortens the path; on the tiled 4000 x 4000 map of the benchmark it expanded a
+   and landmark distances fill one 64-byte row; when several regions hold the goal, the bounds are taken
+   through each of them and the smallest kept, since the goal joins their ports where the port graph may
+   not: ``_fast.astar._goal_distances``); both are consistent, and the search weights the heuristic by
+   ``HEURISTIC_WEIGHT`` = 1.2 (weighted A*: the corridor costs at most 1.2 times the port-graph optimum, and
+   the funnel below only shortens the path; on the tiled 4000 x 4000 map of the benchmark it expanded a
    median 208 ports instead of 1,804 over 40 random pairs, with path lengths still within 10 % of grid A*
    there and in the random-map measurement below). The search keeps a per-thread workspace (one 32-byte
    record a port: generation stamp, cost, heuristic, parent, heap slot; an indexed binary heap with
@@ -57,8 +59,12 @@ side) with the exact search and corner ports only: median 0.83, 99th percentile 
 worst 1.20; with ``HEURISTIC_WEIGHT`` = 1.2, over 1,504 such queries: median 0.83, 99th percentile 1.00,
 none above 1.10, worst 1.04. Corner ports alone gave 1.37 on one map hypothesis found (a wide portal
 crossed near its middle); with the centre ports, over 1,500 other such queries: median 0.835, 99th
-percentile 1.00, worst 1.01. On household-like maps the paths are shorter than grid A* (any-angle): worst
-0.99 on the reference household and 0.92 on the tiled large maps in the benchmark.
+percentile 1.00, worst 1.01. A goal held by two regions that the region graph joins only through others
+made the landmark bound overestimate (1.6x on a map hypothesis found; 3 of 3,000 random maps over
+``LENGTH_FACTOR``); with the bounds taken by goal region, over 29,796 queries on 6,000 such maps: median
+0.83, 99th percentile 1.00, none above 1.10, worst 1.08. On household-like maps the paths are shorter than
+grid A* (any-angle): worst 0.99 on the reference household and 0.92 on the tiled large maps in the
+benchmark.
 """
 
 from __future__ import annotations
@@ -316,12 +322,13 @@ def region_buckets(regions: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndar
 
 def _query_arrays(planner: RoutePlanner) -> tuple:
     """The arrays of :func:`holoslam.planning._fast.query` in their groups (graph, links, locate, grid),
-    derived once per planner (by :func:`build_planner`). The ports are renumbered in a spatial order (regions along a Z-order curve of
-    their centres, each region's ports numbered on first sight), so the ports of one region, which the
-    search meets together, sit together in memory; the per-port arrays are in that order and ``pslot``
-    maps the planner's port ids (the slots of ``pp``) to it. Port rows hold the coordinates and the landmark
-    distances as float32 (a row per cache line; the rounding, about 1e-7 relative, is far below the
-    heuristic weight's slack); the region bucket index and the grid tiles come with them."""
+    derived once per planner (by :func:`build_planner`). The ports are renumbered in a spatial order
+    (regions along a Z-order curve of their centres, each region's ports numbered on first sight), so the
+    ports of one region, which the search meets together, sit together in memory; the per-port arrays are
+    in that order and ``pslot`` maps the planner's port ids (the slots of ``pp``) to it. Port rows hold the
+    coordinates and the landmark distances as float32 (a row per cache line; the rounding, about 1e-7
+    relative, is far below the heuristic weight's slack); the region bucket index and the grid tiles come
+    with them."""
     c = planner._cache
     if "query" not in c:  # the port graph's edge list (adj_*) is not needed: edges are the regions' ports
         g = planner.graph

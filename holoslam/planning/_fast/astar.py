@@ -24,28 +24,39 @@ WORKSPACE_DTYPE = np.dtype(
 
 @nb.njit(**JIT)
 def _alt(node, dgoal, v, h):
-    """The largest of ``h`` and the landmark (ALT) bounds |d(l, goal) - d(l, v)| (``node[v, 2 + l]`` =
-    d(l, v)); a landmark of another component (both distances infinite: NaN) is skipped."""
-    for l in range(dgoal.shape[0]):
-        x = abs(dgoal[l] - node[v, 2 + l])
-        if x > h and x < np.inf:
-            h = x
-    return h
+    """The landmark (ALT) heuristic of node v: for each region q holding the goal, the largest of ``h`` and
+    the bounds |d(l, goal via q) - d(l, v)| (``dgoal[q, l]``, ``node[v, 2 + l]`` = d(l, v)), and the
+    smallest of these over q (:func:`_goal_distances`); a landmark of another component (both distances
+    infinite: NaN) is skipped."""
+    best = h
+    for q in range(dgoal.shape[0]):
+        x = h
+        for l in range(dgoal.shape[1]):
+            y = abs(dgoal[q, l] - node[v, 2 + l])
+            if y > x and y < np.inf:
+                x = y
+        best = x if q == 0 else min(best, x)
+    return best
 
 
 @nb.njit(**JIT_FASTMATH)
 def _alt_finite(node, dgoal, v, h):
     """:func:`_alt` when every landmark distance involved is finite (the landmarks all reach the goal's
     component, so they reach every node the search meets): a branch-free max that vectorises."""
-    for l in range(dgoal.shape[0]):
-        h = max(h, abs(dgoal[l] - node[v, 2 + l]))
-    return h
+    best = h
+    for q in range(dgoal.shape[0]):
+        x = h
+        for l in range(dgoal.shape[1]):
+            x = max(x, abs(dgoal[q, l] - node[v, 2 + l]))
+        best = x if q == 0 else min(best, x)
+    return best
 
 
 @nb.njit(**JIT)
 def _heuristic(heur, j, e):
     """The search's weighted heuristic of node j, ``e`` its Euclidean distance to the goal; ``heur`` =
-    (node rows, the landmarks' distances to the goal, all of them finite, weight)."""
+    (node rows, the landmarks' distances to the goal by goal region (:func:`_goal_distances`), all of them
+    finite, weight)."""
     node, dgoal, finite, hw = heur
     return hw * (_alt_finite(node, dgoal, j, e) if finite else _alt(node, dgoal, j, e))
 
@@ -116,20 +127,33 @@ def _heap_pop(hn, hk, ws, size):
 
 
 @nb.njit(**JIT)
-def _goal_landmark_distances(node, last, gx, gy, nl):
-    """(nl,) each landmark's distance to the goal: through the best of the ports ``last`` (those of the
-    regions holding the goal), then straight to the goal."""
-    dgoal = np.full(nl, np.inf)
+def _goal_distances(node, last, ea, eb, goal_regs, gx, gy, nl):
+    """(Q, nl): row q holds each landmark's distance to the goal through the best port of the region
+    ``goal_regs[q]`` holding it (among ``last``, the ports of all of them), then straight to the goal.
+
+    Kept apart by region, not as one distance through any of them: the goal joins the ports of every region
+    holding it, so with several such regions it also joins ports that the port graph joins only around
+    (overlapping regions need not be adjacent: adjacency comes from their blocks), and the landmark
+    distances d(l, v), measured on the port graph, need not obey the triangle inequality through the goal:
+    |d(l, goal) - d(l, v)| was then no lower bound of d(v, goal) (a route 1.6x the A* optimum, test_routes).
+    Through one region q it is: the goal joins only q's ports, which the port graph joins to each other by
+    straight edges, no longer than through the goal. So v's bound through each goal region bounds its
+    distance through that region, and the smallest of them its distance to the goal (:func:`_alt`)."""
+    Q = goal_regs.shape[0]
+    dist = np.full((Q, nl), np.inf)
     for i in range(last.shape[0]):
         p = last[i]
         du = node[p, 0] - gx
         dv = node[p, 1] - gy
         e = math.sqrt(du * du + dv * dv)
-        for l in range(nl):
-            x = node[p, 2 + l] + e
-            if x < dgoal[l]:
-                dgoal[l] = x
-    return dgoal
+        for q in range(Q):
+            if Q > 1 and ea[p] != goal_regs[q] and eb[p] != goal_regs[q]:
+                continue
+            for l in range(nl):
+                x = node[p, 2 + l] + e
+                if x < dist[q, l]:
+                    dist[q, l] = x
+    return dist
 
 
 @nb.njit(**JIT)
@@ -233,8 +257,9 @@ def corridor_astar(graph, first, first_cost, last, goal_regs, gx, gy, hw, ws, hn
     + L) float32 rows: the port's (u, v), then its distances from the L landmarks (the rest padding), one
     64-byte row a port for L = 14. ``first`` are the start regions' ports with costs ``first_cost``; the goal
     is reached from every port (``last``) of the regions ``goal_regs`` holding it by a straight segment.
-    Heuristic: the larger of the Euclidean distance and the ALT landmark bounds, times ``hw`` (1 = exact:
-    both bounds are consistent, so a popped node is final), computed once per node when first reached (a
+    Heuristic: the larger of the Euclidean distance and the ALT landmark bounds (by goal region,
+    :func:`_goal_distances`: a lower bound also when several regions hold the goal), times ``hw`` (1 = exact: both bounds are
+    consistent, so a popped node is final), computed once per node when first reached (a
     lazy variant, keyed by the Euclidean bound until the node reaches the top of the heap, computes it for
     two thirds of the nodes anyway and was 1.6x slower: the heap work of the re-insertions costs more).
     Nodes are not put in the heap when their key is no less than the best goal cost found: the goal, keyed
@@ -247,10 +272,11 @@ def corridor_astar(graph, first, first_cost, last, goal_regs, gx, gy, hw, ws, hn
     ``hn`` (n + 1,) int64, ``hk`` (n + 1,) float64 (decrease-key: at most one entry per node)."""
     node, ea, eb = graph[3], graph[4], graph[5]
     n = node.shape[0]
-    dgoal = _goal_landmark_distances(node, last, gx, gy, min(node.shape[1] - 2, 64))
+    dgoal = _goal_distances(node, last, ea, eb, goal_regs, gx, gy, min(node.shape[1] - 2, 64))
     finite = True
-    for l in range(dgoal.shape[0]):
-        finite = finite and dgoal[l] < np.inf
+    for q in range(dgoal.shape[0]):
+        for l in range(dgoal.shape[1]):
+            finite = finite and dgoal[q, l] < np.inf
     heur = (node, dgoal, finite, hw)
     gen = _next_generation(ws, n)
     GOAL = n
