@@ -110,6 +110,9 @@ def _check_route(tl, planner, free, a, b):
 )
 # found by hypothesis: 1.37x the A* length while regions had only corner ports (centre ports fixed it)
 @example(20197, 8, 27, 3, 4, 20197)
+# found by hypothesis (derandomize off): 1.6x, the goal in two overlapping regions the region graph does not
+# join directly made the landmark bound overestimate (test_landmark_bounds_stay_below_the_distance_to_the_goal)
+@example(38, 14, 48, 7, 23, 14)
 def test_random_maps_paths_valid_and_within_factor_of_astar(seed, h, w, n_rect, n_dots, qseed):
     free = random_map(seed, h, w, n_rect, n_dots)
     tl = build_two_layer(free, 1, resolution=0.05)
@@ -393,3 +396,77 @@ def test_box_interval_with_fewer_atan2_equals_the_exact_one():
         corners = [(u0, v0), (u1, v0), (u1, v1), (u0, v1)]
         fast_cases += not got[-1] and all(cx * (x - ax) + cy * (y - ay) > 0 for x, y in corners)
     assert fast_cases > 5000  # the shortcut path was exercised
+
+
+def _goal_distances_and_bounds(planner, gu, gv):
+    """For a goal point (u, v): every port's exact distance to the goal over the search's graph (ports joined
+    when they share a region, the goal joined to the ports of every region holding it) and the search's
+    unweighted heuristic (Euclidean and landmark bounds, ``astar._goal_distances``, ``astar._alt``), with the
+    number of regions holding the goal."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from holoslam.planning._fast import astar, queries
+    from holoslam.planning.routes import _query_arrays
+
+    graph, links, locate, _ = _query_arrays(planner)
+    rp_ptr, rp_id, _, node, ea, eb = graph
+    cuv, _, pp, pslot, rptr, rids, _, _ = links
+    regions, bptr, bids, bgrid = locate
+    gr = np.empty(max(int(bgrid[2]), 1), dtype=np.int64)
+    ng = queries._regions_at(regions, bptr, bids, int(bgrid[0]), int(bgrid[1]), gu, gv, gr)
+    gr = gr[:ng]
+    last = queries._ports_of(gr, rptr, rids, pp, pslot)
+    n = node.shape[0]
+    w = {}
+    for r in range(rp_ptr.shape[0] - 1):
+        ids = rp_id[rp_ptr[r] : rp_ptr[r + 1]].tolist()
+        for a in ids:
+            for b in ids:
+                if a != b:
+                    w[a, b] = max(float(np.hypot(*(cuv[a] - cuv[b]))), 1e-12)
+    for p in last.tolist():
+        w[p, n] = w[n, p] = max(float(np.hypot(cuv[p, 0] - gu, cuv[p, 1] - gv)), 1e-12)
+    k = np.array(list(w), dtype=np.int64).reshape(-1, 2)
+    d = dijkstra(coo_matrix((list(w.values()), (k[:, 0], k[:, 1])), shape=(n + 1, n + 1)).tocsr(), indices=n)[
+        :n
+    ]
+    dgoal = astar._goal_distances(node, last, ea, eb, gr, gu, gv, node.shape[1] - 2)
+    h = np.array(
+        [astar._alt(node, dgoal, v, float(np.hypot(cuv[v, 0] - gu, cuv[v, 1] - gv))) for v in range(n)]
+    )
+    return d, h, ng
+
+
+def test_landmark_bounds_stay_below_the_distance_to_the_goal():
+    """Regression (found by hypothesis, hidden by derandomize): the goal lies in two overlapping regions that
+    the region graph joins only through others (adjacency comes from the regions' blocks), so through the
+    goal two ports are nearer than over the port graph, and the landmark bound d(l, v) - d(l, goal) exceeded
+    the distance to the goal (by up to 19 cells on this map): the weighted search returned a corridor 2x
+    the optimum and a path 1.6x the A* length. The heuristic is now below the exact distance at every port,
+    here and for goals held by several regions of the flat."""
+    free = random_map(38, 14, 48, 7, 23)
+    tl = build_two_layer(free, 1, resolution=0.05)
+    planner = build_planner(tl)
+    _check_route(tl, planner, free, (1, 1), (9, 19))
+    d, h, ng = _goal_distances_and_bounds(planner, 19.5, 9.5)
+    assert ng == 2
+    reach = np.isfinite(d)
+    assert np.all(h[reach] <= d[reach] * (1 + 1e-6) + 1e-4), float(np.max(h[reach] - d[reach]))
+    flat = build_two_layer(OccupancyGrid.from_free_mask(apartment_free(), 0.05), 1)
+    fp = build_planner(flat)
+    R = flat.regions
+    rng = np.random.default_rng(4)
+    shared = 0
+    for _ in range(400):
+        r = int(rng.integers(flat.n_regions))
+        u, v = rng.uniform(R[r, 1], R[r, 3]), rng.uniform(R[r, 0], R[r, 2])
+        if ((R[:, 1] <= u) & (u <= R[:, 3]) & (R[:, 0] <= v) & (v <= R[:, 2])).sum() < 2:
+            continue
+        d, h, ng = _goal_distances_and_bounds(fp, u, v)
+        reach = np.isfinite(d)
+        assert np.all(h[reach] <= d[reach] * (1 + 1e-6) + 1e-4), (u, v, float(np.max(h[reach] - d[reach])))
+        shared += 1
+        if shared == 20:
+            break
+    assert shared == 20

@@ -19,10 +19,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_JIT = {"cache": True, "nogil": True}
+from holoslam._jit import JIT
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _find(parent, x):
     root = x
     while parent[root] != root:
@@ -34,7 +34,7 @@ def _find(parent, x):
     return root
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _union(parent, area, mx, a, b):
     ra = _find(parent, a)
     rb = _find(parent, b)
@@ -48,7 +48,7 @@ def _union(parent, area, mx, a, b):
         mx[ra] = mx[rb]
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def restore(cells, lab, parent, area, mx, clr, next_id, w):
     """Label ``cells`` (flat indices) next_id, next_id + 1, ... and join each to its labelled 4-neighbours;
     returns the next free id."""
@@ -75,7 +75,7 @@ def restore(cells, lab, parent, area, mx, clr, next_id, w):
     return next_id + k
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _push(hd, hv, n, d, v):
     i = n
     hd[i] = d
@@ -90,7 +90,7 @@ def _push(hd, hv, n, d, v):
     return n + 1
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _pop(hd, hv, n):
     d, v = hd[0], hv[0]
     n -= 1
@@ -113,7 +113,7 @@ def _pop(hd, hv, n):
     return d, v, n
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def dijkstra_to(indptr, indices, data, source, targets):
     """(dist, pred) from ``source``, searched until every cell of ``targets`` is settled (or none is left)."""
     n = indptr.shape[0] - 1

@@ -36,43 +36,16 @@ import math
 import numba as nb
 import numpy as np
 
-_JIT = {"cache": True, "nogil": True}
+from holoslam._common_fast import clip_segment
+from holoslam._jit import JIT
 
 
-@nb.njit(**_JIT)
-def _clip(ox, oy, dx, dy, lo_x, lo_y, hi_x, hi_y):
-    """Liang-Barsky: the parameter interval [t0, t1] of o + t d, 0 <= t <= 1, inside the box; t0 > t1 when
-    the segment misses it."""
-    t0 = 0.0
-    t1 = 1.0
-    for k in range(4):
-        if k == 0:
-            p, q = -dx, ox - lo_x
-        elif k == 1:
-            p, q = dx, hi_x - ox
-        elif k == 2:
-            p, q = -dy, oy - lo_y
-        else:
-            p, q = dy, hi_y - oy
-        if p == 0.0:
-            if q < 0.0:
-                return 1.0, 0.0
-        else:
-            r = q / p
-            if p < 0.0:
-                if r > t0:
-                    t0 = r
-            elif r < t1:
-                t1 = r
-    return t0, t1
-
-
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _sign(v):
     return 1 if v > 0 else (-1 if v < 0 else 0)
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _walk(misses, c, r, cs, rs, x0, y0, ax, ay, h, w):
     """Count one miss in every grid cell from (r, c) up to, not including, (rs, cs), along the line through
     (x0, y0) with direction (+-ax, +-ay) (signs: towards (rs, cs))."""
@@ -129,7 +102,7 @@ def _walk(misses, c, r, cs, rs, x0, y0, ax, ay, h, w):
         ny -= 1
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def cast_counts(ox, oy, ex, ey, hit, h, w):
     """Hit and miss counts (flat (h * w,) int64, row-major) of beams from (ox, oy) to (ex, ey) (cell units,
     finite) on an h x w grid; ``hit`` (bool) marks beams with a return (their end cell counts a hit)."""
@@ -152,7 +125,7 @@ def cast_counts(ox, oy, ex, ey, hit, h, w):
         rs = re
         if not (-1.0 <= x0 <= w + 1.0 and -1.0 <= y0 <= h + 1.0 and -1.0 <= ex[b] <= w + 1.0
                 and -1.0 <= ey[b] <= h + 1.0):
-            t0, t1 = _clip(x0, y0, dx, dy, -1.0, -1.0, w + 1.0, h + 1.0)
+            t0, t1 = clip_segment(x0, y0, dx, dy, -1.0, -1.0, w + 1.0, h + 1.0)
             if t0 > t1:
                 continue  # never near the grid
             if t0 > 0.0:  # entry cell: outside the grid (on the grown box's border)

@@ -20,10 +20,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-_JIT = {"cache": True, "nogil": True}
+from holoslam._jit import JIT
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _nbr(flat, code, index, offs, i, k):
     """Index of neighbour k of cell i, or -1."""
     if (code[i] >> k) & 1:
@@ -31,7 +31,7 @@ def _nbr(flat, code, index, offs, i, k):
     return np.int64(-1)
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def nodes(flat, code, index, offs, deg, is_node, tip2, clr):
     """(node_of (n,), kind code per node: 0 junction, 1 endpoint, 2 isolated, representative cell per node)."""
     n = flat.shape[0]
@@ -79,7 +79,7 @@ def nodes(flat, code, index, offs, deg, is_node, tip2, clr):
     return node_of, kind, rep
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _find(parent, x):
     while parent[x] != x:
         parent[x] = parent[parent[x]]
@@ -87,7 +87,7 @@ def _find(parent, x):
     return x
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def node_pairs(flat, code, index, offs, is_node, node_of, n_nodes):
     """(di, dj): adjacent node cells of different nodes that join two components of the pairs kept so far."""
     parent = np.arange(n_nodes)
@@ -109,7 +109,7 @@ def node_pairs(flat, code, index, offs, is_node, node_of, n_nodes):
     return di[:m], dj[:m]
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def trace(flat, code, index, offs, bit0, bit1, is_node):
     """(u_cell, v_cell, cells, starts, complete): edges along chains as in ``topology._trace``; complete is
     False when chain cells remain that no walk from a node reached (closed loops without a node)."""
@@ -202,7 +202,7 @@ def trace(flat, code, index, offs, bit0, bit1, is_node):
     return u_cell, v_cell, cells, starts, n_seen == n_chain
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def lengths(rc, starts, clr_cells, resolution):
     """(length, min_clearance) per edge of the concatenated (sum K, 2) cell sequence rc."""
     m = starts.shape[0] - 1

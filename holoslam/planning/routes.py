@@ -15,9 +15,11 @@ touches the grid cell by cell except the final exact segment checks.
    it (convexity: its ports are no closer through it). The heuristic is the larger of the Euclidean distance
    and 14 ALT landmark bounds ``|d(l, goal) - d(l, v)|`` (landmarks picked farthest-first, their distances
    precomputed by ``scipy.sparse.csgraph.dijkstra`` in :func:`build_planner`; 14 so that a port's coordinates
-   and landmark distances fill one 64-byte row); both are consistent, and the search weights the heuristic
-   by ``HEURISTIC_WEIGHT`` = 1.2 (weighted A*: the corridor costs at most 1.2 times the port-graph optimum,
-   and the funnel below only shortens the path; on the tiled 4000 x 4000 map of the benchmark it expanded a
+   and landmark distances fill one 64-byte row; when several regions hold the goal, the bounds are taken
+   through each of them and the smallest kept, since the goal joins their ports where the port graph may
+   not: ``_fast.astar._goal_distances``); both are consistent, and the search weights the heuristic by
+   ``HEURISTIC_WEIGHT`` = 1.2 (weighted A*: the corridor costs at most 1.2 times the port-graph optimum, and
+   the funnel below only shortens the path; on the tiled 4000 x 4000 map of the benchmark it expanded a
    median 208 ports instead of 1,804 over 40 random pairs, with path lengths still within 10 % of grid A*
    there and in the random-map measurement below). The search keeps a per-thread workspace (one 32-byte
    record a port: generation stamp, cost, heuristic, parent, heap slot; an indexed binary heap with
@@ -57,8 +59,12 @@ side) with the exact search and corner ports only: median 0.83, 99th percentile 
 worst 1.20; with ``HEURISTIC_WEIGHT`` = 1.2, over 1,504 such queries: median 0.83, 99th percentile 1.00,
 none above 1.10, worst 1.04. Corner ports alone gave 1.37 on one map hypothesis found (a wide portal
 crossed near its middle); with the centre ports, over 1,500 other such queries: median 0.835, 99th
-percentile 1.00, worst 1.01. On household-like maps the paths are shorter than grid A* (any-angle): worst
-0.99 on the reference household and 0.92 on the tiled large maps in the benchmark.
+percentile 1.00, worst 1.01. A goal held by two regions that the region graph joins only through others
+made the landmark bound overestimate (1.6x on a map hypothesis found; 3 of 3,000 random maps over
+``LENGTH_FACTOR``); with the bounds taken by goal region, over 29,796 queries on 6,000 such maps: median
+0.83, 99th percentile 1.00, none above 1.10, worst 1.08. On household-like maps the paths are shorter than
+grid A* (any-angle): worst 0.99 on the reference household and 0.92 on the tiled large maps in the
+benchmark.
 """
 
 from __future__ import annotations
@@ -70,6 +76,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from holoslam.errors import PlanningError
+from holoslam.planning.segments import EPS_CELLS, path_length, segments_free
 from holoslam.planning.twolayer import TwoLayerGraph, unique_int
 
 __all__ = [
@@ -84,7 +91,6 @@ __all__ = [
 ]
 
 LENGTH_FACTOR = 1.25
-EPS_CELLS = 1e-9  # geometric tolerance of the collision check, in cells
 HEURISTIC_WEIGHT = 1.2  # weighted A* over the port graph: corridor cost <= 1.2 x the port-graph optimum
 
 
@@ -249,80 +255,6 @@ def _ro(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def segments_free(free: np.ndarray, a_uv: np.ndarray, b_uv: np.ndarray, eps: float = EPS_CELLS) -> np.ndarray:
-    """Exact collision check of segments a -> b (N, 2) in cell-boundary coordinates (u = col, v = row) on a
-    free mask: True where every point of the segment lies in the closed union of free cells.
-
-    Vectorised over all segments: each segment is cut at every integer u and v line it crosses; the middle of
-    each piece lies inside one cell (or on a grid line, when the segment runs along it, where either side will
-    do) and that cell must be free. Points outside the grid are not free. Coordinates within ``eps`` cells of
-    a grid line count as on it, so round trips through world metres (float rounding) do not change the answer.
-    """
-    a = np.asarray(a_uv, dtype=np.float64).reshape(-1, 2)
-    b = np.asarray(b_uv, dtype=np.float64).reshape(-1, 2)
-    n = a.shape[0]
-    if n == 0:
-        return np.zeros(0, dtype=bool)
-    ts = [np.zeros(n), np.ones(n)]
-    seg = [np.arange(n), np.arange(n)]
-    for k in (0, 1):
-        lo = np.minimum(a[:, k], b[:, k])
-        hi = np.maximum(a[:, k], b[:, k])
-        first = np.floor(lo + eps).astype(np.int64) + 1
-        last = np.ceil(hi - eps).astype(np.int64) - 1
-        cnt = np.maximum(last - first + 1, 0)
-        if cnt.sum() == 0:
-            continue
-        s = np.repeat(np.arange(n), cnt)
-        off = np.arange(s.shape[0]) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        val = (first[s] + off).astype(np.float64)
-        ts.append((val - a[s, k]) / (b[s, k] - a[s, k]))
-        seg.append(s)
-    t = np.concatenate(ts)
-    sg = np.concatenate(seg)
-    order = np.lexsort((t, sg))
-    t, sg = t[order], sg[order]
-    same = sg[1:] == sg[:-1]
-    tm = ((t[1:] + t[:-1]) / 2)[same]
-    sm = sg[1:][same]
-    p = a[sm] + (b[sm] - a[sm]) * tm[:, None]
-    bad = np.zeros(n, dtype=bool)
-    np.logical_or.at(bad, sm, ~_point_free(free, p, eps))
-    # zero-length segments: the point itself must be in a free cell's closure
-    zero = np.all(a == b, axis=1)
-    if zero.any():
-        bad[zero] = ~_point_free(free, a[zero], eps)
-    return ~bad
-
-
-def _point_free(free: np.ndarray, uv: np.ndarray, eps: float = EPS_CELLS) -> np.ndarray:
-    """Points (N, 2) in the closed union of free cells; within ``eps`` of a grid line counts as on it."""
-    h, w = free.shape
-    ru, rv = np.rint(uv[:, 0]), np.rint(uv[:, 1])
-    on_u = np.abs(uv[:, 0] - ru) <= eps
-    on_v = np.abs(uv[:, 1] - rv) <= eps
-    fu = np.where(on_u, ru, np.floor(uv[:, 0])).astype(np.int64)
-    fv = np.where(on_v, rv, np.floor(uv[:, 1])).astype(np.int64)
-    ok = np.zeros(uv.shape[0], dtype=bool)
-    for du in (0, 1):
-        cu = fu - du * on_u
-        for dv in (0, 1):
-            cv = fv - dv * on_v
-            inside = (cu >= 0) & (cu < w) & (cv >= 0) & (cv < h)
-            o = np.zeros(uv.shape[0], dtype=bool)
-            o[inside] = free[cv[inside], cu[inside]]
-            ok |= o
-    return ok
-
-
-def path_length(waypoints: np.ndarray) -> float:
-    """Length of a polyline (K, 2) in its own units."""
-    w = np.asarray(waypoints, dtype=np.float64).reshape(-1, 2)
-    if w.shape[0] < 2:
-        return 0.0
-    return float(np.hypot(*np.diff(w, axis=0).T).sum())
-
-
 def _locate(
     planner: RoutePlanner, xy: np.ndarray, snap_radius_m: float, what: str
 ) -> tuple[float, float, int]:
@@ -389,13 +321,14 @@ def region_buckets(regions: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndar
 
 
 def _query_arrays(planner: RoutePlanner) -> tuple:
-    """The arrays of :func:`holoslam.planning._fast.query`, derived once per planner (by
-    :func:`build_planner`). The ports are renumbered in a spatial order (regions along a Z-order curve of
-    their centres, each region's ports numbered on first sight), so the ports of one region, which the
-    search meets together, sit together in memory; the per-port arrays are in that order and ``pslot``
-    maps the planner's port ids (the slots of ``pp``) to it. Port rows hold the coordinates and the landmark
-    distances as float32 (a row per cache line; the rounding, about 1e-7 relative, is far below the
-    heuristic weight's slack); the region bucket index and the grid tiles come with them."""
+    """The arrays of :func:`holoslam.planning._fast.query` in their groups (graph, links, locate, grid),
+    derived once per planner (by :func:`build_planner`). The ports are renumbered in a spatial order
+    (regions along a Z-order curve of their centres, each region's ports numbered on first sight), so the
+    ports of one region, which the search meets together, sit together in memory; the per-port arrays are
+    in that order and ``pslot`` maps the planner's port ids (the slots of ``pp``) to it. Port rows hold the
+    coordinates and the landmark distances as float32 (a row per cache line; the rounding, about 1e-7
+    relative, is far below the heuristic weight's slack); the region bucket index and the grid tiles come
+    with them."""
     c = planner._cache
     if "query" not in c:  # the port graph's edge list (adj_*) is not needed: edges are the regions' ports
         g = planner.graph
@@ -410,30 +343,29 @@ def _query_arrays(planner: RoutePlanner) -> tuple:
         rp_new = rp_new[o]
         uv = planner.port_uv[new2old]
         portal_of = planner.port_portal[new2old]
-        c["query"] = (
+        uv32 = np.ascontiguousarray(uv[rp_new], dtype=np.float32)
+        rows = _port_rows(uv, planner.landmark_dist[new2old])
+        graph = (
             rp_ptr,
             rp_new.astype(np.int32),
-            np.ascontiguousarray(uv[rp_new], dtype=np.float32),
+            uv32,
+            rows,
+            *(np.ascontiguousarray(E[portal_of, k]) for k in (0, 1)),
+        )
+        links = (
             np.ascontiguousarray(uv, dtype=np.float64),
-            _port_rows(uv, planner.landmark_dist[new2old]),
-            np.ascontiguousarray(E[portal_of, 0]),
-            np.ascontiguousarray(E[portal_of, 1]),
             np.ascontiguousarray(portal_of),
             np.searchsorted(planner.port_portal, np.arange(E.shape[0] + 1)),
             old2new,
             planner.region_portal_ptr,
             planner.region_portal_ids,
             E,
-            np.ascontiguousarray(g.regions, dtype=np.int64).reshape(-1, 4),
-            bptr,
-            bids,
-            bgrid,
             planner.portal_boxes,
-            *_tiles(planner),
-            int(g.shape[0]),
-            int(g.shape[1]),
-            np.array([g.origin_x, g.origin_y, g.resolution], dtype=np.float64),
         )
+        locate = (np.ascontiguousarray(g.regions, dtype=np.int64).reshape(-1, 4), bptr, bids, bgrid)
+        world = np.array([g.origin_x, g.origin_y, g.resolution], dtype=np.float64)
+        grid = (*_tiles(planner), int(g.shape[0]), int(g.shape[1]), world)
+        c["query"] = (graph, links, locate, grid)
     return c["query"]
 
 
@@ -542,8 +474,21 @@ def plan_path(
             "planning graph"
         )
     c = planner._cache.get("query") or _query_arrays(planner)
+    graph, links, locate, grid = c
     wp, regs, length, status = planner.kernels.query(
-        *c, su, sv, rs, gu, gv, rg, HEURISTIC_WEIGHT, EPS_CELLS, *_workspace(planner)
+        *graph,
+        *links,
+        *locate,
+        *grid,
+        su,
+        sv,
+        rs,
+        gu,
+        gv,
+        rg,
+        HEURISTIC_WEIGHT,
+        EPS_CELLS,
+        *_workspace(planner),
     )
     if status == 1:  # pragma: no cover - the component check above makes this unreachable
         raise PlanningError("no route found between connected regions; rebuild the planning graph")

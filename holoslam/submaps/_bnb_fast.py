@@ -24,10 +24,10 @@ import math
 import numba as nb
 import numpy as np
 
-_JIT = {"cache": True, "nogil": True}
+from holoslam._jit import JIT
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def quantise(prob, lo, step):  # pragma: no cover - compiled
     """uint8 codes q of the cells: ``ceil((p - lo) / step)`` in [0, 255], raised where float rounding left
     ``lo + q * step < p`` (in float64), so every code's value bounds its cell from above."""
@@ -47,7 +47,7 @@ def quantise(prob, lo, step):  # pragma: no cover - compiled
     return q.reshape(h, w)
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _max2(dst, a, b):  # pragma: no cover - compiled
     """dst = max(a, b) elementwise (slices: the loop vectorises)."""
     for j in range(dst.size):
@@ -55,7 +55,7 @@ def _max2(dst, a, b):  # pragma: no cover - compiled
         dst[j] = u if u > v else v
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _max1(dst, a, q_out):  # pragma: no cover - compiled
     """dst = max(a, q_out) elementwise."""
     for j in range(dst.size):
@@ -63,7 +63,7 @@ def _max1(dst, a, q_out):  # pragma: no cover - compiled
         dst[j] = u if u > q_out else q_out
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _pool(src, hs, ws, half, q_out, tmp, dst):  # pragma: no cover - compiled
     """One doubling step: src (hs x ws, flat) -> dst ((hs + half) x (ws + half), flat), through tmp
     (hs x (ws + half)): each cell the max of the cell and the one ``half`` before it (cells outside count
@@ -91,7 +91,7 @@ def _pool(src, hs, ws, half, q_out, tmp, dst):  # pragma: no cover - compiled
             d[:] = q_out
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def pool_levels(q0, depth, q_out):  # pragma: no cover - compiled
     """Levels 1..depth-1 of the quantised grid q0 (H x W) in one flat uint8 buffer; ``starts[d]`` is where
     level d begins (starts[0] = 0, unused: level 0 is the float grid)."""
@@ -113,7 +113,7 @@ def pool_levels(q0, depth, q_out):  # pragma: no cover - compiled
     return levels, starts
 
 
-@nb.njit(**_JIT, inline="always")
+@nb.njit(**JIT, inline="always")
 def _exact(prob, rows, cols, bb, a, x, y, p_out):  # pragma: no cover - compiled
     """Sum over the points of angle a of the cell at offset (x, y) (float64, in point order); bb[a] = the
     points' (row min, row max, col min, col max) at angle a: all inside, no bounds tests."""
@@ -133,7 +133,7 @@ def _exact(prob, rows, cols, bb, a, x, y, p_out):  # pragma: no cover - compiled
     return s
 
 
-@nb.njit(**_JIT, inline="always")
+@nb.njit(**JIT, inline="always")
 def _bound(levels, start, hd, wd, sh, rows, cols, bb, a, x, y, q_out):  # pragma: no cover - compiled
     """Integer sum over the points of angle a of the level cells (padded dims hd x wd, shift sh = w - 1)."""
     s = 0
@@ -153,7 +153,7 @@ def _bound(levels, start, hd, wd, sh, rows, cols, bb, a, x, y, q_out):  # pragma
     return s
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: no cover - compiled
     """The exact sum (d = 0) or the bound (d >= 1) of candidate (a, x, y); quant = (lo, step, q_out, p_out,
     slack)."""
@@ -166,7 +166,7 @@ def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: 
     return rows.shape[1] * lo + q * step + slack
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best, st, sp, cx, cy, cs):  # noqa: E501 # pragma: no cover
     """Score the (up to four) children of candidate (a, x, y) at level d - 1 and push those above ``best``
     onto the stack st (a, x, y, level, score arrays) from position sp, best child last: (new sp, children
@@ -195,7 +195,7 @@ def _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant,
     return sp, scored
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _boxes(rows, cols):  # pragma: no cover - compiled
     """Per angle a: (min row, max row, min col, max col) of the points' cells."""
     bb = np.empty((rows.shape[0], 4), dtype=np.int64)
@@ -205,7 +205,7 @@ def _boxes(rows, cols):  # pragma: no cover - compiled
     return bb
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0):  # pragma: no cover
     """Depth-first branch and bound (Hess et al. 2016, Alg. 3) over angles 0..A-1 (rows/cols (A, N): the
     points' cells at each angle) and integer offsets box = (x_lo, x_hi, y_lo, y_hi), from level d_top down.
@@ -250,7 +250,7 @@ def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0)
     return best, ba, bx, by, nodes
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def discretise(px, py, angles, x0, y0, ox, oy, res, lim):  # pragma: no cover - compiled
     """The cells (rows, cols) (A, N) int32 of the points (px, py) rotated by each angle and moved to (x0, y0):
     floor((x - ox) / res), clamped to +-lim."""
@@ -267,7 +267,7 @@ def discretise(px, py, angles, x0, y0, ox, oy, res, lim):  # pragma: no cover - 
     return rows, cols
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def exhaustive(prob, rows, cols, box, p_out):  # pragma: no cover - compiled
     """Every candidate scored exactly (the compiled brute force, for benchmarks): (best sum, a, x, y), the
     first best in (a, y, x) order."""

@@ -19,10 +19,11 @@ import math
 import numba as nb
 import numpy as np
 
-_JIT = {"cache": True, "nogil": True}
+from holoslam._common_fast import csr_group
+from holoslam._jit import JIT
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def bucket_grid(px, py, cell, max_cells):  # pragma: no cover - compiled
     """Buckets of the points (px, py): (x0, y0, cell, nx, ny, start (nx * ny + 1,), order (M,)), the points of
     bucket b being ``order[start[b]:start[b + 1]]`` in index order. The cell doubles while the extent would
@@ -37,24 +38,16 @@ def bucket_grid(px, py, cell, max_cells):  # pragma: no cover - compiled
     while (math.floor((x1 - x0) / cell) + 1.0) * (math.floor((y1 - y0) / cell) + 1.0) > max_cells:
         cell *= 2.0
     nx, ny = int(math.floor((x1 - x0) / cell)) + 1, int(math.floor((y1 - y0) / cell)) + 1
-    start = np.zeros(nx * ny + 1, dtype=np.int64)
     bucket = np.empty(m, dtype=np.int64)
     for k in range(m):
         cx = min(max(int(math.floor((px[k] - x0) / cell)), 0), nx - 1)
         cy = min(max(int(math.floor((py[k] - y0) / cell)), 0), ny - 1)
         bucket[k] = cy * nx + cx
-        start[bucket[k] + 1] += 1
-    for b in range(nx * ny):
-        start[b + 1] += start[b]
-    fill = start[:-1].copy()
-    order = np.empty(m, dtype=np.int64)
-    for k in range(m):
-        order[fill[bucket[k]]] = k
-        fill[bucket[k]] += 1
+    start, order = csr_group(bucket, nx * ny)
     return x0, y0, cell, nx, ny, start, order
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def grid_nearest(qx, qy, px, py, x0, y0, cell, nx, ny, start, order, gate, out_j, out_d):  # pragma: no cover
     """For every query (qx[i], qy[i]): out_j[i] the nearest of the points (px, py) bucketed by
     :func:`bucket_grid` and out_d[i] its distance when the squared distance is below gate**2, else
@@ -107,7 +100,7 @@ def grid_nearest(qx, qy, px, py, x0, y0, cell, nx, ny, start, order, gate, out_j
             out_d[i] = np.inf
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def icp_terms(px, py, c, s, tx, ty, qx, qy, nqx, nqy, x0, y0, cell, nx, ny, start, order, gate, huber,
               j, d, J, w, r):  # pragma: no cover - compiled
     """One point-to-line ICP iteration's terms, the arithmetic of ``localize.register_points`` point by point:
@@ -138,7 +131,7 @@ def icp_terms(px, py, c, s, tx, ty, qx, qy, nqx, nqy, x0, y0, cell, nx, ny, star
     return m
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def free_counts(tx, ty, ca, sa, nk, step, lo_x, lo_y, resolution, W, H):  # pragma: no cover - compiled
     """How many free samples fall in each cell of an H x W grid (row-major) with lower-left corner (lo_x, lo_y):
     ray i samples tx[i] + d * ca[i], ty[i] + d * sa[i] at d = k * step for k < nk[i] (``segment.local_grid``'s
@@ -153,7 +146,7 @@ def free_counts(tx, ty, ca, sa, nk, step, lo_x, lo_y, resolution, W, H):  # prag
     return out
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def split_pieces(x, y, run_start, run_end, tol):  # pragma: no cover - compiled
     """Split-and-merge's split step (``features._split``, the same arithmetic) on every run [run_start[i],
     run_end[i]) of the ordered points (x, y) at once: (start, end) of the pieces, sorted by start."""

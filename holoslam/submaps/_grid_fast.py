@@ -16,10 +16,10 @@ import math
 import numba as nb
 import numpy as np
 
-_JIT = {"cache": True, "nogil": True}
+from holoslam._jit import JIT
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def insert_scan(logodds, prob, known, marker, stamp, ox, oy, res, sx, sy, ex, ey, hit, l_hit, l_miss, l_max, p_min,
                 p_max):  # pragma: no cover
     """Insert one scan: beams from the sensor at (sx, sy) to the end points (ex, ey) (grid frame, metres).
@@ -66,7 +66,7 @@ def insert_scan(logodds, prob, known, marker, stamp, ox, oy, res, sx, sy, ex, ey
                 r += scy
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _cubic(p0, p1, p2, p3, t):  # pragma: no cover
     """Catmull-Rom cubic through p1 (t = 0) and p2 (t = 1): value and derivative in t."""
     a = -p0 + 3.0 * p1 - 3.0 * p2 + p3
@@ -77,7 +77,7 @@ def _cubic(p0, p1, p2, p3, t):  # pragma: no cover
     return v, d
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _cell(prob, r, c, outside):  # pragma: no cover
     rows, cols = prob.shape
     if 0 <= r < rows and 0 <= c < cols:
@@ -85,7 +85,7 @@ def _cell(prob, r, c, outside):  # pragma: no cover
     return outside
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def bicubic(prob, u, v, outside):  # pragma: no cover
     """Bicubic (Catmull-Rom) interpolation of ``prob`` at continuous cell coordinates (u along columns, v along
     rows, integers at cell centres): value, d/du, d/dv."""
@@ -106,7 +106,7 @@ def bicubic(prob, u, v, outside):  # pragma: no cover
     return value, du, dv
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_trans, w_rot, iters, outside):  # pragma: no cover
     """Continuous scan-to-grid matching: Gauss-Newton with Levenberg damping on
     sum_i (w_occ / sqrt(N) (1 - P(T p_i)))^2 + w_trans^2 |t - t_pred|^2 + w_rot^2 (theta - theta_pred)^2,
@@ -192,7 +192,7 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
     return x, y, t, cost, cost_occ, Hocc, used
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def window_scores(prob, ox, oy, res, px, py, cx, cy, ct, nxy, angles, outside):  # pragma: no cover
     """Mean probability of the points at every pose of a window: translations cx + i res, cy + j res for
     i, j in [-nxy, nxy] and rotations ct + angles[a]. Returns (len(angles), 2 nxy + 1, 2 nxy + 1) scores
@@ -235,7 +235,7 @@ def window_scores(prob, ox, oy, res, px, py, cx, cy, ct, nxy, angles, outside): 
     return out
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def mean_bicubic(prob, ox, oy, res, px, py, x, y, t, outside):  # pragma: no cover
     """Mean bicubic probability of the points at pose (x, y, t)."""
     c, s = math.cos(t), math.sin(t)

@@ -412,10 +412,11 @@ def _kernels():
     if _KERNELS is None:
         import numba as nb
 
+        from holoslam._jit import JIT
         from holoslam.submaps import _bnb_fast as fast
 
         _bnb_fast = fast
-        jit = nb.njit(cache=True, nogil=True)
+        jit = nb.njit(**JIT)
         global _defer
         _defer = jit(_defer)  # called by _descend_py: compiled first, as the global it reads
         _KERNELS = (jit(_top_py), jit(_descend_py))

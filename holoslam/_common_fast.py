@@ -1,0 +1,60 @@
+"""Compiled primitives shared by the kernel files of several packages (numba, :mod:`holoslam._jit` policy).
+
+* :func:`clip_segment` -- Liang-Barsky: the part of a segment inside an axis-aligned box (the ray caster clips
+  beams to the grid with it, the planner's corridor refinement finds where a segment meets a portal box).
+* :func:`csr_group` -- items grouped by an integer key, CSR style (a stable counting sort): the point buckets
+  of the front end's nearest-neighbour grid, the blocks of each planning region.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from holoslam._jit import JIT
+
+
+@nb.njit(**JIT)
+def clip_segment(ox, oy, dx, dy, lo_x, lo_y, hi_x, hi_y):  # pragma: no cover - compiled
+    """Liang-Barsky: the parameter interval [t0, t1] of o + t d, 0 <= t <= 1, inside the closed box
+    [lo_x, hi_x] x [lo_y, hi_y]; t0 > t1 when the segment misses it."""
+    t0 = 0.0
+    t1 = 1.0
+    for k in range(4):
+        if k == 0:
+            p, q = -dx, ox - lo_x
+        elif k == 1:
+            p, q = dx, hi_x - ox
+        elif k == 2:
+            p, q = -dy, oy - lo_y
+        else:
+            p, q = dy, hi_y - oy
+        if p == 0.0:
+            if q < 0.0:
+                return 1.0, 0.0
+        else:
+            r = q / p
+            if p < 0.0:
+                if r > t0:
+                    t0 = r
+            elif r < t1:
+                t1 = r
+    return t0, t1
+
+
+@nb.njit(**JIT)
+def csr_group(keys, n):  # pragma: no cover - compiled
+    """Items 0 .. m-1 grouped by their key in [0, n): (start (n + 1,), order (m,)) int64, the items of key b
+    being ``order[start[b]:start[b + 1]]`` in ascending item order (a stable counting sort)."""
+    m = keys.shape[0]
+    start = np.zeros(n + 1, dtype=np.int64)
+    for k in range(m):
+        start[keys[k] + 1] += 1
+    for b in range(n):
+        start[b + 1] += start[b]
+    fill = start[:-1].copy()
+    order = np.empty(m, dtype=np.int64)
+    for k in range(m):
+        order[fill[keys[k]]] = k
+        fill[keys[k]] += 1
+    return start, order
