@@ -148,7 +148,7 @@ def dijkstra_to(indptr, indices, data, source, targets):
     return dist, pred
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def grow_labels(lab, free, w):
     """Every free cell with label 0 gets the label of the nearest labelled cell along 4-connected free cells,
     the largest among equally near ones (the numpy fallback of ``rooms._grow``: one ring per round, each cell
@@ -207,7 +207,7 @@ def grow_labels(lab, free, w):
         lab[c] = best
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def label_max(values, labels, n):
     """(n,) the largest of the ``values`` per label 0..n-1 (flat arrays; 0 where a label has none, values
     >= 0): ``np.maximum.at`` without its per-element dispatch."""
@@ -219,7 +219,7 @@ def label_max(values, labels, n):
     return out
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def cut_lines(free, cells, reach):
     """For each cell (N, 2) of a gap: its nearest non-free cell p1 within ``reach`` cells (a square window,
     the first in raster order among equally near ones) and the nearest non-free cell p2 on the other side
@@ -260,7 +260,7 @@ def cut_lines(free, cells, reach):
     return p1, p2, ok
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _free_at(free, r, c):
     h, w = free.shape
     ri = int(np.rint(r))
@@ -270,7 +270,7 @@ def _free_at(free, r, c):
     return free[ri, ci]
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def chords(free, mid, u, v, offsets, n):
     """For each cut (middle ``mid``, unit direction ``u`` along it, ``v`` across, (N, 2) row/col): the longest
     free chord along ``u`` through the points ``mid + o v`` for each offset o (cells; a point that is not free
@@ -297,7 +297,7 @@ def chords(free, mid, u, v, offsets, n):
     return out
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def label_stats(labels, values, n):
     """Per label 0..n-1 of the flat ``labels``: the largest of the ``values`` (>= 0; 0 where none), the last
     flat index holding it (-1 where none) and the number of cells."""
