@@ -77,6 +77,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     summary = simulate(
         a.output, seed=a.seed, duration_s=a.duration, image_rate_hz=a.image_rate, noise_scale=a.noise_scale,
         wall_codes=a.wall_codes, sizeless_labels=a.sizeless_labels, profile=a.profile,
+        camera_rate_hz=a.camera_rate, exposure_ms=a.exposure_ms,
     )
     print(_json(summary) if a.json else "\n".join(f"{k}: {v}" for k, v in summary.items()))
     return EXIT_OK
@@ -372,6 +373,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration", type=float, default=None, help="seconds of robot time (default: whole route)"
     )
     s.add_argument("--image-rate", type=float, default=None, help="max camera snapshots per second")
+    s.add_argument("--camera-rate", type=float, default=0.0, metavar="HZ",
+                   help="a camera stream: every frame at HZ for the whole drive, with motion blur (default 0: "
+                   "snapshots only)")
+    s.add_argument("--exposure-ms", type=float, default=None,
+                   help="the stream's exposure in ms (default 10), over which the robot's motion blurs a frame")
     s.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise by this")
     s.add_argument("--profile", default="default",
                    help="the robot: default, noisy (3x every noise), skid-steer (another odometer); see holoslam.sim.profiles")

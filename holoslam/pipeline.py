@@ -875,10 +875,14 @@ def simulate(
     wall_codes: int = 0,
     sizeless_labels: int = 0,
     profile: str = "default",
+    camera_rate_hz: float = 0.0,
+    exposure_ms: float | None = None,
 ) -> dict[str, Any]:
     """Write a simulated reference-household log (``holoslam.sim``) to ``output``; ``wall_codes`` foreign QR codes
     on walls and ``sizeless_labels`` labels without a printed size can be added (``holoslam.sim.world``).
-    ``profile``: the robot (``holoslam.sim.profiles``: default, noisy, skid-steer), ``noise_scale`` on top."""
+    ``profile``: the robot (``holoslam.sim.profiles``: default, noisy, skid-steer), ``noise_scale`` on top.
+    ``camera_rate_hz`` > 0: a camera stream, every frame at that rate with motion blur over ``exposure_ms``
+    (``holoslam.sim.stream``)."""
     from holoslam.sim import simulate_to_file
     from holoslam.sim.profiles import profile_config
 
@@ -893,6 +897,10 @@ def simulate(
         kw["duration_s"] = duration_s
     if image_rate_hz is not None:
         kw["image_rate_hz"] = image_rate_hz
+    if camera_rate_hz:
+        kw["camera_rate_hz"] = camera_rate_hz
+    if exposure_ms is not None:
+        kw["camera_exposure_ms"] = exposure_ms
     cfg = profile_config(profile, **kw)
     if noise_scale != 1.0:
         cfg = cfg.with_noise_scale(noise_scale)

@@ -54,6 +54,13 @@ class SimConfig:
     jpeg_quality: int = 55
     wall_codes: int = 0  # foreign QR codes on walls (holoslam.sim.world.WALL_CODES, the first k)
     sizeless_labels: int = 0  # labels printed without their size (holoslam.sim.world.SIZELESS_ORDER, the first k)
+    # camera stream (holoslam.sim.stream): frames per second for the whole drive; 0 = operator snapshots only
+    camera_rate_hz: float = 0.0
+    # ms: the stream's exposure, over which the robot's motion blurs a frame; a typical indoor auto-exposure of
+    # a robot's CMOS camera (5-30 ms at a few hundred lux); the longest a 15 fps stream allows is 66 ms
+    camera_exposure_ms: float = 10.0
+    # s: how long the stream's head tracks a label after the operator's logic aimed at it (then it looks ahead)
+    camera_dwell_s: float = 2.0
 
     def __post_init__(self) -> None:
         checks = [
@@ -79,6 +86,10 @@ class SimConfig:
             ("laser_sigma", self.laser_sigma >= 0, ">= 0"),
             ("wall_codes", 0 <= self.wall_codes <= 12, "0..12"),
             ("sizeless_labels", 0 <= self.sizeless_labels <= 8, "0..8"),
+            ("camera_rate_hz", 0 <= self.camera_rate_hz <= 60, "0 (no stream) or up to 60 frames per second"),
+            ("camera_exposure_ms", 0 <= self.camera_exposure_ms <= 1000.0 / max(self.camera_rate_hz, 1.0),
+             "0 ms up to one frame period"),
+            ("camera_dwell_s", self.camera_dwell_s >= 0, ">= 0 seconds"),
         ]
         for name, ok, what in checks:
             if not ok:
@@ -109,6 +120,9 @@ class SimConfig:
         d = {k: repr(v) if isinstance(v, float) else str(v) for k, v in dataclasses.asdict(self).items()}
         for extra in ("wall_codes", "sizeless_labels"):  # the reference household's log stays as it was
             if not getattr(self, extra):
+                del d[extra]
+        if not self.camera_rate_hz:  # snapshot mode: the stream's settings are not part of the run
+            for extra in ("camera_rate_hz", "camera_exposure_ms", "camera_dwell_s"):
                 del d[extra]
         for name, default in (("odom_lateral_sigma", 0.0), ("odom_covariance", "propagated")):
             if getattr(self, name) == default:  # likewise: absent from a differential-drive profile's metadata
@@ -173,7 +187,23 @@ def simulate_household(config: SimConfig = SimConfig()) -> SimulatedRun:
         world, traj.stamps_ns, traj.wTb, rng(3), rate_hz=config.laser_rate_hz, sigma=config.laser_sigma
     )
     snaps: list = []
-    if config.image_rate_hz > 0:
+    if config.camera_rate_hz > 0:
+        from holoslam.sim.stream import camera_stream
+
+        snaps = camera_stream(
+            world,
+            traj.stamps_ns,
+            traj.wTb,
+            rng(4),
+            rate_hz=config.camera_rate_hz,
+            exposure_s=config.camera_exposure_ms * 1e-3,
+            dwell_s=config.camera_dwell_s,
+            image_rate_hz=config.image_rate_hz,
+            resnap_s=config.resnap_s,
+            jpeg_quality=config.jpeg_quality,
+            size=(config.image_width, config.image_height),
+        )
+    elif config.image_rate_hz > 0:
         snaps = camera_snapshots(
             world,
             traj.stamps_ns,

@@ -126,7 +126,8 @@ class ScanStream:
 @dataclass(frozen=True)
 class Snapshot:
     """One camera image: when, where the head pointed, the intrinsics, the rendered JPEG, the readable
-    labels (object ids), and their published sightings (payload, corners (4, 2) TL, TR, BR, BL)."""
+    labels (object ids), their published sightings (payload, corners (4, 2) TL, TR, BR, BL), the label the
+    head aimed at ("" for an idle stream frame) and the frame's motion blur."""
 
     stamp_ns: int
     pan: float
@@ -137,6 +138,7 @@ class Snapshot:
     visible_ids: tuple[str, ...]
     tags: tuple[tuple[str, np.ndarray], ...]
     target_id: str
+    blur_px: float = 0.0  # motion blur over the exposure (camera-stream frames, holoslam.sim.stream), px
 
 
 def wrap_angle(theta: np.ndarray) -> np.ndarray:
