@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import time
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -33,6 +32,8 @@ from holoslam.jobs import (  # the light commands' jobs live in holoslam.jobs; k
     topology_from_map_file,
 )
 from holoslam.jobs import inspect_log_file as inspect
+from holoslam.sightings import see_objects, triangulate_objects
+from holoslam.timing import StageClock
 
 __all__ = [
     "RunConfig",
@@ -235,20 +236,6 @@ def _objects(problem: Any, solution: Any, observations: Sequence[Any], features:
     return tuple(objs)
 
 
-def _stage(progress: Progress, timings: dict[str, float], name: str):
-    class _Timer:
-        def __enter__(self):
-            progress(name)
-            self.t0 = time.perf_counter()
-            return self
-
-        def __exit__(self, *exc):
-            timings[name] = round(time.perf_counter() - self.t0, 4)
-            return False
-
-    return _Timer()
-
-
 def run(log_path: str | Path, config: RunConfig | None = None, progress: Progress | None = None) -> RunResult:
     """The main job on one log: ingest, locate objects, build and optimise the graph, build the maps and
     graphs. Raises ``IngestError`` when the log lacks what a run needs (odometry and laser scans)."""
@@ -261,14 +248,11 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     from holoslam.planning.twolayer import build_two_layer
     from holoslam.solve import CovarianceScope, Method, SolveOptions, solve
     from holoslam.submaps.frontend import build_problem
-    from holoslam.vision.observe import locate_from_log
 
     cfg = config or RunConfig()
-    progress = progress or _noop
-    timings: dict[str, float] = {}
-    t_start = time.perf_counter()
+    clock = StageClock(progress)
 
-    with _stage(progress, timings, "ingest"):
+    with clock.stage("ingest"):
         log, ingest_report = read_log(log_path, mapping=cfg.mapping, require=["odometry", "scan"])
     absent = [
         name
@@ -281,36 +265,14 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         if not present
     ]
 
-    observations: tuple = ()
-    features: dict = {}
-    vision = None
-    vision_report: dict[str, Any] = {"skipped": "the log has no images and no tag sightings"}
-    if log.images or log.tags:
-        with _stage(progress, timings, "vision"):
-            vision = locate_from_log(
-                log,
-                base_frame=cfg.vision.base_frame or log.base_frame,
-                sigma_px=cfg.vision.sigma_px,
-                source=cfg.vision.source,
-                progress=lambda done, total: progress("vision", done, total),
-                triangulate=cfg.vision.triangulate,
-                foreign=cfg.vision.foreign_landmarks,
-            )
-            observations = vision.observations
-            vision_report = dataclasses.asdict(vision.report)
-            vision_report["problems"] = list(vision_report.get("problems", ()))[:50]
-        if cfg.vision.features and log.images and vision.sightings:
-            from holoslam.vision.features import object_features_from_log
-
-            with _stage(progress, timings, "object features (Eq. 13)"):
-                features = object_features_from_log(log, vision.sightings)
+    seen = see_objects(log, cfg.vision, clock)
 
     fe_stage = "front end (submaps, Eq. 12/14/15/16)"
-    with _stage(progress, timings, fe_stage):
-        fe = build_problem(log, observations, cfg.frontend, lambda done, total: progress(fe_stage, done, total),
+    with clock.stage(fe_stage):
+        fe = build_problem(log, seen.observations, cfg.frontend, clock.progress_of(fe_stage),
                            optimize=reestimate_anchors)
 
-    with _stage(progress, timings, "optimise"):
+    with clock.stage("optimise"):
         options = SolveOptions(
             method=Method.ISAM2 if cfg.solver.method is SolverMethod.ISAM2 else Method.BATCH,
             reject_outliers=cfg.solver.reject_outliers,
@@ -322,17 +284,9 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         )
         sol = solve(fe.problem, options)
 
-    extra_sightings: dict[str, int] = {}
-    if vision is not None and vision.views:
-        with _stage(progress, timings, "objects by triangulation"):
-            fe, sol, tri = _triangulated_objects(vision.views, fe, sol, log, cfg, options)
-            observations = tuple(observations) + tri.observations
-            vision_report["triangulation"] = {**dataclasses.asdict(tri.report), "laser_ranged": tri.laser_ranged,
-                                              "problems": list(tri.report.problems)[:50]}
-            for p in tri.points:
-                extra_sightings[p.object_id] = extra_sightings.get(p.object_id, 0) + len(p.views) - 1
+    fe, sol, seen = triangulate_objects(seen, fe, sol, log, cfg, options, clock)
 
-    with _stage(progress, timings, "trajectory"):
+    with clock.stage("trajectory"):
         odom_stamps, odomTb = log.odometry_arrays()
         scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
         # a pose at every odometry and every scan stamp, so ground truth stamped by scan (relations) scores it
@@ -341,9 +295,9 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
         # between keyframes (a few tenths of a second) the wheel odometry's own motion is the most faithful
         wTb = optimised_trajectory(stamps, odom_stamps, odomTb, key_stamps, wTk)
-        objects = _objects(fe.problem, sol, observations, features, extra_sightings)
+        objects = _objects(fe.problem, sol, seen.observations, seen.features, seen.extra_sightings)
 
-    with _stage(progress, timings, "occupancy grid"):
+    with clock.stage("occupancy grid"):
         wTb_scan = optimised_trajectory(scan_stamps, odom_stamps, odomTb, key_stamps, wTk)
         wTs = g.compose(wTb_scan, np.broadcast_to(fe.bTs, wTb_scan.shape))
         grid = build_grid(
@@ -354,10 +308,10 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             no_return_clear_m=cfg.grid.no_return_clear_m,
         )
 
-    with _stage(progress, timings, "topology (thinning)"):
+    with clock.stage("topology (thinning)"):
         topology = topology_from_settings(grid, cfg.topology, anchors_wTa=sol.wTa)
 
-    with _stage(progress, timings, "holographic graph"):
+    with clock.stage("holographic graph"):
         submap_features = {
             sm.index: {
                 "n_scans": int(len(sm.scan_stamps_ns)),
@@ -383,16 +337,15 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
             edge_paths=edge_paths,
         )
 
-    with _stage(progress, timings, "planning graph"):
+    with clock.stage("planning graph"):
         planning = build_two_layer(
             _configuration_space(grid, cfg.robot.radius_m), cfg.planning.min_block_cells
         )
 
-    timings["total"] = round(time.perf_counter() - t_start, 4)
     report = _report(
         log=log,
         ingest_report=ingest_report,
-        vision_report=vision_report,
+        vision_report=seen.report,
         fe=fe,
         sol=sol,
         objects=objects,
@@ -400,12 +353,12 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         topology=topology,
         holo=holo,
         planning=planning,
-        timings=timings,
+        timings=clock.total(),
         absent=absent,
         stamps=stamps,
         wTb=wTb,
         dr=dr,
-        located_by=_located_by(observations, objects),
+        located_by=_located_by(seen.observations, objects),
         codes_truth=cfg.vision.foreign_landmarks,
     )
     return RunResult(
@@ -429,22 +382,6 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         report=report,
         rooms=rooms,
     )
-
-
-def _triangulated_objects(views: Sequence[Any], fe: Any, sol: Any, log: Any, cfg: RunConfig, options: Any):
-    """Codes without a printed size (and foreign codes) triangulated over the solved poses, added to the
-    problem as landmark measurements, and the problem solved again (``holoslam.vision.landmarks``)."""
-    from holoslam.solve import solve
-    from holoslam.vision.landmarks import triangulated_landmarks, with_landmarks
-
-    odom_stamps, odomTb = log.odometry_arrays()
-    tl = triangulated_landmarks(views, fe.submaps, sol.wTa, sol.cov_wTa, odom_stamps, odomTb, cfg.vision.sigma_px,
-                                cfg.vision.min_parallax_deg, cfg.vision.inlier_m, cfg.vision.laser_range)
-    if len(tl.ids):
-        problem = with_landmarks(fe.problem, tl, sol.wTa)
-        sol = solve(problem, options)
-        fe = dataclasses.replace(fe, problem=problem)
-    return fe, sol, tl
 
 
 def _located_by(observations: Sequence[Any], objects: Sequence[Any]) -> dict[str, dict[str, str]]:
