@@ -25,6 +25,9 @@ from holoslam.errors import ConfigError, MapError
 from holoslam.maps.settings import HolographicConfig, TopologyConfig
 from holoslam.submaps.frontend import FrontEndConfig
 
+if typing.TYPE_CHECKING:
+    from holoslam.vision.stream import StreamSettings
+
 __all__ = [
     "from_mapping",
     "to_mapping",
@@ -258,6 +261,20 @@ class VisionConfig:
     min_parallax_deg: float = 2.0  # deg between two views' rays at the code, for them to triangulate it
     inlier_m: float = 0.10  # m: a view agrees with a triangulated point when its ray passes this close
     laser_range: bool = True  # a code's range along its rays from the laser points, where views agree
+    # camera streams (holoslam.vision.stream.StreamSettings, where the defaults are justified): a quick look
+    # (zxing-cpp's fast path) before the full decode; frames showing the view just decoded are not decoded again
+    prefilter: bool = True
+    skip_same_view: bool = True
+    same_view_m: float = 0.05  # m the camera moved since the last full decode: one map cell
+    same_view_deg: float = 1.0  # deg the camera turned since: twice a PTZ head's pointing repeatability
+    same_view_max_s: float = 1.0  # s: a view is decoded again at least this often while it lasts
+
+    def stream_settings(self) -> StreamSettings:
+        """The stream settings of the vision stage (``holoslam.vision.stream``)."""
+        from holoslam.vision.stream import StreamSettings
+
+        return StreamSettings(self.prefilter, self.skip_same_view, self.same_view_m, self.same_view_deg,
+                              self.same_view_max_s)
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,7 @@ def see_objects(log: LogData, cfg: VisionConfig, clock: StageClock) -> Sightings
     ``object features (Eq. 13)`` (``holoslam.vision.features``); nothing when the log has neither images nor tag
     sightings."""
     from holoslam.vision.observe import locate_from_log
+    from holoslam.vision.stream import frames_per_second
 
     if not (log.images or log.tags):
         return Sightings()
@@ -49,9 +50,10 @@ def see_objects(log: LogData, cfg: VisionConfig, clock: StageClock) -> Sightings
             base_frame=cfg.base_frame or log.base_frame,
             sigma_px=cfg.sigma_px,
             source=cfg.source,
-            progress=clock.progress_of("vision"),
+            progress=frames_per_second(clock.progress, "vision"),
             triangulate=cfg.triangulate,
             foreign=cfg.foreign_landmarks,
+            stream=cfg.stream_settings(),
         )
         report = dataclasses.asdict(vision.report)
         report["problems"] = list(report.get("problems", ()))[:_PROBLEMS_KEPT]

@@ -40,6 +40,7 @@ from holoslam.vision.label import MAGIC, ObjectLabel, foreign_code_id, parse_lab
 from holoslam.vision.locate import DEFAULT_SIGMA_PX, observation_from_pnp
 from holoslam.vision.multiview import View
 from holoslam.vision.qr import Decoder, Fallback, detect_qr
+from holoslam.vision.stream import FrameDecoder, StreamSettings
 
 __all__ = [
     "Sighting",
@@ -85,7 +86,10 @@ class VisionReport:
     "both"); ``problems`` holds one line per image or sighting that gave nothing (corrupt image, missing
     calibration or transform, label without a size when triangulation is off), ``foreign_payloads`` the
     distinct texts of codes that are not holoslam labels. ``views`` counts the sightings kept for
-    triangulation (labels without a size: ``sizeless``; foreign codes as landmarks: ``foreign_views``)."""
+    triangulation (labels without a size: ``sizeless``; foreign codes as landmarks: ``foreign_views``).
+    On a stream (``holoslam.vision.stream``): ``full_decodes`` frames were decoded in full,
+    ``skipped_no_code`` were not because the quick look found no code, ``skipped_same_view`` because they
+    showed the view just decoded; ``frames_per_s`` is the frames per second (wall) of the image loop."""
 
     images: int = 0
     images_decoded: int = 0
@@ -108,10 +112,16 @@ class VisionReport:
     views: int = 0
     sizeless: int = 0
     foreign_views: int = 0
+    full_decodes: int = 0
+    skipped_no_code: int = 0
+    skipped_same_view: int = 0
+    frames_per_s: float = float("nan")
 
     def summary(self) -> str:
         return (
-            f"{self.images} images ({self.images_decoded} with codes, {self.corrupt_images} corrupt), "
+            f"{self.images} images ({self.images_decoded} with codes, {self.corrupt_images} corrupt; "
+            f"{self.full_decodes} decoded in full, skipped: {self.skipped_no_code} without a code, "
+            f"{self.skipped_same_view} the same view; {self.frames_per_s:.0f} frames/s), "
             f"{self.decodes} decodes ({self.labels} labels, {self.foreign} foreign, {self.rejected_payloads} "
             f"rejected), {self.tag_sightings} robot tag sightings, sightings from {self.source or 'nothing'}, "
             f"{self.observations} observations of {len(self.object_ids)} objects, {self.views} views to "
@@ -175,11 +185,14 @@ def sightings_from_log(
     fallback: Fallback | None = None,
     progress: Callable[[int, int], None] | None = None,
     foreign: bool = False,
+    stream: StreamSettings | None = None,
+    base_frame: str = "",
 ) -> tuple[list[Sighting], dict]:
     """The code sightings of a log from ``source`` (see the module docstring): holoslam labels, and with
     ``foreign`` the codes that are not labels too; and counters for the report (as a plain dict;
     ``locate_from_log`` turns it into a ``VisionReport``). ``progress(done, total)`` is called with the images
-    decoded so far, about every 2 % of them."""
+    decoded so far, about every 2 % of them. ``stream`` (default ``StreamSettings()``): the quick look and the
+    same-view skip in front of the full decode (``holoslam.vision.stream``; ``base_frame`` "" = the log's)."""
     src = resolve_source(log, source)
     c = {
         k: 0
@@ -213,6 +226,8 @@ def sightings_from_log(
             return None, foreign and bool(text)
 
     seen: set[tuple[int, str]] = set()
+    frames = FrameDecoder(log, stream or StreamSettings(), base_frame,
+                          lambda px: detect_qr(px, decoders, fallback))
     if src in (SightingSource.IMAGES, SightingSource.BOTH):
         every = max(1, -(-len(log.images) // 50))  # at most 50 calls
         for idx, im in enumerate(log.images):
@@ -221,8 +236,7 @@ def sightings_from_log(
             c["images"] += 1
             where = f"image {idx} ({im.frame_id} at {im.stamp_ns} ns)"
             try:
-                pixels = im.decode()
-                dets = detect_qr(pixels, decoders, fallback)
+                dets = frames.decode(idx, im)
             except (ImageDecodeError, VisionError) as e:
                 c["corrupt_images"] += 1
                 problems.append(f"{where}: {e}")
@@ -251,6 +265,9 @@ def sightings_from_log(
                 continue
             c["labels"] += label is not None
             out.append(s)
+    fc = frames.counts
+    c.update(full_decodes=fc.full_decodes, skipped_no_code=fc.skipped_no_code,
+             skipped_same_view=fc.skipped_same_view, frames_per_s=round(fc.frames_per_s, 1))
     c["problems"] = problems
     c["foreign_payloads"] = tuple(foreign_texts)
     c["source"] = src.value
@@ -268,15 +285,18 @@ def locate_from_log(
     progress: Callable[[int, int], None] | None = None,
     triangulate: bool = True,
     foreign: bool = False,
+    stream: StreamSettings | None = None,
 ) -> VisionResult:
     """PnP observations (label centre in the base frame, "" = ``log.base_frame``, at each image stamp, with
     covariance from ``sigma_px`` pixel noise) of every sized label sighting of ``log``, the views to
     triangulate (labels without a size when ``triangulate``; foreign codes when ``foreign`` too), and a
-    ``VisionReport``. ``progress(done, total)`` follows the image decoding (see :func:`sightings_from_log`)."""
+    ``VisionReport``. ``progress(done, total)`` follows the image decoding and ``stream`` sets how frames are
+    skipped (see :func:`sightings_from_log`)."""
     from holoslam.frames import TransformTree
 
     base_frame = base_frame or log.base_frame
-    sightings, c = sightings_from_log(log, source, decoders, fallback, progress, foreign and triangulate)
+    sightings, c = sightings_from_log(log, source, decoders, fallback, progress, foreign and triangulate, stream,
+                                      base_frame)
     problems: list[str] = list(c.pop("problems"))
     foreign_payloads = c.pop("foreign_payloads")
     tree = TransformTree(log.transforms)

@@ -1,0 +1,244 @@
+"""Vision on a camera stream: fast where there is nothing to find, careful where there is.
+
+A robot's camera topic runs at 10-30 frames a second and most frames show no code; the full decode
+(``holoslam.vision.qr.detect_qr``: zxing-cpp and zbar on every image, corners oriented and refined) costs
+5-15 ms a frame, most of it zbar's scan, whether or not the frame holds a code. ``FrameDecoder`` puts two
+cheap steps in front of it, frame by frame in stream order:
+
+1. **Can this frame hold a code?** (``quick_look``) The frame is decoded to grey only (``decode_gray``; a JPEG's
+   luma plane, without colour) and zxing-cpp's fast path runs on it and on a half-size copy (no rotation,
+   downscale pyramid or inversion tried; ``return_errors``: a symbol whose three finder patterns were found but
+   whose data did not decode counts too, so a blurred or partly read code still passes). Chosen by measurement
+   (``benchmarks/bench_vision.py``, stream section): on simulated 15 fps streams it rejects frames without a
+   code at about 1 ms each and passed every frame from which the full decode read an object's label in all
+   but a few frames per thousand (the objects were all read in neighbouring frames); the half-size pass
+   catches blurred codes that the full-size pass misses (a box blur of a few pixels is about one pixel at half
+   size). A frame that fails is not decoded (``skipped_no_code``).
+2. **Is it the view already decoded?** A frame whose camera pose (the odometry interpolated at its stamp times
+   the log's base -> camera transform, in the odometry frame) lies within ``same_view_m`` and ``same_view_deg``
+   of the last frame decoded in full, with the same intrinsics (zoom), at most ``same_view_max_s`` later, and
+   whose quick look read the same payloads (at least one), adds nothing to that frame's sightings and is not
+   decoded again (``skipped_same_view``). Without odometry or a transform the frame is decoded.
+
+Every other frame is decoded in full, exactly as without these steps (``full_decodes``), from the same pixels
+(``Image.decode``), so a log whose frames all hold codes far apart (operator snapshots) gives the same
+sightings as before. ``StreamSettings`` holds the switches and thresholds (the run configuration's ``vision``
+section sets them); ``frames_per_second`` wraps a stage's progress callback so that it reports frames per
+second.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from holoslam.errors import ConfigError, HoloslamError, ImageDecodeError
+from holoslam.types import Image, LogData
+
+__all__ = [
+    "StreamSettings",
+    "StreamCounts",
+    "FrameDecoder",
+    "QuickLook",
+    "decode_gray",
+    "quick_look",
+    "frames_per_second",
+]
+
+
+@dataclass(frozen=True)
+class StreamSettings:
+    """How the vision stage walks a camera stream (see the module docstring).
+
+    ``same_view_m`` (m) and ``same_view_deg`` (deg): a frame whose camera moved less than this since the last
+    frame decoded in full is the same view. 5 cm is one cell of the map grid (``grid.resolution``): the map
+    cannot tell the two camera positions apart, and the odometry over such a step is exact to about a
+    millimetre (a 1.5 % scale error). 1 deg is twice the pointing repeatability of a PTZ head (0.5 deg) and
+    moves a code in the image by at most 1/60 of a 60 deg field of view at zoom 1. ``same_view_max_s`` (s): a
+    view is decoded again at least this often while it lasts, so a label the robot keeps looking at gets
+    independent decodes (a payload is confirmed by a second sighting, ``maps.holographic.CONFIRMING_SIGHTINGS``)
+    and a slow odometry drift cannot chain skips; one second is under the time a person-paced robot spends
+    looking at an object (it turns toward it at up to 35 deg/s and stops)."""
+
+    prefilter: bool = True
+    skip_same_view: bool = True
+    same_view_m: float = 0.05
+    same_view_deg: float = 1.0
+    same_view_max_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("same_view_m", "same_view_deg", "same_view_max_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ConfigError(f"vision.{name} = {v!r}: expected a finite number >= 0")
+
+
+@dataclass
+class StreamCounts:
+    """What ``FrameDecoder`` did: frames seen, frames the quick look found no code in, frames skipped as the
+    view already decoded, frames decoded in full, and the seconds (wall) spent."""
+
+    frames: int = 0
+    skipped_no_code: int = 0
+    skipped_same_view: int = 0
+    full_decodes: int = 0
+    seconds: float = 0.0
+
+    @property
+    def frames_per_s(self) -> float:
+        return self.frames / self.seconds if self.seconds > 0 else float("nan")
+
+
+@dataclass(frozen=True)
+class QuickLook:
+    """The quick look's verdict on one frame: whether it can hold a code and the payloads it already read."""
+
+    candidate: bool
+    payloads: frozenset[str] = field(default_factory=frozenset)
+
+
+def decode_gray(image: Image) -> np.ndarray:
+    """The grey pixels (H, W) uint8 of ``image``: a compressed frame decoded to grey directly (a JPEG's luma
+    plane, without colour conversion), any other through ``Image.decode``. Raises ``ImageDecodeError``."""
+    import cv2
+
+    from holoslam.io.images import _compressed_kind
+    from holoslam.vision.qr import to_gray
+
+    if _compressed_kind(image.encoding.strip().lower()) is not None and image.data:
+        try:
+            g = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        except cv2.error:
+            g = None
+        if g is not None:
+            return g
+    px = image.decode()
+    if px.dtype != np.uint8:
+        raise ImageDecodeError(f"image at {image.stamp_ns} ns is {px.dtype}; QR codes need 8-bit pixels")
+    return to_gray(px)
+
+
+def quick_look(gray: np.ndarray) -> QuickLook:
+    """zxing-cpp's fast path on ``gray`` and on a half-size copy (module docstring, step 1)."""
+    import cv2
+    import zxingcpp
+
+    fmt = zxingcpp.BarcodeFormat.QRCode
+    small = {getattr(zxingcpp.BarcodeFormat, n) for n in ("MicroQRCode", "RMQRCode")
+             if hasattr(zxingcpp.BarcodeFormat, n)}
+    found = []
+    half = cv2.resize(gray, (gray.shape[1] // 2, gray.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    for g in (gray, half):
+        res = zxingcpp.read_barcodes(g, formats=fmt, try_rotate=False, try_downscale=False, try_invert=False,
+                                     text_mode=zxingcpp.TextMode.Plain, return_errors=True)
+        found += [b for b in res if b.format not in small]
+        if any(b.valid for b in found):
+            break
+    return QuickLook(bool(found), frozenset(b.text for b in found if b.valid))
+
+
+def _rotation_deg(R1: np.ndarray, R2: np.ndarray) -> float:
+    c = (np.trace(R1.T @ R2) - 1.0) / 2.0
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+class FrameDecoder:
+    """Decodes a log's frames in stream order with the quick look and the same-view skip in front of the full
+    decode (module docstring). ``decode(index, image)`` returns the frame's detections, or an empty list for a
+    skipped frame; ``counts`` says what was done."""
+
+    def __init__(self, log: LogData, settings: StreamSettings, base_frame: str,
+                 full_decode: Callable[[np.ndarray], list]) -> None:
+        self.settings = settings
+        self.counts = StreamCounts()
+        self._full = full_decode
+        self._base = base_frame or log.base_frame
+        self._tree = None
+        self._stamps, self._odom = log.odometry_arrays() if log.odometry else (np.zeros(0, np.int64), None)
+        self._infos = log.camera_infos
+        self._info_stamps = np.array([i.stamp_ns for i in self._infos], np.int64)
+        self._key: tuple[int, np.ndarray, float, frozenset[str]] | None = None
+        self._t0 = time.perf_counter()
+        if settings.skip_same_view and self._odom is not None and len(self._stamps) >= 2:
+            from holoslam.frames import TransformTree
+
+            self._tree = TransformTree(log.transforms)
+            self._theta = np.unwrap(self._odom[:, 2])
+
+    def _camera_pose(self, image: Image) -> tuple[np.ndarray, float] | None:
+        """(odomTc 4x4, focal length px) at the frame's stamp, or None when the odometry does not cover it or
+        the transform is missing."""
+        t = image.stamp_ns
+        if self._tree is None or not (self._stamps[0] <= t <= self._stamps[-1]):
+            return None
+        x, y = (float(np.interp(t, self._stamps, self._odom[:, k])) for k in (0, 1))
+        th = float(np.interp(t, self._stamps, self._theta))
+        try:
+            bTc = self._tree.lookup(self._base, image.frame_id, t)
+        except HoloslamError:
+            return None
+        c, s = math.cos(th), math.sin(th)
+        oTb = np.array([[c, -s, 0, x], [s, c, 0, y], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        fx = float("nan")
+        if len(self._infos):
+            j = int(np.clip(np.searchsorted(self._info_stamps, t), 0, len(self._infos) - 1))
+            if j > 0 and abs(self._info_stamps[j - 1] - t) < abs(self._info_stamps[j] - t):
+                j -= 1
+            fx = float(self._infos[j].K[0, 0])
+        return oTb @ bTc, fx
+
+    def _same_view(self, image: Image, pose: tuple[np.ndarray, float] | None, payloads: frozenset[str]) -> bool:
+        if self._key is None or pose is None or not payloads:
+            return False
+        st = self.settings
+        k_stamp, k_pose, k_fx, k_payloads = self._key
+        T, fx = pose
+        return (
+            payloads == k_payloads
+            and 0 <= image.stamp_ns - k_stamp <= st.same_view_max_s * 1e9
+            and (math.isnan(fx) and math.isnan(k_fx) or abs(fx - k_fx) <= 0.01 * k_fx)
+            and float(np.linalg.norm(T[:3, 3] - k_pose[:3, 3])) <= st.same_view_m
+            and _rotation_deg(T[:3, :3], k_pose[:3, :3]) <= st.same_view_deg
+        )
+
+    def decode(self, index: int, image: Image) -> list:
+        """The detections of frame ``index`` (raises ``ImageDecodeError`` / ``VisionError`` as the full decode
+        does)."""
+        c = self.counts
+        c.frames += 1
+        try:
+            if not self.settings.prefilter:
+                c.full_decodes += 1
+                return self._full(image.decode())
+            look = quick_look(decode_gray(image))
+            if not look.candidate:
+                c.skipped_no_code += 1
+                return []
+            pose = self._camera_pose(image) if self._tree is not None else None
+            if self.settings.skip_same_view and self._same_view(image, pose, look.payloads):
+                c.skipped_same_view += 1
+                return []
+            c.full_decodes += 1
+            dets = self._full(image.decode())
+            if dets and look.payloads and pose is not None:
+                self._key = (image.stamp_ns, pose[0], pose[1], look.payloads)
+            return dets
+        finally:
+            c.seconds = time.perf_counter() - self._t0
+
+
+def frames_per_second(progress: Callable[..., None], stage: str) -> Callable[[int, int], None]:
+    """A ``(done, total)`` progress callback for a stage that goes through frames: it calls
+    ``progress("<stage> (<n> frames/s)", done, total)`` with the frames per second (wall) so far."""
+    t0 = time.perf_counter()
+
+    def report(done: int, total: int) -> None:
+        dt = time.perf_counter() - t0
+        name = f"{stage} ({done / dt:.0f} frames/s)" if done and dt > 0 else stage
+        progress(name, done, total)
+
+    return report
