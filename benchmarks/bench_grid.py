@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/bench_grid.py [--quick] [--repeat N]
 
 Scan sets (sensor poses = the log's ground truth at each scan stamp composed with the base->laser transform;
-clearing distance and margin of the pipeline's defaults, ``holoslam.pipeline.GridConfig``, 5 cm cells):
+clearing distance and margin of the pipeline's defaults, ``holoslam.config.GridConfig``, 5 cm cells):
 - household: every scan of the bundled household log (``datasets/household_small.mcap``);
 - household x4: those scans four times, the copies at poses jittered by 1 cm / 0.5 deg (seeded), a 4x longer
   log over the same rooms (``--quick`` skips it).
@@ -119,7 +119,7 @@ def classes(grid: OccupancyGrid) -> np.ndarray:
 
 
 def main() -> None:
-    from holoslam.pipeline import GridConfig
+    from holoslam.config import GridConfig
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="the household scans only, 3 runs each")

@@ -69,11 +69,12 @@ def significant(grid) -> tuple[int, int]:
 def measure(name: str, grid, repeat: int, counts: bool = True) -> dict:
     import networkx as nx
 
+    from holoslam.config import RunConfig
+    from holoslam.mapping import reach_model
     from holoslam.maps.holographic import build_holographic
     from holoslam.maps.passages import EdgePaths
     from holoslam.maps.rooms import rooms_of_grid
     from holoslam.maps.topology import cycle_rank, topology_from_grid, topology_from_settings
-    from holoslam.pipeline import RunConfig, reach_model
 
     cfg = RunConfig()
     tc, hc = cfg.topology, cfg.holographic

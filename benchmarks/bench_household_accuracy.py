@@ -102,7 +102,7 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
     """Front end + solve + errors for one log and observation list -> dict of numbers."""
     from holoslam import geometry as g
     from holoslam.evaluate import object_errors, trajectory_errors, truth_at
-    from holoslam.pipeline import reestimate_anchors, run_build_options
+    from holoslam.optimise import reestimate_anchors, run_build_options
     from holoslam.solve import CovarianceScope, SolveOptions, solve
     from holoslam.submaps.frontend import build_problem
 

@@ -6,8 +6,8 @@ with and without a change, on the same code).
         [--out FILE.json] [--timing]
 
 What runs is what ``holoslam.pipeline.run`` does for the trajectory, without the maps, vision and covariances:
-``frontend.build_problem(log, optimize=pipeline.reestimate_anchors)``, ``solve`` with the run's robust kernels
-(``pipeline.run_build_options``) and the default solver settings (LM, chi-square rounds at 0.9999), keyframe poses
+``frontend.build_problem(log, optimize=optimise.reestimate_anchors)``, ``solve`` with the run's robust kernels
+(``optimise.run_build_options``) and the default solver settings (LM, chi-square rounds at 0.9999), keyframe poses
 and the wheel odometry between them at every odometry and scan stamp, scored by ``evaluate.relation_errors``
 against ``../shared/realdata/<log>.relations`` (nearest pose within 0.05 s).
 
@@ -53,10 +53,11 @@ def bench_log(name: str, data: Path, overrides: dict) -> dict:
     from holoslam.evaluate import relation_errors
     from holoslam.io.mcap import read_log
     from holoslam.io.relations import read_relations
-    from holoslam.pipeline import keyframe_poses, optimised_trajectory, reestimate_anchors, run_build_options
+    from holoslam.optimise import reestimate_anchors, run_build_options
     from holoslam.solve import SolveOptions, solve
     from holoslam.submaps import loops as loops_mod
     from holoslam.submaps.frontend import FrontEndConfig, build_problem
+    from holoslam.trajectory import keyframe_poses, optimised_trajectory
 
     log, _ = read_log(data / f"{name}.mcap", require=["odometry", "scan"])
     rel = read_relations(data / f"{name}.relations")
@@ -123,7 +124,7 @@ def bench_log(name: str, data: Path, overrides: dict) -> dict:
 
 def _record(log, loops_mod, cfg) -> list:
     """The calls of ``LoopSearch`` (submaps added, searches with their arguments) in one front-end run."""
-    from holoslam.pipeline import reestimate_anchors
+    from holoslam.optimise import reestimate_anchors
     from holoslam.submaps.frontend import FrontEndConfig, build_problem
 
     events: list = []

@@ -57,7 +57,8 @@ MEAN_TOLERANCE = 1e-6
 
 def child(log: str, out: str) -> None:
     """What ``holoslam run LOG -o OUT`` does, with the default configuration."""
-    from holoslam.pipeline import RunConfig, run_log_to_folder
+    from holoslam.config import RunConfig
+    from holoslam.run_jobs import run_log_to_folder
 
     summary = run_log_to_folder(log, out, RunConfig())
     Path(out, "bench_child.json").write_text(json.dumps({"seconds": summary["seconds"]}))

@@ -7,7 +7,7 @@ first use::
     import holoslam
 
     result = holoslam.run(holoslam.bundled_household_log(), holoslam.RunConfig())   # RunResult
-    print(holoslam.format_run_report(result.report))
+    print(result.report.text())                                                     # RunReport
     saved = holoslam.load_run("out/household")                                       # SavedRun
     sim = holoslam.simulate_household(holoslam.SimConfig(seed=2, duration_s=60))     # SimulatedRun
     fig = holoslam.viz.map_figure(result.grid, topology=result.topology)             # submodules, lazily
@@ -30,9 +30,9 @@ _LAZY: dict[str, str] = {
     "run": "holoslam.pipeline",
     "RunConfig": "holoslam.config",
     "RunResult": "holoslam.pipeline",
-    "run_log_to_folder": "holoslam.pipeline",
-    "run_logs": "holoslam.pipeline",
-    "format_run_report": "holoslam.pipeline",
+    "run_log_to_folder": "holoslam.run_jobs",
+    "run_logs": "holoslam.run_jobs",
+    "format_run_report": "holoslam.report",
     "load_run_config": "holoslam.config",
     "load_run": "holoslam.io.run_folder",
     "SavedRun": "holoslam.io.run_folder",
@@ -101,13 +101,9 @@ if TYPE_CHECKING:  # for type checkers and IDEs only; nothing is imported at run
     from holoslam.io.mcap import read_log
     from holoslam.io.run_folder import SavedRun, load_run, write_run
     from holoslam.jobs import solve_g2o_file
-    from holoslam.pipeline import (
-        RunResult,
-        format_run_report,
-        run,
-        run_log_to_folder,
-        run_logs,
-    )
+    from holoslam.pipeline import RunResult, run
+    from holoslam.report import format_run_report
+    from holoslam.run_jobs import run_log_to_folder, run_logs
     from holoslam.sim import SimConfig, SimulatedRun, simulate_household, simulate_to_file
 
 

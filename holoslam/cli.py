@@ -72,7 +72,7 @@ def _parse_xy(text: str) -> tuple[float, float]:
 
 
 def cmd_simulate(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import simulate
+    from holoslam.run_jobs import simulate
 
     summary = simulate(
         a.output, seed=a.seed, duration_s=a.duration, image_rate_hz=a.image_rate, noise_scale=a.noise_scale,
@@ -93,7 +93,8 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 
 def cmd_run(a: argparse.Namespace) -> int:
     from holoslam.batch import collect_logs
-    from holoslam.pipeline import load_run_config, run_logs
+    from holoslam.config import load_run_config
+    from holoslam.run_jobs import run_logs
 
     config = load_run_config(a.config)
     logs = collect_logs(a.logs)
@@ -195,7 +196,7 @@ def _solve_text(d: dict) -> str:
 
 
 def cmd_plan(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import plan_to_object
+    from holoslam.run_jobs import plan_to_object
 
     route = plan_to_object(a.run, a.to, from_xy=a.from_xy)
     if a.json:
@@ -206,7 +207,7 @@ def cmd_plan(a: argparse.Namespace) -> int:
 
 
 def cmd_export(a: argparse.Namespace) -> int:
-    from holoslam.pipeline import export_run
+    from holoslam.run_jobs import export_run
 
     written = export_run(a.run, a.to, formats=a.formats)
     print("\n".join(str(p) for p in written))

@@ -102,7 +102,7 @@ SYNTHETIC_DR = DeadReckoningConfig(sigma_s_per_sqrt_m=0.016, odo_sigma_heading_p
 def frontend_run():
     log, obs, t, wTb = make_log()
     dr = SYNTHETIC_DR
-    from holoslam.pipeline import reestimate_anchors
+    from holoslam.optimise import reestimate_anchors
 
     PROGRESS_CALLS.clear()
     fe = build_problem(
@@ -242,7 +242,7 @@ def test_without_compass_and_camera_scan_only_loops_recover_truth():
 
     log, _, t, wTb = make_log(seed=1)
     bare = dataclasses.replace(log, headings=(), images=(), camera_infos=(), tags=())
-    from holoslam.pipeline import reestimate_anchors, run_build_options
+    from holoslam.optimise import reestimate_anchors, run_build_options
 
     fe = build_problem(bare, (), FrontEndConfig(local=LOCAL), optimize=reestimate_anchors)
     P = fe.problem

@@ -277,7 +277,7 @@ def drifting_log(seed=0, laps=2, scale=0.03, turn_bias=0.03, drift_deg_per_m=2.0
 @pytest.fixture(scope="module")
 def drifting_run():
     from holoslam.evaluate import truth_at
-    from holoslam.pipeline import reestimate_anchors
+    from holoslam.optimise import reestimate_anchors
     from holoslam.submaps.frontend import FrontEndConfig, build_problem
     from holoslam.submaps.local_slam import LocalSlamConfig
 
@@ -321,7 +321,7 @@ def test_odometry_drifts_by_metres_and_loops_close_across_laps(drifting_run):
 
 def test_the_graph_recovers_the_truth_from_metres_of_drift(drifting_run):
     from holoslam.evaluate import trajectory_errors, truth_at
-    from holoslam.pipeline import run_build_options
+    from holoslam.optimise import run_build_options
     from holoslam.solve import SolveOptions, solve
 
     fe, _, truth, *_ = drifting_run

@@ -74,18 +74,18 @@ def test_a_log_another_robot_writes_runs_end_to_end(short_run, tmp_path):
     log, mapping = _other_robot(short_run, tmp_path)
     # a wide robot: the planning graph is built on the free space its centre fits in (one robot description)
     result = run(log, RunConfig(mapping=mapping, robot=RobotConfig(radius_m=0.35)))
-    ingest = result.report["ingest"]
+    ingest = result.report.ingest
     assert ingest["base_frame"] == "base_footprint", ingest.get("base_frame")
-    assert result.report["submaps"]["odometry_noise"]["source"] == "defaults"  # zeros: no covariance to use
-    assert set(result.report["inputs_absent"]) == {"compass", "camera images", "tag sightings"}
-    assert result.report["vision"]["skipped"]
-    assert result.report["factors"]["compass_heading"] == 0
-    assert result.report["factors"]["object_landmark"] == 0
+    assert result.report.submaps.odometry_noise["source"] == "defaults"  # zeros: no covariance to use
+    assert set(result.report.inputs_absent) == {"compass", "camera images", "tag sightings"}
+    assert result.report.vision["skipped"]
+    assert result.report.factors["compass_heading"] == 0
+    assert result.report.factors["object_landmark"] == 0
     assert len(result.objects) == 0
-    acc = result.report["accuracy"]  # the ground truth came through the mapping
+    acc = result.report.accuracy  # the ground truth came through the mapping
     # scan matching alone: 10.6 mm against 102 mm of dead reckoning (2026-12-02; 9.6 mm with all 181 beams; the
     # same beams cut to +-80 deg gave 33 mm: a weakness of the scan matching, not of the names)
-    assert acc["anchors"]["rmse_m"] < 0.021 and acc["anchors"]["rmse_m"] < 0.2 * acc["anchors_dead_reckoning"]["rmse_m"]
+    assert acc.anchors.rmse_m < 0.021 and acc.anchors.rmse_m < 0.2 * acc.anchors_dead_reckoning.rmse_m
     assert result.grid.free.sum() > 1000
     assert result.holographic.number_of_nodes() > 0
     from holoslam.maps.topology import clearance_map
@@ -139,7 +139,7 @@ def test_run_config_from_yaml(tmp_path):
 
 def test_optimised_trajectory_follows_anchors():
     from holoslam import geometry as g
-    from holoslam.pipeline import optimised_trajectory
+    from holoslam.trajectory import optimised_trajectory
 
     dr_stamps = np.arange(0, 100, dtype=np.int64) * 10
     dr = np.column_stack([np.linspace(0, 9.9, 100), np.zeros(100), np.zeros(100)])

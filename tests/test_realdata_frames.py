@@ -108,7 +108,8 @@ def test_a_simulated_log_with_raw_and_compressed_images_runs(tmp_path):
     import cv2
 
     from holoslam.io.mcap import read_log
-    from holoslam.pipeline import run, simulate
+    from holoslam.pipeline import run
+    from holoslam.run_jobs import simulate
 
     sim = tmp_path / "sim.mcap"
     simulate(sim, seed=1, duration_s=40.0)

@@ -21,9 +21,10 @@ def aces_cut(tmp_path_factory):
     from holoslam.io.mcap import read_log
     from holoslam.io.mcap_cut import cut_log
     from holoslam.io.relations import cut_relations, read_relations
-    from holoslam.pipeline import keyframe_poses, optimised_trajectory, reestimate_anchors, run_build_options
+    from holoslam.optimise import reestimate_anchors, run_build_options
     from holoslam.solve import SolveOptions, solve
     from holoslam.submaps.frontend import build_problem
+    from holoslam.trajectory import keyframe_poses, optimised_trajectory
 
     path = tmp_path_factory.mktemp("aces") / "cut.mcap"
     cut_log(REALDATA / "aces.mcap", path, 0.0, 150.0)

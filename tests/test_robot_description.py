@@ -8,10 +8,10 @@ from planning_maps import apartment_free
 
 from holoslam.config import RobotConfig, RunConfig, from_mapping, to_mapping
 from holoslam.errors import ConfigError
+from holoslam.mapping import configuration_space, reach_model
 from holoslam.maps.grid import OccupancyGrid
 from holoslam.maps.holographic import ObjectInfo, ReachModel, build_holographic
 from holoslam.maps.topology import clearance_map, topology_from_grid
-from holoslam.pipeline import _configuration_space, reach_model
 
 RES = 0.05
 
@@ -67,7 +67,7 @@ def test_reach_through_decides_the_box_in_the_middle_of_the_table(flat):
 @pytest.mark.parametrize("radius", [0.2, 0.26, 0.4])
 def test_the_configuration_space_keeps_the_cells_the_robot_centre_fits(flat, radius):
     grid, _ = flat
-    cspace = _configuration_space(grid, radius)
+    cspace = configuration_space(grid, radius)
     clr = clearance_map(grid.free, RES)
     # every cell left free has the robot's radius of free space around it, and almost every such cell is kept
     assert np.all(clr[cspace.free] >= radius - RES)

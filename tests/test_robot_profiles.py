@@ -19,7 +19,7 @@ DURATION_S = 300.0
 def _map(profile: str, seed: int, folder) -> dict:
     from holoslam.evaluate import trajectory_errors, truth_at
     from holoslam.io.mcap import read_log
-    from holoslam.pipeline import reestimate_anchors, run_build_options
+    from holoslam.optimise import reestimate_anchors, run_build_options
     from holoslam.sim import simulate_to_file
     from holoslam.sim.profiles import profile_config
     from holoslam.solve import CovarianceScope, SolveOptions, solve

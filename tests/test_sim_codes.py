@@ -66,17 +66,17 @@ def test_ten_wall_codes_each_found_once_within_5_cm(tmp_path):
     assert {v.object_id for v in default.views} == set(SIZELESS_ORDER[:4])
 
     r = run(path, RunConfig(vision=VisionConfig(foreign_landmarks=True), pictures=False, results_mcap=False))
-    acc = r.report["accuracy"]["objects"]
+    acc = r.report.accuracy.objects
     found = [o.object_id for o in r.objects if o.object_id.startswith("QR-")]
     assert sorted(found) == sorted(codes)  # each exactly once
     assert not {m.object_id.split("@")[0] for m in r.moved_objects} & codes
-    errs = np.array([acc["per_object_m"][c] for c in codes])
+    errs = np.array([acc.per_object_m[c] for c in codes])
     assert errs.max() <= 0.06, dict(zip(codes, errs, strict=True))
     assert all(o.object_type == "qr_code" for o in r.objects if o.object_id in codes)
     assert all(r.holographic.nodes[c]["kind"] == "object" for c in codes)  # the holographic graph lists them
-    located_by = r.report["objects"]["located_by"]
+    located_by = r.report.objects.located_by
     assert {located_by[c]["method"] for c in codes} <= {"triangulation", "laser_range"}
     assert all(located_by[o]["method"] != "pnp" for o in SIZELESS_ORDER[:4])
     # the sizeless labels: measured 0.8-14 cm (O10: two views, one without a laser return; pose heading error)
-    assert all(acc["per_object_m"][o] <= 0.25 for o in SIZELESS_ORDER[:4])
-    assert r.report["accuracy"]["anchors"]["rmse_m"] <= 0.015
+    assert all(acc.per_object_m[o] <= 0.25 for o in SIZELESS_ORDER[:4])
+    assert r.report.accuracy.anchors.rmse_m <= 0.015

@@ -128,12 +128,12 @@ def test_pipeline_with_isam2_reports_it_and_maps_what_batch_maps(tmp_path):
     simulate_to_file(log, SimConfig(seed=7, duration_s=120.0, image_rate_hz=0.5))
     lm = run(log, RunConfig())
     inc = run(log, RunConfig(solver=SolverConfig(method=SolverMethod.ISAM2)))
-    assert lm.report["solver"]["method"] == "batch" and inc.report["solver"]["method"] == "isam2"
-    assert inc.report["solver"]["rejected_measurements"] == lm.report["solver"]["rejected_measurements"]
-    assert inc.report["factors"]["object_landmark"] > 0  # objects were seen: landmark rounds ran
+    assert lm.report.solver.method == "batch" and inc.report.solver.method == "isam2"
+    assert inc.report.solver.rejected_measurements == lm.report.solver.rejected_measurements
+    assert inc.report.factors["object_landmark"] > 0  # objects were seen: landmark rounds ran
     assert np.abs(inc.wTa[:, :2] - lm.wTa[:, :2]).max() < 1e-4
     assert [o.object_id for o in inc.objects] == [o.object_id for o in lm.objects]
     pos_inc = np.array([o.w_position[:2] for o in inc.objects])
     pos_lm = np.array([o.w_position[:2] for o in lm.objects])
     assert np.abs(pos_inc - pos_lm).max() < 1e-4
-    assert inc.report["solver"]["final_error"] == pytest.approx(lm.report["solver"]["final_error"], rel=1e-6)
+    assert inc.report.solver.final_error == pytest.approx(lm.report.solver.final_error, rel=1e-6)

@@ -205,7 +205,6 @@ def write_run(
     from holoslam.io.results_mcap import write_results_mcap
     from holoslam.io.trajectory import write_tum
     from holoslam.maps.topology import to_graphml_ready
-    from holoslam.pipeline import format_run_report
 
     out = prepare_output_folder(out_dir)
     if progress:
@@ -225,8 +224,8 @@ def write_run(
     if getattr(result, "rooms", None) is not None:
         written.append(write_label_png(result.rooms.labels, out / "rooms.png"))
     written.append(write_planning(result.planning, out / "planning.json"))
-    (out / "report.json").write_text(dumps(result.report, indent=2))  # strict JSON: NaN/inf -> null
-    (out / "report.txt").write_text(format_run_report(result.report) + "\n")
+    (out / "report.json").write_text(dumps(result.report.to_dict(), indent=2))  # strict JSON: NaN/inf -> null
+    (out / "report.txt").write_text(result.report.text() + "\n")
     written += [out / "report.json", out / "report.txt"]
     if results_mcap:
         scene = _scene(

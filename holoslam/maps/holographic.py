@@ -112,7 +112,7 @@ class ObjectInfo:
 @dataclass(frozen=True, slots=True)
 class ReachModel:
     """Where the robot can handle an object from (module docstring). A run builds it from the robot description
-    (``holoslam.config.RobotConfig``, ``holoslam.pipeline.reach_model``), whose defaults these are and where
+    (``holoslam.config.RobotConfig``, ``holoslam.mapping.reach_model``), whose defaults these are and where
     they are justified."""
 
     robot_radius_m: float = 0.26

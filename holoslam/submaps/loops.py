@@ -16,7 +16,7 @@ corridor, or between two similar rooms, the best of the window can be an alias m
 flat score surface, and the refinement's covariance (its +-0.5 m surface) does not cover the error; such a
 match is dropped (``ambiguity="reject"``) or kept with a covariance spanning the peaks (``"span"``). An
 accepted match gives the ``loop`` relative pose of Eq. 15, mTn = mTr ∘ (nTr)^-1, with the refined match's
-covariance. Loops enter the graph with a robust kernel (Huber in a run, ``pipeline.run_build_options``) and the
+covariance. Loops enter the graph with a robust kernel (Huber in a run, ``optimise.run_build_options``) and the
 final solve's chi-square rounds, so a wrong one that passes here bends the map less. Defaults: Cartographer's
 published constraint-builder settings (SPEC §8: +-7 m, +-30 deg, 15 m, score 0.55 / 0.6, depth 7); the
 ambiguity test's were measured on the real logs (``LoopConfig``).

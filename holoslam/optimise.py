@@ -1,0 +1,52 @@
+"""The run's optimisation settings: solver options from the run configuration's ``solver`` section, the robust
+kernels of a run, and the front end's re-estimate of the anchors after loop closures."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from holoslam.config import SolverConfig
+    from holoslam.graph.build import BuildOptions
+    from holoslam.solve import SolveOptions
+
+__all__ = ["solve_options", "run_build_options", "reestimate_anchors"]
+
+
+def solve_options(cfg: SolverConfig) -> SolveOptions:
+    """The final solve's options from the run configuration's ``solver`` section, with the run's kernels."""
+    from holoslam.config import SolverMethod
+    from holoslam.solve import CovarianceScope, Method, SolveOptions
+
+    return SolveOptions(
+        method=Method.ISAM2 if cfg.method is SolverMethod.ISAM2 else Method.BATCH,
+        reject_outliers=cfg.reject_outliers,
+        chi2_probability=cfg.chi2_probability,
+        covariances=CovarianceScope.ALL if cfg.covariances else CovarianceScope.NONE,
+        max_iterations=cfg.max_iterations,
+        isam2_relinearize_threshold=cfg.isam2_relinearize_threshold,
+        build=run_build_options(),
+    )
+
+
+def reestimate_anchors(problem: Any) -> np.ndarray:
+    """The front end's re-estimate after loop closures: the anchors' poses from the relative poses found so
+    far, loops under the robust kernel, one plain solve (no outlier rounds: the final solve does those)."""
+    from holoslam.solve import SolveOptions, solve
+
+    opts = SolveOptions(reject_outliers=True, max_rounds=0, final_gaussian=False, detect_moved=False,
+                        max_iterations=50, build=run_build_options())
+    return solve(problem, opts).wTa
+
+
+def run_build_options() -> BuildOptions:
+    """Robust kernels of a run: loops under Huber (3 sigma), not DCS. On real logs the chain of scan matches is
+    less certain than its covariances say, and DCS (redescending) drops the very closures that correct it;
+    Huber keeps their pull linear beyond 3 sigma (Cartographer uses Huber on loops for the same reason). The
+    chi-square rounds of the final solve remove what is still inconsistent."""
+    from holoslam.graph import factors as fac
+    from holoslam.graph.build import BuildOptions
+
+    return BuildOptions(loop_kernel=fac.Kernel(fac.RobustKernel.HUBER, 3.0))

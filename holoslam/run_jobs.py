@@ -1,0 +1,215 @@
+"""The jobs around runs, one library call per command: run logs into output folders (one, or many in parallel),
+write a simulated log, and route in or re-export a saved run folder. Each writes only through ``holoslam.io``
+and only under the folder the caller named; the run itself is ``holoslam.pipeline.run``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from holoslam.errors import ConfigError, IngestError
+from holoslam.timing import Progress
+
+if TYPE_CHECKING:
+    from holoslam.config import RunConfig
+
+__all__ = ["run_log_to_folder", "run_logs", "simulate", "plan_to_object", "export_run"]
+
+
+def _noop(*_a: Any, **_k: Any) -> None:
+    return None
+
+
+def run_log_to_folder(
+    log: str, out_dir: str, config: RunConfig | None = None, progress: Progress | None = None
+) -> dict[str, Any]:
+    """Run one log and write its output folder; returns a short summary (for the batch runner)."""
+    from holoslam.io.run_folder import prepare_output_folder, write_run
+    from holoslam.pipeline import run
+
+    existed = Path(out_dir).exists()
+    prepare_output_folder(out_dir)  # an unwritable folder is a one-line error before the run, not after it
+    try:
+        result = run(log, config, progress)
+    except BaseException:
+        if not existed and not any(Path(out_dir).iterdir()):
+            Path(out_dir).rmdir()  # a run that failed leaves no empty folder behind
+        raise
+    written = write_run(
+        result,
+        out_dir,
+        pictures=result.config.pictures,
+        results_mcap=result.config.results_mcap,
+        progress=progress,
+    )
+    acc = result.report.accuracy
+    return {
+        "log": log,
+        "out_dir": out_dir,
+        "files": len(written),
+        "anchors": int(len(result.wTa)),
+        "objects": len(result.objects),
+        "anchor_rmse_m": acc.anchors.rmse_m if acc is not None else None,
+        "object_rmse_m": acc.objects.rmse_m if acc is not None and acc.objects is not None else None,
+        "seconds": result.report.timings_s["total"],
+        "text": result.report.text(),
+    }
+
+
+def run_logs(
+    logs: Sequence[Path],
+    out_root: str | Path,
+    config: RunConfig,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+) -> dict[str, Any]:
+    """Run one or many logs. One log writes straight into ``out_root``; many logs get one sub-folder each,
+    processed in parallel (local processes, or a Dask cluster given its scheduler address)."""
+    from holoslam.batch import run_many
+    from holoslam.io.run_folder import prepare_output_folder
+
+    progress = progress or _noop
+    if len(logs) > 1 or scheduler is not None:
+        prepare_output_folder(out_root)  # once, before any log is dispatched
+    if len(logs) == 1 and scheduler is None:
+        try:
+            summary = run_log_to_folder(str(logs[0]), str(out_root), config, progress)
+        except IngestError as e:  # name the log, once
+            msg = str(e)
+            raise IngestError(msg if msg.startswith(str(logs[0])) else f"{logs[0]}: {msg}") from None
+        return {"ok": True, "logs": [summary], "text": summary["text"] + f"\n  output: {out_root}"}
+
+    def on_done(item, done, total):
+        progress(f"{done}/{total} {'ok' if item.ok else 'FAILED'} {item.log} ({item.seconds:.1f} s)")
+
+    items = run_many(
+        run_log_to_folder,
+        logs,
+        out_root,
+        workers=workers,
+        scheduler=scheduler,
+        on_done=on_done,
+        config=config,
+    )
+    lines = [f"{sum(i.ok for i in items)} of {len(items)} logs processed into {out_root}"]
+    for i in items:
+        lines.append(
+            f"  {'ok    ' if i.ok else 'FAILED'} {i.log} -> {i.out_dir} ({i.seconds:.1f} s)"
+            + ("" if i.ok else f": {i.error}")
+        )
+    return {
+        "ok": all(i.ok for i in items),
+        "logs": [dataclasses.asdict(i) for i in items],
+        "text": "\n".join(lines),
+    }
+
+
+def simulate(
+    output: str | Path,
+    seed: int = 0,
+    duration_s: float | None = None,
+    image_rate_hz: float | None = None,
+    noise_scale: float = 1.0,
+    wall_codes: int = 0,
+    sizeless_labels: int = 0,
+    profile: str = "default",
+    camera_rate_hz: float = 0.0,
+    exposure_ms: float | None = None,
+) -> dict[str, Any]:
+    """Write a simulated reference-household log (``holoslam.sim``) to ``output``; ``wall_codes`` foreign QR codes
+    on walls and ``sizeless_labels`` labels without a printed size can be added (``holoslam.sim.world``).
+    ``profile``: the robot (``holoslam.sim.profiles``: default, noisy, skid-steer), ``noise_scale`` on top.
+    ``camera_rate_hz`` > 0: a camera stream, every frame at that rate with motion blur over ``exposure_ms``
+    (``holoslam.sim.stream``)."""
+    from holoslam.sim import simulate_to_file
+    from holoslam.sim.profiles import profile_config
+
+    if noise_scale < 0 or not np.isfinite(noise_scale):
+        raise ConfigError(f"--noise-scale must be a non-negative number, got {noise_scale}")
+    if duration_s is not None and not duration_s > 0:
+        raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
+    if image_rate_hz is not None and not image_rate_hz >= 0:
+        raise ConfigError(f"--image-rate must be >= 0 snapshots per second, got {image_rate_hz}")
+    kw: dict[str, Any] = {"seed": seed, "wall_codes": wall_codes, "sizeless_labels": sizeless_labels}
+    if duration_s is not None:
+        kw["duration_s"] = duration_s
+    if image_rate_hz is not None:
+        kw["image_rate_hz"] = image_rate_hz
+    if camera_rate_hz:
+        kw["camera_rate_hz"] = camera_rate_hz
+    if exposure_ms is not None:
+        kw["camera_exposure_ms"] = exposure_ms
+    cfg = profile_config(profile, **kw)
+    if noise_scale != 1.0:
+        cfg = cfg.with_noise_scale(noise_scale)
+    out = Path(output)
+    if out.parent and not out.parent.exists():
+        raise ConfigError(f"folder {out.parent} does not exist; create it first")
+    return simulate_to_file(out, cfg)
+
+
+def plan_to_object(
+    run_dir: str | Path, object_id: str, from_xy: tuple[float, float] | None = None
+) -> dict[str, Any]:
+    """Route from a pose (default: the run's last pose) to an object in a saved run."""
+    from holoslam.io.run_folder import load_run
+    from holoslam.maps.holographic import CONFIRMING_SIGHTINGS
+    from holoslam.planning.routes import plan_to_object as _plan
+
+    saved = load_run(run_dir, parts=("trajectory", "holographic", "planning", "grid"))
+    oid = _resolve_object(saved.holographic, object_id)
+    start = np.asarray(from_xy if from_xy is not None else saved.wTb[-1, :2], dtype=np.float64)
+    route = _plan(saved.planning, saved.holographic, saved.grid, oid, start)
+    obj = saved.holographic.nodes[oid]
+    wp = np.asarray(route.waypoints)
+    text = [
+        f"route to {oid} ({obj.get('object_type', obj.get('type', '?'))}) at "
+        f"({obj.get('x', float('nan')):.2f}, {obj.get('y', float('nan')):.2f}) from ({start[0]:.2f}, {start[1]:.2f})",
+        "  places: " + " -> ".join(str(p) for p in route.places),
+        f"  handled from: {route.goal_place}",
+        "  waypoints: " + " ".join(f"({x:.2f},{y:.2f})" for x, y in wp),
+        f"  length: {route.length:.2f} m",
+    ]
+    sightings = int(obj.get("sightings", 0))
+    if 0 < sightings < CONFIRMING_SIGHTINGS:
+        text.append(f"  note: {oid} was seen once (unconfirmed): its label may have been misread")
+    return {
+        "object": oid,
+        "sightings": sightings,
+        "from": [float(start[0]), float(start[1])],
+        "places": [str(p) for p in route.places],
+        "goal_place": route.goal_place,
+        "waypoints": wp.round(4).tolist(),
+        "length_m": round(float(route.length), 4),
+        "text": "\n".join(text),
+    }
+
+
+def _resolve_object(holo: Any, id_or_type: str) -> str:
+    from holoslam.errors import PlanningError
+    from holoslam.maps.holographic import where_is
+
+    if id_or_type in holo and holo.nodes[id_or_type].get("kind") == "object":
+        return id_or_type
+    found = where_is(holo, id_or_type) if id_or_type else []
+    if not found:
+        ids = sorted(n for n, d in holo.nodes(data=True) if d.get("kind") == "object")
+        raise PlanningError(f"no object {id_or_type!r} in this run; known objects: {', '.join(ids)}")
+    return str(found[0].get("id", found[0].get("object_id")))
+
+
+def export_run(
+    run_dir: str | Path, to: str | Path | None = None, formats: Sequence[str] = ("all",)
+) -> list[Path]:
+    """Re-export a saved run (pictures, results MCAP, graphs, TUM) into ``to`` (default: the run folder)."""
+    from holoslam.io.run_folder import export_saved, load_run
+
+    saved = load_run(run_dir)
+    return export_saved(saved, Path(to) if to is not None else Path(run_dir), set(formats))

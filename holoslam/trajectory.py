@@ -1,0 +1,83 @@
+"""The run's trajectory stage: the base pose at every odometry and scan stamp, from the optimised anchors, the
+keyframes registered in their submaps, and the wheel odometry between them (``RunTrajectory``)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from holoslam import geometry as g
+
+__all__ = ["RunTrajectory", "run_trajectory", "keyframe_poses", "optimised_trajectory"]
+
+
+@dataclass(frozen=True, eq=False)
+class RunTrajectory:
+    """The optimised base trajectory ``wTb`` and the dead-reckoned one at ``stamps_ns`` (every odometry and every
+    scan stamp, sorted, unique), and the optimised keyframes ``wTk`` at ``key_stamps_ns`` it hangs from."""
+
+    stamps_ns: np.ndarray  # (N,)
+    wTb: np.ndarray  # (N, 3)
+    dead_reckoning_wTb: np.ndarray  # (N, 3)
+    key_stamps_ns: np.ndarray  # (K,)
+    wTk: np.ndarray  # (K, 3)
+
+    def at_scans(self, log: Any) -> np.ndarray:
+        """The optimised base pose at each of the log's scans (the occupancy grid's poses), (S, 3)."""
+        odom_stamps, odomTb = log.odometry_arrays()
+        scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
+        return optimised_trajectory(scan_stamps, odom_stamps, odomTb, self.key_stamps_ns, self.wTk)
+
+
+def run_trajectory(log: Any, fe: Any, sol: Any) -> RunTrajectory:
+    """The trajectory of a run from its front end ``fe`` (dead reckoning, submaps) and solution ``sol``."""
+    from holoslam.submaps.deadreckon import interpolate_poses
+
+    odom_stamps, odomTb = log.odometry_arrays()
+    scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
+    # a pose at every odometry and every scan stamp, so ground truth stamped by scan (relations) scores it
+    stamps = np.union1d(odom_stamps, scan_stamps)
+    dr = interpolate_poses(fe.dr_stamps_ns, fe.dr_wTb, stamps)
+    key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
+    # between keyframes (a few tenths of a second) the wheel odometry's own motion is the most faithful
+    wTb = optimised_trajectory(stamps, odom_stamps, odomTb, key_stamps, wTk)
+    return RunTrajectory(stamps, wTb, dr, key_stamps, wTk)
+
+
+def optimised_trajectory(
+    stamps_ns: np.ndarray,
+    dr_stamps_ns: np.ndarray,
+    dr_wTb: np.ndarray,
+    anchor_stamps_ns: np.ndarray,
+    wTa: np.ndarray,
+) -> np.ndarray:
+    """The base pose at every stamp from optimised reference poses (anchors or keyframes) ``wTa`` at
+    ``anchor_stamps_ns``: after reference k (until the next) the pose is wTa_k composed with the dead-reckoned
+    motion since it, wTb(t) = wTa_k ∘ (drTa_k^-1 ∘ drTb(t)). Before the first, reference 0 is used backwards."""
+    from holoslam.submaps.deadreckon import interpolate_poses
+
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    dr_t = interpolate_poses(dr_stamps_ns, dr_wTb, stamps)
+    dr_a = interpolate_poses(dr_stamps_ns, dr_wTb, np.asarray(anchor_stamps_ns, dtype=np.int64))
+    k = np.clip(np.searchsorted(anchor_stamps_ns, stamps, side="right") - 1, 0, len(anchor_stamps_ns) - 1)
+    return g.compose(np.asarray(wTa)[k], g.between(dr_a[k], dr_t))
+
+
+def keyframe_poses(submaps: Sequence[Any], wTa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every submap keyframe's base pose in the world, sorted by stamp: wTb = wTa_k ∘ aTb (the keyframes are
+    registered in their submap by scan matching, so they are more accurate than dead reckoning between anchors),
+    with the scans localised in a submap without being inserted (``Submap.track_*``)."""
+    stamps = [np.concatenate([np.asarray(sm.scan_stamps_ns, np.int64), np.asarray(sm.track_stamps_ns, np.int64)])
+              for sm in submaps]
+    rel = [np.vstack([np.reshape(sm.aTb, (-1, 3)), np.reshape(sm.track_aTb, (-1, 3))]) for sm in submaps]
+    poses = [g.compose(np.broadcast_to(wTa[sm.index], r.shape), r) for sm, r in zip(submaps, rel, strict=True)]
+    if not stamps:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    s, p = np.concatenate(stamps), np.concatenate(poses).reshape(-1, 3)
+    order = np.argsort(s, kind="stable")
+    s, p = s[order], p[order]
+    keep = np.concatenate([[True], np.diff(s) > 0])
+    return s[keep], p[keep]
