@@ -133,8 +133,9 @@ class _Submap:
 def test_laser_range_along_the_rays_replaces_a_triangulation_it_agrees_with():
     """A code on a wall 3 m ahead seen from two poses 0.3 m apart whose headings are off by 0.3 deg: the
     triangulation is decimetres off along the rays (its covariance, from the poses' 0.3 deg, says so), the
-    laser's wall gives the range (each view its own measurement); with a cabinet before the wall the laser
-    disagrees with the triangulation and the triangulation is kept."""
+    laser's wall gives the range (each view its own measurement), also with a cabinet before the wall whose
+    ends the laser saw past (the surface nearest the triangulated point, not the first along the ray); where
+    only the cabinet is seen the laser disagrees with the triangulation and the triangulation is kept."""
     from holoslam.vision.landmarks import triangulated_landmarks
 
     cam = _camera(3000.0)
@@ -149,7 +150,9 @@ def test_laser_range_along_the_rays_replaces_a_triangulation_it_agrees_with():
     wTb = given
     (tri,), _ = locate_from_views(views, wTb, _Submap(wall, stamps, given).cov_aTb)
     assert np.linalg.norm(tri.w_position[:2] - w_X[:2]) > 0.1  # measured 0.29 m: range x 0.6 deg / parallax
-    for points, laser_wins in ((wall, True), (np.vstack([wall, wall[40:80] - [1.2, 0.0]]), False)):
+    cabinet = wall[40:80] - [1.2, 0.0]
+    hidden = np.vstack([wall[:40], wall[80:], cabinet])  # the wall behind the cabinet never seen
+    for points, laser_wins in ((wall, True), (np.vstack([wall, cabinet]), True), (hidden, False)):
         tl = triangulated_landmarks(views, [_Submap(points, stamps, given)], np.zeros((1, 3)), None, odo_t, odo, 0.5)
         if laser_wins:
             assert tl.laser_ranged == 2 and len(tl.ids) == 2 and tl.points == ()

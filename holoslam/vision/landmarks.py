@@ -103,18 +103,28 @@ def view_poses(
 
 _CHI2_3_999 = 16.27
 LASER_RANGE_SIGMA_M = 0.03  # along the ray: laser noise, the 5 cm decimation of the submap's points, paint
+LASER_GATE_SIGMAS = 3.0  # laser points searched within 3 sd of the triangulated point along each ray
 
 
 def laser_ranges(
     views: Sequence[View], ks: np.ndarray, aTb: np.ndarray, cov_aTb: np.ndarray, submaps: Sequence[Any],
-    sigma_px: float, lateral_m: float = 0.04,
+    sigma_px: float, lateral_m: float = 0.04, near_a: np.ndarray | None = None, gate_m: np.ndarray | None = None,
 ) -> list[tuple[np.ndarray, np.ndarray] | None]:
     """For each view: the point (3,) in its anchor's frame where its ray meets the first laser point of its
     submap within ``lateral_m`` (+1 % of the range) of the ray's horizontal projection, and its 2x2 covariance
     (range ``LASER_RANGE_SIGMA_M`` along the ray; pixels and the pose's heading across it); None when the ray
-    meets no laser point (a code above the laser's plane with nothing below it, or beyond the submap)."""
+    meets no laser point (a code above the laser's plane with nothing below it, or beyond the submap).
+
+    With an expected point ``near_a[n]`` (xy in the view's anchor frame, NaN for none) and ``gate_m[n]``, only
+    laser points whose range along the ray is within ``gate_m`` of the expected point's count: a code on a wall
+    above a table or a sideboard is ranged on the wall behind it, which the laser sees past the furniture's
+    legs or from the side, not on the furniture's front: of the laser points in the gate, the surface nearest the
+    expected point is taken."""
     out: list[tuple[np.ndarray, np.ndarray] | None] = []
-    for v, k, T, C in zip(views, ks, aTb, cov_aTb, strict=True):
+    V = len(views)
+    near = np.full((V, 2), np.nan) if near_a is None else np.asarray(near_a, np.float64).reshape(V, 2)
+    gate = np.full(V, np.inf) if gate_m is None else np.asarray(gate_m, np.float64).reshape(V)
+    for v, k, T, C, xy, gm in zip(views, ks, aTb, cov_aTb, near, gate, strict=True):
         pts = np.asarray(submaps[int(k)].points, np.float64).reshape(-1, 2)
         aTb4 = np.eye(4)
         aTb4[:2, :2] = g.rot2(T[2])
@@ -131,11 +141,18 @@ def laser_ranges(
         along = rel @ u
         perp = np.abs(rel[:, 0] * u[1] - rel[:, 1] * u[0])
         hit = (along > 0.2) & (perp <= lateral_m + 0.01 * along)
+        expected = float((xy - c[:2]) @ u) if np.isfinite(xy).all() else None
+        if expected is not None:
+            hit &= np.abs(along - expected) <= gm
         if not hit.any():
             out.append(None)
             continue
-        first = float(along[hit].min())
-        rho = float(np.median(along[hit & (along <= first + 0.05)]))
+        if expected is None:  # the first surface along the ray
+            first = float(along[hit].min())
+            rho = float(np.median(along[hit & (along <= first + 0.05)]))
+        else:  # the surface nearest the expected point (furniture in front of a wall is a surface too)
+            near_hit = float(along[hit][np.argmin(np.abs(along[hit] - expected))])
+            rho = float(np.median(along[hit & (np.abs(along - near_hit) <= 0.05)]))
         X = c + d * (rho / h)
         f = float(v.camera.K[0, 0])
         lat2 = (rho * sigma_px / f) ** 2 + rho**2 * C[2, 2] + max(C[0, 0], C[1, 1])
@@ -143,6 +160,22 @@ def laser_ranges(
         R = np.column_stack([u, [-u[1], u[0]]])
         out.append((X, R @ np.diag([along2, lat2]) @ R.T))
     return out
+
+
+def _gated_laser_ranges(
+    views: Sequence[View], points: Sequence[MultiViewPoint], ks: np.ndarray, aTb: np.ndarray, cov_aTb: np.ndarray,
+    wTa: np.ndarray, submaps: Sequence[Any], sigma_px: float,
+) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """``laser_ranges`` of each view, searched along its ray within ``LASER_GATE_SIGMAS`` standard deviations (of
+    its triangulated point's horizontal position, + ``LASER_RANGE_SIGMA_M``) of that point."""
+    near = np.full((len(views), 2), np.nan)
+    gate = np.full(len(views), np.inf)
+    for p in points:
+        sd = float(np.sqrt(max(np.linalg.eigvalsh(p.cov_w_position[:2, :2]).max(), 0.0)))
+        for n in p.views:
+            near[n] = g.transform_points(g.inverse(wTa[ks[n]]), p.w_position[None, :2])[0]
+            gate[n] = LASER_GATE_SIGMAS * sd + LASER_RANGE_SIGMA_M
+    return laser_ranges(views, ks, aTb, cov_aTb, submaps, sigma_px, near_a=near, gate_m=gate)
 
 
 def triangulated_landmarks(
@@ -182,7 +215,7 @@ def triangulated_landmarks(
         points = redone
     obs, i, ids, axy, acov, z = [], [], [], [], [], []
     initial: dict[str, np.ndarray] = {}
-    laser = laser_ranges(views, ks, aTb, cov_local, submaps, sigma_px) if laser_range else [None] * V
+    laser = _gated_laser_ranges(views, points, ks, aTb, cov_local, wTa, submaps, sigma_px) if laser_range else [None] * V
     drop: set[int] = set()  # triangulated points replaced by their views' laser ranges
     ranged: list[int] = []
     for j, p in enumerate(points):
