@@ -42,6 +42,7 @@ __all__ = [
     "object_features",
     "object_crops_from_log",
     "object_features_from_log",
+    "best_views",
 ]
 
 _LBP_BINS = 10
@@ -444,6 +445,25 @@ def object_crops_from_log(
     return out, problems
 
 
+def best_views(items: Sequence[Sighting | TagSighting | ObjectObservation],
+               per_object: int) -> list[Sighting | TagSighting | ObjectObservation]:
+    """At most ``per_object`` items per object id, the ones whose label corners span the most pixels (items
+    without corners or an id are all kept: their size in the image is not known before decoding), in their
+    original order."""
+    sized: dict[str, list[tuple[float, int]]] = {}
+    keep: set[int] = set()
+    for i, it in enumerate(items):
+        oid, c = getattr(it, "object_id", None), getattr(it, "corners", None)
+        if oid is None or c is None:
+            keep.add(i)
+            continue
+        q = np.asarray(c, np.float64).reshape(4, 2)
+        sized.setdefault(oid, []).append((float(np.linalg.norm(q - np.roll(q, -1, axis=0), axis=1).mean()), i))
+    for views in sized.values():
+        keep.update(i for _, i in sorted(views, key=lambda v: -v[0])[:per_object])
+    return [it for i, it in enumerate(items) if i in keep]
+
+
 def object_features_from_log(
     log: LogData,
     items: Sequence[Sighting | TagSighting | ObjectObservation],
@@ -456,10 +476,13 @@ def object_features_from_log(
     """Eq. 13's feature set of every object sighted in ``items`` (see ``object_crops_from_log``; ``accepted``
     restricts it to accepted landmarks), keyed by object id: size = the printed label side (``s``), range =
     median PnP range, texture / colours / SIFT over at most ``max_crops`` crops per object (the ones showing
-    the label largest, i.e. the most detail). ``ObjectFeatures.to_summary()`` is its JSON-able form."""
+    the label largest, i.e. the most detail). Computed once per object from its best views, not per frame:
+    only the ``2 max_crops`` sightings of an object showing its label largest (``best_views``; the spare ones
+    stand in for views whose crop fails) are cropped, so a camera stream that sees a label in hundreds of
+    frames costs what a few snapshots do. ``ObjectFeatures.to_summary()`` is its JSON-able form."""
     if max_crops < 1:
         raise VisionError(f"max_crops must be >= 1, got {max_crops}")
-    crops_by_id, _problems = object_crops_from_log(log, items, accepted, crop_scale)
+    crops_by_id, _problems = object_crops_from_log(log, best_views(items, 2 * max_crops), accepted, crop_scale)
     out: dict[str, ObjectFeatures] = {}
     for oid in sorted(crops_by_id):
         crops = crops_by_id[oid]
