@@ -14,6 +14,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from holoslam import __version__
 from holoslam.errors import ConfigError, HoloslamError, PlanningError
@@ -335,14 +336,8 @@ def cmd_config(a: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------------- parser
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="holoslam",
-        description="Factor-graph SLAM backend for household service robots: logs in, holographic maps out.",
-    )
-    p.add_argument("--version", action="version", version=f"holoslam {__version__}")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
+def _add_run(sub: Any) -> None:
+    """The ``run`` command's arguments."""
     s = sub.add_parser("run", help="ingest, optimise and export one or many logs")
     s.add_argument("logs", nargs="+", help="MCAP files, rosbag2 folders, or folders of them")
     s.add_argument("-o", "--output", required=True, type=Path, help="output folder (one sub-folder per log)")
@@ -355,18 +350,27 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the summary as JSON only")
     s.set_defaults(func=cmd_run)
 
+
+def _add_config(sub: Any) -> None:
+    """The ``config`` command's arguments."""
     s = sub.add_parser("config", help="the run configuration: --dump writes every setting with its default")
     s.add_argument("--dump", action="store_true", help="write the whole run configuration as YAML")
     s.add_argument("--config", type=Path, help="a YAML run configuration to merge over the defaults first")
     s.add_argument("-o", "--output", type=Path, help="file to write (default: standard output)")
     s.set_defaults(func=cmd_config)
 
+
+def _add_inspect(sub: Any) -> None:
+    """The ``inspect`` command's arguments."""
     s = sub.add_parser("inspect", help="summarise a log's channels without reading its messages")
     s.add_argument("log", type=Path)
     s.add_argument("--mapping", type=Path, help="YAML topic-role mapping for custom topics")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_inspect)
 
+
+def _add_simulate(sub: Any) -> None:
+    """The ``simulate`` command's arguments."""
     s = sub.add_parser("simulate", help="write a simulated reference-household log")
     s.add_argument("-o", "--output", required=True, type=Path, help="MCAP file to write")
     s.add_argument("--seed", type=int, default=0)
@@ -387,6 +391,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_simulate)
 
+
+def _add_solve(sub: Any) -> None:
+    """The ``solve`` command's arguments."""
     s = sub.add_parser("solve", help="optimise a g2o (or TORO/iSAM text) pose graph")
     s.add_argument("input", type=Path)
     s.add_argument("-o", "--output", required=True, type=Path, help="optimised graph (.g2o)")
@@ -422,6 +429,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_solve)
 
+
+def _add_plan(sub: Any) -> None:
+    """The ``plan`` command's arguments."""
     s = sub.add_parser("plan", help="route from a pose to an object in a run's output")
     s.add_argument("run", type=Path, help="a run's output folder")
     s.add_argument("--to", required=True, help="object id (or type)")
@@ -429,6 +439,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_plan)
 
+
+def _add_export(sub: Any) -> None:
+    """The ``export`` command's arguments."""
     s = sub.add_parser("export", help="re-export a saved run (pictures, results MCAP, graphs)")
     s.add_argument("run", type=Path)
     s.add_argument("--to", type=Path, help="folder to write into (default: the run folder)")
@@ -437,6 +450,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.set_defaults(func=cmd_export)
 
+
+def _add_evaluate(sub: Any) -> None:
+    """The ``evaluate`` command's arguments."""
     s = sub.add_parser("evaluate", help="score a run's trajectory against ground truth (relations or TUM)")
     s.add_argument("target", type=Path, help="a run folder (its trajectory.tum) or a TUM trajectory file")
     ref = s.add_mutually_exclusive_group(required=True)
@@ -459,15 +475,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_evaluate)
 
+
+def _add_datasets(sub: Any) -> None:
+    """The ``datasets`` command's arguments."""
     s = sub.add_parser("datasets", help="list the bundled and known datasets and where they are")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_datasets)
 
+
+def _add_tags(sub: Any) -> None:
+    """The ``tags`` command's arguments."""
     s = sub.add_parser("tags", help="decode the QR labels in image files")
     s.add_argument("images", nargs="+")
     s.add_argument("--json", action="store_true", help="one JSON object per decoded code")
     s.set_defaults(func=cmd_tags)
 
+
+def _add_topology(sub: Any) -> None:
+    """The ``topology`` command's arguments."""
     s = sub.add_parser(
         "topology",
         help="topology graph of a ROS map_server map (PGM/PNG + YAML); with --rooms / --png its rooms too",
@@ -507,6 +532,17 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--erode-cells", type=int, metavar="N", help="erode free space by a disc first (default 0)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_topology)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="holoslam",
+        description="Factor-graph SLAM backend for household service robots: logs in, holographic maps out.",
+    )
+    p.add_argument("--version", action="version", version=f"holoslam {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add in (_add_run, _add_config, _add_inspect, _add_simulate, _add_solve, _add_plan, _add_export, _add_evaluate, _add_datasets, _add_tags, _add_topology):
+        add(sub)
     return p
 
 
