@@ -203,10 +203,10 @@ class RunReport:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (report.json)."""
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        for k, v in out.items():
-            if dataclasses.is_dataclass(v):
-                out[k] = v.to_dict() if isinstance(v, Accuracy) else dataclasses.asdict(v)
+        out: dict[str, Any] = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        for k in ("submaps", "solver", "objects", "map", "topology", "holographic", "planning"):
+            out[k] = dataclasses.asdict(out[k])
+        out["accuracy"] = self.accuracy.to_dict() if self.accuracy is not None else None
         return out
 
     @classmethod

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from holoslam.errors import ConfigError, IngestError
+from holoslam.errors import ConfigError, IngestError, PlanningError
 from holoslam.timing import Progress
 
 if TYPE_CHECKING:
@@ -165,7 +165,12 @@ def plan_to_object(
 
     saved = load_run(run_dir, parts=("trajectory", "holographic", "planning", "grid"))
     oid = _resolve_object(saved.holographic, object_id)
-    start = np.asarray(from_xy if from_xy is not None else saved.wTb[-1, :2], dtype=np.float64)
+    if from_xy is not None:
+        start = np.asarray(from_xy, dtype=np.float64)
+    elif saved.wTb is not None and len(saved.wTb):
+        start = np.asarray(saved.wTb[-1, :2], dtype=np.float64)
+    else:
+        raise PlanningError(f"{run_dir}: the run's trajectory is empty; give the start with --from x,y")
     route = _plan(saved.planning, saved.holographic, saved.grid, oid, start)
     obj = saved.holographic.nodes[oid]
     wp = np.asarray(route.waypoints)
@@ -193,7 +198,6 @@ def plan_to_object(
 
 
 def _resolve_object(holo: Any, id_or_type: str) -> str:
-    from holoslam.errors import PlanningError
     from holoslam.maps.holographic import where_is
 
     if id_or_type in holo and holo.nodes[id_or_type].get("kind") == "object":

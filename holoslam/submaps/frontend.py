@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -46,6 +47,9 @@ from holoslam.submaps.loops import LoopConfig, LoopSearch
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
 from holoslam.submaps.segment import Submap, voxel_downsample
 from holoslam.types import LogData, ObjectObservation
+
+if TYPE_CHECKING:
+    from holoslam.graph.problem import SlamProblem
 
 _CHI2_3_MEDIAN = 2.366  # median of the chi-square distribution with 3 degrees of freedom
 _CHI2_3_95 = 7.815  # its 95 % quantile
@@ -76,7 +80,7 @@ class FrontEnd:
     at an anchor's origin), and ``ambiguous_objects``: ids whose sightings all disagree (step 7), left out of the problem."""
 
     submaps: tuple[Submap, ...]
-    problem: object  # holoslam.graph.problem.SlamProblem
+    problem: SlamProblem
     dr_stamps_ns: np.ndarray
     dr_wTb: np.ndarray
     anchor_stamps_ns: np.ndarray
