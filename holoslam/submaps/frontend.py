@@ -277,9 +277,43 @@ def build_problem(
     odometry or scans. ``progress(done, total)`` is called with the scans walked, about every 2% of them.
     ``optimize(problem) -> wTa`` re-estimates the anchors after loop closures (without it the front end keeps
     its chained estimate, and loop windows grow with the distance since the start)."""
-    from holoslam.graph.problem import SlamProblem
-
     cfg = config or FrontEndConfig()
+    run = _dead_reckoning(log, cfg)  # step 1
+    closed, graph, loops = _local_slam(run, cfg, progress, optimize)  # steps 2-3
+    anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
+    problem, skipped, drop = _problem(run, closed, anchors, graph, observations, cfg)  # steps 4-6
+    return FrontEnd(tuple(closed), problem, run.dr_stamps_ns, run.dr_wTb, anchors, run.bTs, skipped,
+                    loops.tried, tuple(sorted(drop)), graph.dead_reckoning_inflation(), run.noise,
+                    len(graph.loop_groups()), len(graph.dead_reckoning_slips()))
+
+
+@dataclass(frozen=True, eq=False)
+class _Run:
+    """Step 1's results and the log's arrays the later steps read: odometry ``ost``/``opose``, compass
+    ``hst``/``hyaw``/``hsig`` (``have_h``: enough of it to use), dead-reckoning arguments with the compass
+    (``hargs``) and without it for short spans (``short``), the scans within the odometry's span, the laser pose
+    ``bTs``, the noise model, the whole-run dead reckoning ``dr_wTb`` at ``dr_stamps_ns``, and per scan the
+    odometry pose and the distance travelled."""
+
+    ost: np.ndarray
+    opose: np.ndarray
+    hst: np.ndarray
+    hyaw: np.ndarray
+    hsig: np.ndarray
+    have_h: bool
+    hargs: dict
+    short: dict
+    scans: list
+    bTs: np.ndarray
+    noise: OdometryNoise
+    dr_stamps_ns: np.ndarray
+    dr_wTb: np.ndarray
+    odo_at_scans: np.ndarray
+    travelled: np.ndarray
+
+
+def _dead_reckoning(log: LogData, cfg: FrontEndConfig) -> _Run:
+    """Step 1: the whole-run dead reckoning, starting at the odometry pose of the first scan."""
     if len(log.odometry) < 2:
         raise IngestError(f"{log.source}: the front end needs odometry (/odom), found {len(log.odometry)} records")
     if not log.scans:
@@ -298,7 +332,6 @@ def build_problem(
     if not scans:
         raise IngestError(f"{log.source}: no scan lies within the odometry's time span")
     bTs = base_to_laser(log, scans[0].frame_id, cfg.base_frame)
-    # 1. whole-run dead reckoning, starting at the odometry pose of the first scan
     t_first = int(scans[0].stamp_ns)
     start = interpolate_poses(ost, opose, np.array([t_first]))[0]
     whole = dead_reckon(ost, opose, t_first, int(ost[-1]), start=start, **hargs)
@@ -307,32 +340,41 @@ def build_problem(
     scan_t = np.array([s.stamp_ns for s in scans], dtype=np.int64)
     odo_at_scans = interpolate_poses(ost, opose, scan_t)
     travelled = np.interp((scan_t - dr_st[0]).astype(float), (dr_st - dr_st[0]).astype(float), path_len)
+    return _Run(ost, opose, hst, hyaw, hsig, have_h, hargs, short, scans, bTs, noise, dr_st, dr_wTb, odo_at_scans,
+                travelled)
 
-    # 2-3. local SLAM and revisits
-    slam = LocalSlam(cfg.local, bTs)
+
+def _local_slam(
+    run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
+    optimize: Callable[[object], np.ndarray] | None,
+) -> tuple[list[Submap], _Graph, LoopSearch]:
+    """Steps 2-3: local SLAM over the scans and the revisit search; returns the finished submaps (by index), the
+    relative-pose graph between their anchors and the loop search (its counts)."""
+    ost, opose, travelled = run.ost, run.opose, run.travelled
+    slam = LocalSlam(cfg.local, run.bTs)
     loops = LoopSearch(cfg.loops, cfg.local.match)
-    graph = _Graph(dr_wTb[0])
+    graph = _Graph(run.dr_wTb[0])
     closed: list[Submap] = []
-    n_arrivals, last_t, n_nodes = 0, t_first, 0
-    every = max(1, -(-len(scans) // 50))
-    for k, scan in enumerate(scans):
+    n_arrivals, last_t, n_nodes = 0, int(run.scans[0].stamp_ns), 0
+    every = max(1, -(-len(run.scans) // 50))
+    for k, scan in enumerate(run.scans):
         if progress is not None and k % every == 0:
-            progress(k, len(scans))
+            progress(k, len(run.scans))
         t = int(scan.stamp_ns)
         if np.count_nonzero(scan.valid) < cfg.local.match.min_points:
             continue
-        if not slam.wants(t, odo_at_scans[k]):
+        if not slam.wants(t, run.odo_at_scans[k]):
             if cfg.local.match_every_scan:
-                slam.track(t, odo_at_scans[k], scan.points())
+                slam.track(t, run.odo_at_scans[k], scan.points())
             continue
         lt = last_t
-        node = slam.add(t, odo_at_scans[k],
-                        lambda lt=lt, t=t: dead_reckon(ost, opose, lt, t, **short).cov_aTb_end,
+        node = slam.add(t, run.odo_at_scans[k],
+                        lambda lt=lt, t=t: dead_reckon(ost, opose, lt, t, **run.short).cov_aTb_end,
                         scan.points(), np.where(scan.valid, scan.ranges, np.inf).astype(np.float64),
                         scan.angles, float(travelled[k]))
         last_t, n_nodes = t, n_nodes + 1
         for m, n, mTn, cov_mTn in slam.arrivals[n_arrivals:]:
-            dr = dead_reckon(ost, opose, slam.anchor_stamps[m], slam.anchor_stamps[n], **hargs)
+            dr = dead_reckon(ost, opose, slam.anchor_stamps[m], slam.anchor_stamps[n], **run.hargs)
             graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
             graph.add(m, n, mTn, cov_mTn, "scan_match")
             graph.est.append(g.compose(graph.est[m], mTn))
@@ -352,26 +394,33 @@ def build_problem(
     slam.close()
     closed.extend(_submap_record(sm, cfg, "scans") for sm in slam.pop_finished())
     closed.sort(key=lambda sm: sm.index)
-    anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
+    return closed, graph, loops
+
+
+def _problem(
+    run: _Run, closed: list[Submap], anchors: np.ndarray, graph: _Graph, observations: Sequence[ObjectObservation],
+    cfg: FrontEndConfig,
+) -> tuple[SlamProblem, int, set[str]]:
+    """Steps 4-6: compass headings and landmarks at the anchors, ambiguous objects left out, and the SLAM
+    problem (its poses: the submaps' anchors at ``anchors``); returns it with the observations skipped and the
+    ambiguous objects' ids."""
+    from holoslam.graph.problem import HeadingMeasurements, LandmarkMeasurements, SlamProblem
+
     N = len(closed)
-    headings = _headings(hst, hyaw, hsig, anchors) if have_h else None
-    li, lid, lxy, lcov, lz, skipped = _landmarks(observations, closed, anchors, ost, opose, short)
+    headings = _headings(run.hst, run.hyaw, run.hsig, anchors) if run.have_h else None
+    li, lid, lxy, lcov, lz, skipped = _landmarks(observations, closed, anchors, run.ost, run.opose, run.short)
     init = np.array(graph.est).reshape(N, 3)
     drop, init_lm = _object_consensus(init, li, lid, lxy, lcov, cfg)
     if drop:
         keep = [k for k, name in enumerate(lid) if name not in drop]
         li, lid, lxy, lcov, lz = ([seq[k] for k in keep] for seq in (li, lid, lxy, lcov, lz))
-    from holoslam.graph.problem import HeadingMeasurements, LandmarkMeasurements
-
     landmarks = (LandmarkMeasurements(np.array(li, np.int64), tuple(lid), np.array(lxy).reshape(-1, 2),
                                       np.array(lcov).reshape(-1, 2, 2), np.array(lz))
                  if li else LandmarkMeasurements.empty())
     problem = SlamProblem(num_poses=N, relative=graph.measurements(),
                           headings=headings if headings is not None else HeadingMeasurements.empty(),
                           landmarks=landmarks, initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
-    return FrontEnd(tuple(closed), problem, dr_st, dr_wTb, anchors, bTs, skipped, loops.tried,
-                    tuple(sorted(drop)), graph.dead_reckoning_inflation(), noise, len(graph.loop_groups()),
-                    len(graph.dead_reckoning_slips()))
+    return problem, skipped, drop
 
 
 def _headings(hst, hyaw, hsig, anchors):
