@@ -5,9 +5,11 @@ blur, noise, lighting, JPEG, several codes per image), corner error (px), object
 against OpenCV's
 QRCodeDetector run in the same process.
 
-    .venv/bin/python benchmarks/bench_vision.py [--n 8] [--seed 0] [--quick]
+    .venv/bin/python benchmarks/bench_vision.py [--n 8] [--seed 0] [--quick] [--stream on|off|only]
 
-The default run takes about 40 s on one core, ``--quick`` about 15 s.
+The default run takes about 40 s on one core, ``--quick`` about 15 s, plus the camera-stream section
+(``bench_stream``: a simulated 15 fps stream of 10 minutes, ``--quick`` 2; simulated once into the temporary
+folder, about 5 minutes, then about 4 minutes: the full decode of every frame and two front-end runs).
 """
 
 from __future__ import annotations
@@ -422,6 +424,95 @@ def bench_real_photos(root: str) -> None:
               f"{false:>7d}{np.median(ms):>12.2f}{extra}")
 
 
+def _stream_log(path: str | None, seed: int, duration_s: float, rate_hz: float) -> Path:
+    """The stream log to measure: ``path``, or a simulated one (``holoslam.sim``, camera stream) kept in the
+    temporary folder so that a second run does not simulate it again."""
+    import tempfile
+
+    from holoslam.sim import SimConfig, simulate_to_file
+
+    if path:
+        return Path(path)
+    out = Path(tempfile.gettempdir()) / f"holoslam_stream_s{seed}_{duration_s:g}s_{rate_hz:g}hz.mcap"
+    if not out.exists():
+        t0 = time.perf_counter()
+        tmp = out.with_suffix(".part")
+        simulate_to_file(tmp, SimConfig(seed=seed, duration_s=duration_s, camera_rate_hz=rate_hz))
+        tmp.replace(out)
+        print(f"(simulated {out} in {time.perf_counter() - t0:.0f} s)")
+    return out
+
+
+def _stream_stages(log, settings):
+    """CPU seconds of the vision stage and of the feature stage, and their results."""
+    from holoslam.vision.features import object_features_from_log
+    from holoslam.vision.observe import locate_from_log
+
+    t0 = time.process_time()
+    res = locate_from_log(log, stream=settings)
+    t1 = time.process_time()
+    feats = object_features_from_log(log, res.sightings)
+    return t1 - t0, time.process_time() - t1, res, feats
+
+
+def _object_rmse(log, observations):
+    """Front end + solve on the log with these observations; (located ids, object RMSE m) against the world."""
+    from holoslam.evaluate import object_errors, trajectory_errors, truth_at
+    from holoslam.sim.world import world_from_json
+    from holoslam.solve import SolveOptions, solve
+    from holoslam.submaps.frontend import build_problem
+
+    fe = build_problem(log, observations)
+    sol = solve(fe.problem, SolveOptions())
+    gt_t, gt_wTb = log.ground_truth_arrays()
+    te = trajectory_errors(sol.wTa, truth_at(fe.anchor_stamps_ns, gt_t, gt_wTb))
+    truth = {o.object_id: np.asarray(o.position[:2]) for o in world_from_json(log.world_json).objects}
+    oe = object_errors(sol.landmark_ids, sol.w_landmarks, truth, te.T)
+    return set(sol.landmark_ids), oe.rmse_m
+
+
+def bench_stream(path: str | None, seed: int, duration_s: float, rate_hz: float, reps: int) -> None:
+    """A camera stream (``holoslam.vision.stream``): the vision and feature stages with the quick look and the
+    same-view skip against decoding every frame in full, on one core (CPU seconds, median of ``reps``); objects
+    located by the front end + solve from each mode's observations and their RMSE against the world; frames
+    without a code through the vision stage alone. Goals (issue 18): >= 300 frames of log per second for vision
+    + features, no object lost, RMSE no worse; >= 500 frames without a code per second."""
+    import dataclasses
+
+    from holoslam.io.mcap import read_log
+    from holoslam.vision.stream import StreamSettings
+
+    log, _ = read_log(_stream_log(path, seed, duration_s, rate_hz))
+    n = len(log.images)
+    modes = {"every frame in full": StreamSettings(prefilter=False), "stream (quick look + skip)": StreamSettings()}
+    rows = {}
+    for name, st in modes.items():
+        runs = [_stream_stages(log, st) for _ in range(1 if st.prefilter is False else reps)]
+        tv, tf = float(np.median([r[0] for r in runs])), float(np.median([r[1] for r in runs]))
+        rows[name] = (tv, tf, runs[-1][2], runs[-1][3], *_object_rmse(log, runs[-1][2].observations))
+    print(f"\n## Camera stream: {n} frames ({n / max(duration_s, 1e-9):.0f} fps, {duration_s:g} s; simulated, "
+          f"seed {seed}); CPU s on one core (median of {reps} runs; the full decode once)")
+    print(f"{'mode':28s}{'vision s':>9s}{'feat s':>8s}{'frames/s':>10s}{'ratio':>7s}{'full dec':>9s}"
+          f"{'no code':>9s}{'same':>6s}{'w/ codes':>9s}{'obs':>6s}{'objects':>8s}{'RMSE m':>8s}")
+    ref = rows["every frame in full"]
+    for name, (tv, tf, res, _feats, ids, rmse) in rows.items():
+        r = res.report
+        print(f"{name:28s}{tv:>9.1f}{tf:>8.1f}{n / (tv + tf):>10.0f}{(ref[0] + ref[1]) / (tv + tf):>7.2f}"
+              f"{r.full_decodes:>9d}{r.skipped_no_code:>9d}{r.skipped_same_view:>6d}{r.images_decoded:>9d}"
+              f"{r.observations:>6d}{len(ids):>8d}{rmse:>8.4f}")
+    lost = sorted(ref[4] - rows["stream (quick look + skip)"][4])
+    print(f"objects lost by the stream mode vs every frame in full: {len(lost)} {lost or ''}; features for "
+          f"{len(rows['stream (quick look + skip)'][3])} vs {len(ref[3])} objects")
+    full = ref[2]
+    seen = {s.image_index for s in full.sightings}
+    blank = dataclasses.replace(log, images=tuple(im for k, im in enumerate(log.images) if k not in seen),
+                                tags=())
+    ts = [_stream_stages(blank, StreamSettings())[0] for _ in range(reps)]
+    tb = float(np.median(ts))
+    print(f"frames without a code (no label read by the full decode): {len(blank.images)} through the vision stage "
+          f"in {tb:.2f} s CPU: {len(blank.images) / tb:.0f} frames/s (goal >= 500)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=None, help="views per cell (default 8, --quick 2)")
@@ -432,17 +523,28 @@ def main() -> None:
     )
     ap.add_argument("--photos", default=os.environ.get("HOLOSLAM_QR_PHOTOS", "../shared/qr"),
                     help="folders of real photos N.png with the expected text N.txt (none: without a code)")
+    ap.add_argument("--stream", choices=["on", "off", "only"], default="on",
+                    help="the camera-stream section (simulated 15 fps stream; first run simulates it, ~5 min)")
+    ap.add_argument("--stream-log", default=None, help="a stream log to use instead of simulating one")
+    ap.add_argument("--stream-duration", type=float, default=None, help="stream seconds (default 600, --quick 120)")
     a = ap.parse_args()
     import cv2
 
     cv2.setNumThreads(1)  # one core: images per second are per core
     n = a.n if a.n is not None else (2 if a.quick else 8)
     t0 = time.perf_counter()
+    dur = a.stream_duration or (120.0 if a.quick else 600.0)
+    if a.stream == "only":
+        bench_stream(a.stream_log, 2, dur, 15.0, 3)
+        print(f"\n(total {time.perf_counter() - t0:.0f} s)")
+        return
     bench_decoders(n, a.seed)
     bench_household_log(a.log, 8 if a.quick else 1)
     bench_position(n, a.seed)
     bench_speed(10 if a.quick else 30)
     bench_real_photos(a.photos)
+    if a.stream == "on":
+        bench_stream(a.stream_log, 2, dur, 15.0, 3)
     print(f"\n(total {time.perf_counter() - t0:.0f} s)")
 
 

@@ -18,7 +18,8 @@ cheap steps in front of it, frame by frame in stream order:
    the log's base -> camera transform, in the odometry frame) lies within ``same_view_m`` and ``same_view_deg``
    of the last frame decoded in full, with the same intrinsics (zoom), at most ``same_view_max_s`` later, and
    whose quick look read the same payloads (at least one), adds nothing to that frame's sightings and is not
-   decoded again (``skipped_same_view``). Without odometry or a transform the frame is decoded.
+   decoded again (``skipped_same_view``), once the view has been decoded in full ``decodes_per_view`` times.
+   Without odometry or a transform the frame is decoded.
 
 Every other frame is decoded in full, exactly as without these steps (``full_decodes``), from the same pixels
 (``Image.decode``), so a log whose frames all hold codes far apart (operator snapshots) gives the same
@@ -62,15 +63,20 @@ class StreamSettings:
     view is decoded again at least this often while it lasts, so a label the robot keeps looking at gets
     independent decodes (a payload is confirmed by a second sighting, ``maps.holographic.CONFIRMING_SIGHTINGS``)
     and a slow odometry drift cannot chain skips; one second is under the time a person-paced robot spends
-    looking at an object (it turns toward it at up to 35 deg/s and stops)."""
+    looking at an object (it turns toward it at up to 35 deg/s and stops). ``decodes_per_view``: a view is
+    decoded in full this many times before its repeats are skipped; 2 = the sightings that confirm a payload
+    (``maps.holographic.CONFIRMING_SIGHTINGS``), so an object seen in one view only is still confirmed."""
 
     prefilter: bool = True
     skip_same_view: bool = True
     same_view_m: float = 0.05
     same_view_deg: float = 1.0
     same_view_max_s: float = 1.0
+    decodes_per_view: int = 2
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.decodes_per_view, int) and self.decodes_per_view >= 1):
+            raise ConfigError(f"vision.decodes_per_view = {self.decodes_per_view!r}: expected an integer >= 1")
         for name in ("same_view_m", "same_view_deg", "same_view_max_s"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
@@ -162,6 +168,7 @@ class FrameDecoder:
         self._infos = log.camera_infos
         self._info_stamps = np.array([i.stamp_ns for i in self._infos], np.int64)
         self._key: tuple[int, np.ndarray, float, frozenset[str]] | None = None
+        self._key_decodes = 0  # full decodes of the key view so far
         self._t0 = time.perf_counter()
         if settings.skip_same_view and self._odom is not None and len(self._stamps) >= 2:
             from holoslam.frames import TransformTree
@@ -219,13 +226,17 @@ class FrameDecoder:
                 c.skipped_no_code += 1
                 return []
             pose = self._camera_pose(image) if self._tree is not None else None
-            if self.settings.skip_same_view and self._same_view(image, pose, look.payloads):
+            same = self.settings.skip_same_view and self._same_view(image, pose, look.payloads)
+            if same and self._key_decodes >= self.settings.decodes_per_view:
                 c.skipped_same_view += 1
                 return []
             c.full_decodes += 1
             dets = self._full(image.decode())
             if dets and look.payloads and pose is not None:
-                self._key = (image.stamp_ns, pose[0], pose[1], look.payloads)
+                if same:
+                    self._key_decodes += 1
+                else:
+                    self._key, self._key_decodes = (image.stamp_ns, pose[0], pose[1], look.payloads), 1
             return dets
         finally:
             c.seconds = time.perf_counter() - self._t0
