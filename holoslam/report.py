@@ -291,6 +291,12 @@ def _vision_text(v: Mapping[str, Any]) -> list[str]:
         f"decoded, {v['tag_sightings']} robot sightings, {v['observations']} object observations (PnP), "
         f"{v['foreign']} foreign codes"
     ]
+    if v.get("images") and "full_decodes" in v:  # the stream steps (holoslam.vision.stream): what was skipped
+        lines.append(
+            f"  frames: {v['images']} ({v.get('images_decoded', 0)} with codes): {v['full_decodes']} decoded in full, "
+            f"skipped {v.get('skipped_no_code', 0)} without a code (quick look) and {v.get('skipped_same_view', 0)} "
+            f"showing the view just decoded; {v.get('frames_per_s') or float('nan'):.0f} frames/s"
+        )
     t = v.get("triangulation")
     if t:
         lines.append(
