@@ -191,3 +191,17 @@ def test_features_come_from_the_best_views(stream_log, both_modes):
     feats = object_features_from_log(log, items, max_crops=2)
     assert set(feats) == set(by_id)
     assert all(1 <= f.n_crops <= 2 for f in feats.values())
+
+
+def test_cli_simulate_camera_rate(tmp_path, capsys):
+    import json
+
+    from holoslam.cli import main
+
+    out = tmp_path / "s.mcap"
+    assert main(["simulate", "-o", str(out), "--duration", "3", "--camera-rate", "5", "--exposure-ms", "20",
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert 13 <= summary["images"] <= 15  # 5 frames a second for 3 s
+    assert main(["simulate", "-o", str(out), "--duration", "3", "--camera-rate", "5", "--exposure-ms", "500"]) == 2
+    assert "camera_exposure_ms" in capsys.readouterr().err
