@@ -157,92 +157,124 @@ def build_holographic(
     objects. The rooms and doorways are ``rooms`` when given (``holoslam.maps.rooms.rooms_of_grid`` of this
     grid and topology: the caller keeps its label image, whose ids are the room nodes'), else segmented here
     with ``room_rules``; ``edge_paths``: the topology's ``passages.EdgePaths`` when the caller has them. Raises
-    ``MapError`` for malformed inputs."""
-    import cv2
+    ``MapError`` for malformed inputs.
+
+    Steps: places (rooms, doorways, crossings and dead ends in narrow space), their nodes in the frame of the
+    nearest anchor, passages along the skeleton (rooms to their doorways and narrow places, then every
+    component joined), and the objects with an edge to each room they can be handled from (reach)."""
     import networkx as nx
 
     from holoslam.maps.topology import cleaned_free, clearance_map
 
     reach_model = reach_model or ReachModel()
     p = params or PlaceParams()
-    res, ox, oy = grid.resolution, grid.origin_x, grid.origin_y
     free = cleaned_free(grid, topology)  # the free space the topology was built on
-    h, w = free.shape
-    clr = clearance_map(free, res)
+    clr = clearance_map(free, grid.resolution)
+    anchors, sids = _anchors(anchors_wTa, submap_ids)
+    edge_paths = edge_paths if edge_paths is not None else EdgePaths(topology)
+    if rooms is None:
+        rooms = segment_rooms(free, grid.resolution, edge_paths, room_rules, clearance=clr)
+    elif rooms.labels.shape != free.shape:
+        raise MapError(f"room labels are {rooms.labels.shape}, the grid {free.shape}; segment this grid's rooms")
+
+    G = nx.Graph(kind="holographic", resolution=grid.resolution)
+    places, door_keys = _places(grid, topology, rooms, clr, p)
+    cells = np.array([pl[2] for pl in places], dtype=np.int64).reshape(-1, 2)
+    frames = _add_place_nodes(G, grid, places, cells, rooms, clr, anchors, sids, submap_features)
+    passages = _Passages(G, grid, places, cells, frames, SkeletonPaths(topology, grid.resolution, edge_paths))
+    room_of_label = {pl[3]: pl[0] for pl in places if pl[1] == "room"}
+    pairs = [(room_of_label[lbl], key) for key, a, b in door_keys for lbl in (a, b) if lbl in room_of_label]
+    pairs += [
+        (room_of_label[region], key)
+        for key, place, _cell, region in places
+        if place in ("crossing", "dead_end") and region in room_of_label
+    ]
+    passages.add(pairs)
+    # every place without a passage yet (e.g. a doorway whose side is no room, a crossing outside the rooms)
+    # and every component left apart are joined to the nearest place along the skeleton, so the environment
+    # graph is connected wherever the skeleton is
+    _join_components(G, [pl[0] for pl in places], passages.sk, passages.sk_of, passages.add)
+    _add_objects(G, grid, objects, reach_model, free, clr, rooms.labels, places, cells, frames)
+    return G
+
+
+# a place: (node key, place kind, (row, col) cell, room id; 0 for a doorway)
+_Place = tuple[str, str, np.ndarray, int]
+
+
+def _anchors(anchors_wTa: np.ndarray | None, submap_ids: Sequence[int] | None) -> tuple[np.ndarray | None, list]:
+    """The anchors as (K, 3) and their submap ids (default 0..K-1)."""
     anchors = None if anchors_wTa is None else np.asarray(anchors_wTa, dtype=np.float64).reshape(-1, 3)
     if anchors is not None and submap_ids is not None and len(submap_ids) != len(anchors):
         raise MapError(f"{len(anchors)} anchors but {len(submap_ids)} submap ids; give one id per anchor")
     sids = (
         list(range(len(anchors))) if (anchors is not None and submap_ids is None) else list(submap_ids or [])
     )
+    return anchors, sids
 
-    def rc_to_xy(rc: np.ndarray) -> np.ndarray:
-        rc = np.asarray(rc, dtype=np.float64).reshape(-1, 2)
-        return np.column_stack([ox + (rc[:, 1] + 0.5) * res, oy + (rc[:, 0] + 0.5) * res])
 
-    # ---- rooms and doorways -------------------------------------------------------------------------------
-    edge_paths = edge_paths if edge_paths is not None else EdgePaths(topology)
-    if rooms is None:
-        rooms = segment_rooms(free, res, edge_paths, room_rules, clearance=clr)
-    elif rooms.labels.shape != free.shape:
-        raise MapError(f"room labels are {rooms.labels.shape}, the grid {free.shape}; segment this grid's rooms")
+def _places(grid: OccupancyGrid, topology, rooms: RoomSegmentation, clr: np.ndarray,
+            p: PlaceParams) -> tuple[list[_Place], list[tuple[str, int, int]]]:
+    """The places: every room, every doorway (with the two room ids it joins), and the crossings and dead ends
+    of the topology in narrow space inside a room, away from doorways."""
     lab = rooms.labels
-
-    # safe space for the base, and its components (reach model connectivity)
-    safe = (clr >= reach_model.robot_radius_m).astype(np.uint8)
-    _, safe_lab = cv2.connectedComponents(safe, connectivity=8)
-
-    G = nx.Graph(kind="holographic", resolution=res)
-    places: list[tuple[str, str, np.ndarray, int]] = []  # key, place, cell, room id
-    for k in range(1, rooms.n_rooms + 1):
-        places.append((f"room:{k}", "room", rooms.room_cells[k - 1], k))
+    places: list[_Place] = [(f"room:{k}", "room", rooms.room_cells[k - 1], k) for k in range(1, rooms.n_rooms + 1)]
     door_keys = []
     for i, dw in enumerate(rooms.doorways):
         places.append((f"door:{i}", "doorway", np.array(dw.cell), 0))
         door_keys.append((f"door:{i}", *dw.rooms))
-    room_cell = {k: rooms.room_cells[k - 1] for k in range(1, rooms.n_rooms + 1)}
-    # crossings and dead ends in narrow space
-    door_xy = rc_to_xy(np.array([d.cell for d in rooms.doorways])) if rooms.doorways else np.zeros((0, 2))
+    room_ids = set(range(1, rooms.n_rooms + 1))
+    door_xy = grid.cell_to_world(np.array([d.cell for d in rooms.doorways])) if rooms.doorways else np.zeros((0, 2))
     n_cross = n_dead = 0
-    for _n, d in topology.nodes(data=True):
+    for n, d in topology.nodes(data=True):
         kind = d.get("kind")
         if kind not in ("junction", "endpoint"):
             continue
         r, c = int(d["row"]), int(d["col"])
-        if 2.0 * clr[r, c] > p.corridor_width_m or lab[r, c] not in room_cell:
+        if 2.0 * clr[r, c] > p.corridor_width_m or lab[r, c] not in room_ids:
             continue
-        xy = rc_to_xy(np.array([r, c]))[0]
+        xy = grid.cell_to_world(np.array([r, c]))[0]
         if door_xy.shape[0] and np.min(np.hypot(*(door_xy - xy).T)) < p.doorway_depth_m:
             continue
-        if kind == "junction":
-            lengths = [float(ed.get("length", 0.0)) for _a, _b, ed in topology.edges(_n, data=True)]
-            if sum(1 for v in lengths if v >= p.branch_min_length_m) < 3:
-                continue
-        if kind == "endpoint":
-            # a dead-end corridor: the edge leading to the endpoint is long and narrow on average
-            inc = [ed for _a, _b, ed in topology.edges(_n, data=True) if "path" in ed]
-            if not inc:
-                continue
-            pth = np.asarray(inc[0]["path"], dtype=np.int64).reshape(-1, 2)
-            if (
-                float(inc[0].get("length", 0.0)) < p.branch_min_length_m
-                or 2.0 * float(np.mean(clr[pth[:, 0], pth[:, 1]])) > p.corridor_width_m
-            ):
-                continue
+        if not _is_narrow_place(topology, n, kind, clr, p):
+            continue
         if kind == "junction":
             places.append((f"crossing:{n_cross}", "crossing", np.array([r, c]), int(lab[r, c])))
             n_cross += 1
         else:
             places.append((f"dead_end:{n_dead}", "dead_end", np.array([r, c]), int(lab[r, c])))
             n_dead += 1
+    return places, door_keys
 
-    cells = np.array([pl[2] for pl in places], dtype=np.int64).reshape(-1, 2)
-    pxy = rc_to_xy(cells)
+
+def _is_narrow_place(topology, n, kind: str, clr: np.ndarray, p: PlaceParams) -> bool:
+    """A junction with three branches of at least ``branch_min_length_m`` (a crossing), or an endpoint at the
+    end of a long, narrow edge (a dead-end corridor)."""
+    if kind == "junction":
+        lengths = [float(ed.get("length", 0.0)) for _a, _b, ed in topology.edges(n, data=True)]
+        return sum(1 for v in lengths if v >= p.branch_min_length_m) >= 3
+    # a dead-end corridor: the edge leading to the endpoint is long and narrow on average
+    inc = [ed for _a, _b, ed in topology.edges(n, data=True) if "path" in ed]
+    if not inc:
+        return False
+    pth = np.asarray(inc[0]["path"], dtype=np.int64).reshape(-1, 2)
+    return not (
+        float(inc[0].get("length", 0.0)) < p.branch_min_length_m
+        or 2.0 * float(np.mean(clr[pth[:, 0], pth[:, 1]])) > p.corridor_width_m
+    )
+
+
+def _add_place_nodes(G, grid: OccupancyGrid, places: list[_Place], cells: np.ndarray, rooms: RoomSegmentation,
+                     clr: np.ndarray, anchors: np.ndarray | None, sids: list,
+                     submap_features: Mapping[int, Mapping[str, int]] | None) -> np.ndarray:
+    """One environment node per place, in the frame of its nearest anchor (the place itself, unrotated, when
+    there are none); returns the places' frames (P, 3)."""
+    pxy = grid.cell_to_world(cells)
     aidx = _nearest_anchor(pxy, anchors)
     frames = np.zeros((len(places), 3))
     for i, (key, place, cell, region) in enumerate(places):
         if aidx[i] >= 0:
-            frames[i] = anchors[aidx[i]]
+            frames[i] = anchors[aidx[i]]  # type: ignore[index]
         else:
             frames[i] = (pxy[i, 0], pxy[i, 1], 0.0)
         sub = int(sids[aidx[i]]) if aidx[i] >= 0 else -1
@@ -272,42 +304,56 @@ def build_holographic(
             for fk, fv in submap_features[sub].items():
                 attrs[f"feat_{fk}"] = int(fv)
         G.add_node(key, **attrs)
-    index = {pl[0]: i for i, pl in enumerate(places)}
-    room_of_label = {pl[3]: pl[0] for pl in places if pl[1] == "room"}
+    return frames
 
-    # ---- passages along the skeleton ----------------------------------------------------------------------
-    sk = SkeletonPaths(topology, res, edge_paths)
-    sk_of = sk.nearest(cells) if len(sk) and len(places) else np.zeros(0, dtype=np.int64)
 
-    def passage(i: int, j: int, seq: list[int] | None) -> tuple[np.ndarray, float, bool]:
+class _Passages:
+    """Passage edges between places along the skeleton (``SkeletonPaths``): the polyline from one place
+    through the skeleton cells between them to the other, or the straight segment where the skeleton does
+    not join them."""
+
+    def __init__(self, G, grid: OccupancyGrid, places: list[_Place], cells: np.ndarray, frames: np.ndarray,
+                 sk: SkeletonPaths) -> None:
+        self.G, self.grid, self.places, self.frames, self.sk = G, grid, places, frames, sk
+        self.pxy = grid.cell_to_world(cells)
+        self.index = {pl[0]: i for i, pl in enumerate(places)}
+        self.sk_of = sk.nearest(cells) if len(sk) and len(places) else np.zeros(0, dtype=np.int64)
+
+    def _passage(self, i: int, j: int, seq: list[int] | None) -> tuple[np.ndarray, float, bool]:
+        pxy = self.pxy
         if seq is not None:
-            pts = np.vstack([pxy[i : i + 1], rc_to_xy(sk.cells[seq]), pxy[j : j + 1]])
+            pts = np.vstack([pxy[i : i + 1], self.grid.cell_to_world(self.sk.cells[seq]), pxy[j : j + 1]])
             return pts, float(np.hypot(*np.diff(pts, axis=0).T).sum()), True
         pts = np.vstack([pxy[i], pxy[j]])
         return pts, float(np.hypot(*(pxy[j] - pxy[i]))), False
 
-    def add_env_edges(pairs: list[tuple[str, str]]) -> None:
-        """Passages for the pairs (in order; a pair already joined is skipped), one skeleton search per
-        source place."""
+    def _skeleton_paths(self, todo: list[tuple[int, int]]) -> dict[tuple[int, int], list[int] | None]:
+        """The skeleton path of each pair, one search per source place."""
+        sk, sk_of = self.sk, self.sk_of
+        if not len(sk):
+            return {}
+        by_source: dict[int, list[int]] = {}
+        for i, j in todo:
+            by_source.setdefault(int(sk_of[i]), []).append(int(sk_of[j]))
+        found = {}
+        for s, t in by_source.items():
+            reach = float(np.abs(sk.cells[t] - sk.cells[s]).sum(axis=1).max()) * self.grid.resolution
+            found[s] = sk.paths_from(s, t, limit=3.0 * reach + 2.0)
+        return {(i, j): found[int(sk_of[i])][int(sk_of[j])] for i, j in todo}
+
+    def add(self, pairs: list[tuple[str, str]]) -> None:
+        """Passages for the pairs of place keys (in order; a pair already joined is skipped)."""
+        G, places = self.G, self.places
         todo, seen = [], set()
         for ki, kj in pairs:
             if ki == kj or G.has_edge(ki, kj) or frozenset((ki, kj)) in seen:
                 continue
             seen.add(frozenset((ki, kj)))
-            todo.append((index[ki], index[kj]))
-        seqs: dict[tuple[int, int], list[int] | None] = {}
-        if len(sk):
-            by_source: dict[int, list[int]] = {}
-            for i, j in todo:
-                by_source.setdefault(int(sk_of[i]), []).append(int(sk_of[j]))
-            found = {}
-            for s, t in by_source.items():
-                reach = float(np.abs(sk.cells[t] - sk.cells[s]).sum(axis=1).max()) * res
-                found[s] = sk.paths_from(s, t, limit=3.0 * reach + 2.0)
-            seqs = {(i, j): found[int(sk_of[i])][int(sk_of[j])] for i, j in todo}
+            todo.append((self.index[ki], self.index[kj]))
+        seqs = self._skeleton_paths(todo)
         for i, j in todo:
-            pts, length, on_sk = passage(i, j, seqs.get((i, j)))
-            wij = between(frames[i], frames[j])
+            pts, length, on_sk = self._passage(i, j, seqs.get((i, j)))
+            wij = between(self.frames[i], self.frames[j])
             G.add_edge(
                 places[i][0],
                 places[j][0],
@@ -322,21 +368,20 @@ def build_holographic(
                 w_theta=float(wij[2]),
             )
 
-    pairs = [(room_of_label[lbl], key) for key, a, b in door_keys for lbl in (a, b) if lbl in room_of_label]
-    pairs += [
-        (room_of_label[region], key)
-        for key, place, _cell, region in places
-        if place in ("crossing", "dead_end") and region in room_of_label
-    ]
-    add_env_edges(pairs)
 
-    # every place without a passage yet (e.g. a doorway whose side is no room, a crossing outside the rooms)
-    # and every component left apart are joined to the nearest place along the skeleton, so the environment
-    # graph is connected wherever the skeleton is
-    _join_components(G, [pl[0] for pl in places], sk, sk_of, add_env_edges)
+def _add_objects(G, grid: OccupancyGrid, objects: Sequence[ObjectInfo], reach_model: ReachModel, free: np.ndarray,
+                 clr: np.ndarray, lab: np.ndarray, places: list[_Place], cells: np.ndarray,
+                 frames: np.ndarray) -> None:
+    """One node per object, with an edge to each room it can be handled from (``_reach``), its position in
+    that room's frame on the edge."""
+    import cv2
 
-    # ---- objects ------------------------------------------------------------------------------------------
-    rooms = [(pl[0], pl[3], index[pl[0]]) for pl in places if pl[1] == "room"]
+    # safe space for the base, and its components (reach model connectivity)
+    safe = (clr >= reach_model.robot_radius_m).astype(np.uint8)
+    _, safe_lab = cv2.connectedComponents(safe, connectivity=8)
+    index = {pl[0]: i for i, pl in enumerate(places)}
+    room_places = [(pl[0], pl[3], index[pl[0]]) for pl in places if pl[1] == "room"]
+    res, ox, oy = grid.resolution, grid.origin_x, grid.origin_y
     for ob in objects:
         attrs = dict(
             kind="object",
@@ -354,10 +399,8 @@ def build_holographic(
         if ob.object_id in G:
             raise MapError(f"object id {ob.object_id!r} is used twice (or clashes with a place key)")
         G.add_node(ob.object_id, **attrs)
-        found = _reach(ob.w_position, reach_model, free, clr, lab, safe_lab, rooms, cells, res, ox, oy)
-        if not found:
-            continue
-        for key, dist, sxy, at_home in found:
+        found = _reach(ob.w_position, reach_model, free, clr, lab, safe_lab, room_places, cells, res, ox, oy)
+        for key, dist, sxy, at_home in found or ():
             i = index[key]
             k = transform_points(inverse(frames[i]), ob.w_position[None, :2])[0]
             G.add_edge(
@@ -372,7 +415,6 @@ def build_holographic(
                 reach_y=float(sxy[1]),
                 reach_distance=float(dist),
             )
-    return G
 
 
 def _join_components(G, keys: list[str], sk: SkeletonPaths, sk_of: np.ndarray, add_env_edges) -> None:
