@@ -318,8 +318,6 @@ def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray, max_steps: i
         return e, e, e, np.zeros(1, dtype=np.int64)
     two = sk.two_neighbours(chain)
     n = is_node.shape[0]
-    cpos = np.full(n, -1, dtype=np.int64)
-    cpos[chain] = np.arange(chain.shape[0])
     tsum = np.zeros(n, dtype=np.int64)
     tsum[chain] = two[:, 0] + two[:, 1]
     node_cells = np.flatnonzero(is_node)
@@ -328,6 +326,42 @@ def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray, max_steps: i
     u0, c0 = node_cells[ii], nb[ii, kk]
     sel = ~is_node[c0]
     u0, c0 = u0[sel], c0[sel]  # a walk starts at each (node cell, chain neighbour) pair
+    walks = _walk(is_node, tsum, u0, c0, max_steps)
+    if walks is None:
+        return _trace_by_pointer_jumping(sk, is_node, node_of)
+    seq, seq_wid, last_prev, last_cell, end_node = walks
+    sizes = np.array([x.shape[0] for x in seq], dtype=np.int64)
+    if int(sizes.sum()) != 2 * chain.shape[0]:
+        return None  # chain cells no walk reached: closed loops without a node
+    cpos = np.full(n, -1, dtype=np.int64)
+    cpos[chain] = np.arange(chain.shape[0])
+    # (cell, direction) state ids as in _states: state 2 i + d at chain cell i arrived from two[i, d]
+    pc, pl = cpos[c0], cpos[last_cell]
+    start_state = 2 * pc + (two[pc, 0] != u0)
+    term_state = 2 * pl + (two[pl, 0] != last_prev)
+    kw = np.flatnonzero(term_state < (start_state ^ 1))  # one direction per chain
+    kw = kw[np.argsort(term_state[kw])]
+    m = kw.shape[0]
+    newid = np.full(u0.shape[0], -1, dtype=np.int64)
+    newid[kw] = np.arange(m)
+    g = newid[np.concatenate(seq_wid)]
+    kept = g >= 0
+    g = g[kept]
+    step = np.repeat(np.arange(sizes.shape[0]), sizes)[kept]
+    glen = np.bincount(g, minlength=m)
+    starts = np.concatenate([[0], np.cumsum(glen + 2)])
+    cells = np.empty(int(starts[-1]), dtype=np.int64)
+    cells[starts[g] + 1 + step] = np.concatenate(seq)[kept]
+    u_cell, v_cell = u0[kw], end_node[kw]
+    cells[starts[:-1]] = u_cell
+    cells[starts[1:] - 1] = v_cell
+    return node_of[u_cell], node_of[v_cell], cells, starts
+
+
+def _walk(is_node: np.ndarray, tsum: np.ndarray, u0: np.ndarray, c0: np.ndarray, max_steps: int):
+    """The lockstep walk of ``_trace`` from the (node cell ``u0``, chain cell ``c0``) pairs: the cells of each
+    step with their walk ids, and per walk its last (previous, chain) cells and the node cell it ends at; None
+    when a walk is still going after ``max_steps`` steps."""
     n_walks = u0.shape[0]
     prev, cur, wid = u0, c0, np.arange(n_walks)
     last_prev = np.empty(n_walks, dtype=np.int64)
@@ -348,31 +382,13 @@ def _trace(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray, max_steps: i
             prev, cur, wid = cur[keep], nxt[keep], wid[keep]
         else:
             prev, cur = cur, nxt
-    if cur.size == 0:
-        sizes = np.array([x.shape[0] for x in seq], dtype=np.int64)
-        if int(sizes.sum()) != 2 * chain.shape[0]:
-            return None  # chain cells no walk reached: closed loops without a node
-        # (cell, direction) state ids as in _states: state 2 i + d at chain cell i arrived from two[i, d]
-        pc, pl = cpos[c0], cpos[last_cell]
-        start_state = 2 * pc + (two[pc, 0] != u0)
-        term_state = 2 * pl + (two[pl, 0] != last_prev)
-        kw = np.flatnonzero(term_state < (start_state ^ 1))  # one direction per chain
-        kw = kw[np.argsort(term_state[kw])]
-        m = kw.shape[0]
-        newid = np.full(n_walks, -1, dtype=np.int64)
-        newid[kw] = np.arange(m)
-        g = newid[np.concatenate(seq_wid)]
-        kept = g >= 0
-        g = g[kept]
-        step = np.repeat(np.arange(sizes.shape[0]), sizes)[kept]
-        glen = np.bincount(g, minlength=m)
-        starts = np.concatenate([[0], np.cumsum(glen + 2)])
-        cells = np.empty(int(starts[-1]), dtype=np.int64)
-        cells[starts[g] + 1 + step] = np.concatenate(seq)[kept]
-        u_cell, v_cell = u0[kw], end_node[kw]
-        cells[starts[:-1]] = u_cell
-        cells[starts[1:] - 1] = v_cell
-        return node_of[u_cell], node_of[v_cell], cells, starts
+    if cur.size:
+        return None
+    return seq, seq_wid, last_prev, last_cell, end_node
+
+
+def _trace_by_pointer_jumping(sk: _Skeleton, is_node: np.ndarray, node_of: np.ndarray):
+    """``_trace`` by pointer jumping on (cell, direction) states, for chains longer than the lockstep walk."""
     _chain, here, frm, to, nxt = _states(sk, is_node)
     rank, root, done = _pointer_jump(nxt)
     if not done.all():
