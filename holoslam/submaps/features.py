@@ -155,7 +155,8 @@ def extract_features(points: np.ndarray, config: FeatureConfig | None = None) ->
         # a full-circle scan whose last beam continues its first: start at the widest gap instead
         d = np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T)
         pts = np.roll(pts, -(int(np.argmax(d)) + 1), axis=0)
-    segs, lines, order, run_of = [], [], [], []
+    segs: list[np.ndarray] = []
+    lines: list[np.ndarray] = []
     blobs = []
     fits: dict[tuple[int, int], tuple[np.ndarray, float, np.ndarray]] = {}  # each piece is fitted once
 
@@ -172,69 +173,75 @@ def extract_features(points: np.ndarray, config: FeatureConfig | None = None) ->
         extents = np.hypot(span[:, 0], span[:, 1]).tolist()
         pieces_of = _split_all(pts, runs, [e > cfg.point_max_extent for e in extents], cfg.split_tol)
     for r, (a, b) in enumerate(runs):
-        run = pts[a:b]
         if extents[r] <= cfg.point_max_extent:
             if b - a >= cfg.point_min_points:
-                blobs.append(run.mean(axis=0))
+                blobs.append(pts[a:b].mean(axis=0))
             continue
-        pieces = pieces_of[a]
-        fitted = []
-        for pa, pb in pieces:
-            if pb - pa < cfg.min_points:
-                fitted.append(None)
-                continue
-            n, d, seg = fit(a + pa, a + pb)
-            fitted.append((pa, pb, n, d, seg))
-        # merge adjacent collinear pieces
-        merged: list[tuple[int, int]] = []
-        cos_tol = np.cos(np.radians(cfg.merge_angle_deg))
-        for f in fitted:
-            if f is None:
-                merged.append((-1, -1))
-                continue
-            if merged and merged[-1][0] >= 0:
-                pa0, pb0 = merged[-1]
-                n0, d0, _ = fit(a + pa0, a + pb0)
-                if abs(n0 @ f[2]) > cos_tol and np.max(np.abs(run[f[0]:f[1]] @ n0 - d0)) < 2 * cfg.split_tol:
-                    merged[-1] = (pa0, f[1])
-                    continue
-            merged.append((f[0], f[1]))
-        for pa, pb in merged:
-            if pa < 0:
-                continue
+        for pa, pb in _merged_pieces(pts[a:b], a, pieces_of[a], fit, cfg):
             n, d, seg = fit(a + pa, a + pb)
             if np.hypot(seg[2] - seg[0], seg[3] - seg[1]) < cfg.min_length:
                 continue
             segs.append(seg)
             lines.append(np.array([n[0], n[1], d]))
-            order.append(a + pa)
-            run_of.append(r)
     S = np.array(segs).reshape(-1, 4)
     Ln = np.array(lines).reshape(-1, 3)
-    sin_min = np.sin(np.radians(cfg.corner_min_angle_deg))
+    corners, crossings = _corners_and_crossings(S, Ln, cfg)
+    return ScanFeatures(S, Ln, corners, crossings, np.array(blobs).reshape(-1, 2))
+
+
+def _merged_pieces(run: np.ndarray, a: int, pieces: list[tuple[int, int]], fit, cfg: FeatureConfig
+                   ) -> list[tuple[int, int]]:
+    """The pieces (offsets in ``run``, which starts at point ``a``) with at least ``min_points`` points, adjacent
+    collinear ones merged (normals within ``merge_angle_deg``, the next piece's points within 2 ``split_tol`` of
+    the line so far)."""
+    fitted = []
+    for pa, pb in pieces:
+        if pb - pa < cfg.min_points:
+            fitted.append(None)
+            continue
+        n, d, seg = fit(a + pa, a + pb)
+        fitted.append((pa, pb, n, d, seg))
+    merged: list[tuple[int, int]] = []
+    cos_tol = np.cos(np.radians(cfg.merge_angle_deg))
+    for f in fitted:
+        if f is None:
+            merged.append((-1, -1))
+            continue
+        if merged and merged[-1][0] >= 0:
+            pa0, pb0 = merged[-1]
+            n0, d0, _ = fit(a + pa0, a + pb0)
+            if abs(n0 @ f[2]) > cos_tol and np.max(np.abs(run[f[0]:f[1]] @ n0 - d0)) < 2 * cfg.split_tol:
+                merged[-1] = (pa0, f[1])
+                continue
+        merged.append((f[0], f[1]))
+    return [m for m in merged if m[0] >= 0]
+
+
+def _corners_and_crossings(S: np.ndarray, Ln: np.ndarray, cfg: FeatureConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Corners: pairs of segments with two ends close together (adjacent along the scan or across the wrap of a
+    full-circle scan) whose lines meet near both; crossings: the extended lines of non-adjacent segments, away
+    from the corners."""
     corners = np.zeros((0, 2))
     crossings = np.zeros((0, 2))
-    if S.shape[0] >= 2:
-        # corners: pairs of segments with two ends close together (adjacent along the scan or across the
-        # wrap of a full-circle scan) whose lines meet near both
-        i, j = np.triu_indices(S.shape[0], 1)
-        ends_i = S[i].reshape(-1, 2, 2)
-        ends_j = S[j].reshape(-1, 2, 2)
-        dd = np.hypot(ends_i[:, :, None, 0] - ends_j[:, None, :, 0], ends_i[:, :, None, 1] - ends_j[:, None, :, 1])
-        X, sn = _line_intersections(Ln[i], Ln[j])
-        tol = cfg.corner_gap + cfg.gap_per_m * np.hypot(X[:, 0], X[:, 1])  # beams spread with range
-        adjacent = dd.reshape(-1, 4).min(axis=1) < tol
-        bi, bj = _beyond(S[i], X), _beyond(S[j], X)
-        corner = adjacent & (sn >= sin_min) & (bi < tol) & (bj < tol)
-        corners = X[corner]
-        # crossings: the extended lines of non-adjacent segments
-        ok = ~adjacent & (sn >= sin_min) & (bi <= cfg.extend) & (bj <= cfg.extend)
-        X = X[ok]
-        if corners.shape[0] and X.shape[0]:
-            dmin = np.min(np.hypot(X[:, None, 0] - corners[None, :, 0], X[:, None, 1] - corners[None, :, 1]), axis=1)
-            X = X[dmin > cfg.corner_gap]
-        crossings = X
-    return ScanFeatures(S, Ln, corners, crossings, np.array(blobs).reshape(-1, 2))
+    if S.shape[0] < 2:
+        return corners, crossings
+    sin_min = np.sin(np.radians(cfg.corner_min_angle_deg))
+    i, j = np.triu_indices(S.shape[0], 1)
+    ends_i = S[i].reshape(-1, 2, 2)
+    ends_j = S[j].reshape(-1, 2, 2)
+    dd = np.hypot(ends_i[:, :, None, 0] - ends_j[:, None, :, 0], ends_i[:, :, None, 1] - ends_j[:, None, :, 1])
+    X, sn = _line_intersections(Ln[i], Ln[j])
+    tol = cfg.corner_gap + cfg.gap_per_m * np.hypot(X[:, 0], X[:, 1])  # beams spread with range
+    adjacent = dd.reshape(-1, 4).min(axis=1) < tol
+    bi, bj = _beyond(S[i], X), _beyond(S[j], X)
+    corner = adjacent & (sn >= sin_min) & (bi < tol) & (bj < tol)
+    corners = X[corner]
+    ok = ~adjacent & (sn >= sin_min) & (bi <= cfg.extend) & (bj <= cfg.extend)
+    X = X[ok]
+    if corners.shape[0] and X.shape[0]:
+        dmin = np.min(np.hypot(X[:, None, 0] - corners[None, :, 0], X[:, None, 1] - corners[None, :, 1]), axis=1)
+        X = X[dmin > cfg.corner_gap]
+    return corners, X
 
 
 def transform_features(aTb: np.ndarray, f: ScanFeatures) -> ScanFeatures:
