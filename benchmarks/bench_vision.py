@@ -505,6 +505,11 @@ def bench_stream(path: str | None, seed: int, duration_s: float, rate_hz: float,
           f"{len(rows['stream (quick look + skip)'][3])} vs {len(ref[3])} objects")
     full = ref[2]
     seen = {s.image_index for s in full.sightings}
+    from holoslam.vision.stream import decode_gray, quick_look
+
+    missed = [k for k in sorted(seen) if not quick_look(decode_gray(log.images[k])).candidate]
+    print(f"quick look: rejected {len(missed)} of the {len(seen)} frames the full decode read a label in "
+          f"({1e3 * len(missed) / max(len(seen), 1):.1f} per thousand)")
     blank = dataclasses.replace(log, images=tuple(im for k, im in enumerate(log.images) if k not in seen),
                                 tags=())
     ts = [_stream_stages(blank, StreamSettings())[0] for _ in range(reps)]

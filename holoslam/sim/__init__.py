@@ -25,6 +25,12 @@ visits every room, stops and turns in front of every object it can approach, pas
 twice (in and out; a long run loops the tour), and comes back through the living room and dining room
 many times (loops). Default duration 500 s (the committed ``datasets/household_small.mcap``).
 
+Camera stream (``SimConfig.camera_rate_hz`` > 0, ``holoslam simulate --camera-rate HZ``; off by default, so the
+bundled log stays small): every frame at that rate for the whole drive, like a real robot's camera topic; the
+head tracks a label for ``camera_dwell_s`` after each of the operator's aims and looks ahead at zoom 1 otherwise,
+so most frames show no readable code; each frame is blurred by the robot's own motion over
+``camera_exposure_ms`` (``holoslam.sim.stream``).
+
 Noise models (defaults of ``SimConfig``; details in ``holoslam.sim.sensors``):
 
 - odometer, 20 Hz: distance scale error +1.5 %, random slip 0.01 m per sqrt(m), slip events 0.05 per metre
