@@ -113,6 +113,16 @@ def node_pairs(flat, code, index, offs, is_node, node_of, n_nodes):
 def trace(flat, code, index, offs, bit0, bit1, is_node):
     """(u_cell, v_cell, cells, starts, complete): edges along chains as in ``topology._trace``; complete is
     False when chain cells remain that no walk from a node reached (closed loops without a node)."""
+    cpos, n_chain, nb2 = _chain_neighbours(flat, code, index, offs, bit0, bit1, is_node)
+    buf, wstart, wkey, nw, n_seen = _walk_chains(flat, code, index, offs, is_node, cpos, n_chain, nb2)
+    u_cell, v_cell, cells, starts = _edges_in_key_order(buf, wstart, wkey, nw, n_chain)
+    return u_cell, v_cell, cells, starts, n_seen == n_chain
+
+
+@nb.njit(inline="always", **JIT)
+def _chain_neighbours(flat, code, index, offs, bit0, bit1, is_node):
+    """Each chain cell's position among the chain cells (-1 at nodes), their count, and both neighbours of
+    every chain cell, sorted (n, 2)."""
     n = flat.shape[0]
     cpos = np.full(n, -1, np.int64)
     n_chain = 0
@@ -130,6 +140,16 @@ def trace(flat, code, index, offs, bit0, bit1, is_node):
             a = np.int64(index[fc + offs[bit0[cc]]])
             b = np.int64(index[fc + offs[bit1[cc]]])
             nb2[i, 0], nb2[i, 1] = min(a, b), max(a, b)
+    return cpos, n_chain, nb2
+
+
+@nb.njit(inline="always", **JIT)
+def _walk_chains(flat, code, index, offs, is_node, cpos, n_chain, nb2):
+    """Walk every chain from each node it leaves (a chain already walked from its other end is skipped):
+    the walks' cells (node, chain cells ..., node) in ``buf`` from ``wstart``, each in the direction whose last
+    (cell, direction) state is smaller than its reverse's, that state its key; returns (buf, wstart, wkey,
+    walks, chain cells seen)."""
+    n = flat.shape[0]
     visited = np.zeros(n, np.bool_)
     buf = np.empty(3 * n_chain + 2, np.int64)  # every edge has a chain cell: edges <= chain cells
     wstart = np.empty(n_chain + 1, np.int64)
@@ -167,14 +187,24 @@ def trace(flat, code, index, offs, bit0, bit1, is_node):
                 wkey[nw] = t
             else:  # keep the reverse walk
                 wkey[nw] = s ^ 1
-                lo, hi = s0, nb_ - 1
-                while lo < hi:
-                    buf[lo], buf[hi] = buf[hi], buf[lo]
-                    lo += 1
-                    hi -= 1
+                _reverse(buf, s0, nb_ - 1)
             wstart[nw] = s0
             nw += 1
     wstart[nw] = nb_
+    return buf, wstart, wkey, nw, n_seen
+
+
+@nb.njit(inline="always", **JIT)
+def _reverse(buf, lo, hi):
+    while lo < hi:
+        buf[lo], buf[hi] = buf[hi], buf[lo]
+        lo += 1
+        hi -= 1
+
+
+@nb.njit(inline="always", **JIT)
+def _edges_in_key_order(buf, wstart, wkey, nw, n_chain):
+    """The walks as edges (u_cell, v_cell, cells, starts), ordered by key."""
     # order by key: the keys are distinct states < 2 n_chain, so a scan of a dense table sorts them
     slot = np.full(2 * n_chain + 2, -1, np.int64)
     for w in range(nw):
@@ -185,6 +215,7 @@ def trace(flat, code, index, offs, bit0, bit1, is_node):
         if slot[x] >= 0:
             order[q] = slot[x]
             q += 1
+    nb_ = wstart[nw]
     cells = np.empty(nb_, np.int64)
     starts = np.empty(nw + 1, np.int64)
     u_cell = np.empty(nw, np.int64)
@@ -199,7 +230,7 @@ def trace(flat, code, index, offs, bit0, bit1, is_node):
         u_cell[e] = buf[a]
         v_cell[e] = buf[b - 1]
     starts[nw] = p
-    return u_cell, v_cell, cells, starts, n_seen == n_chain
+    return u_cell, v_cell, cells, starts
 
 
 @nb.njit(**JIT)
