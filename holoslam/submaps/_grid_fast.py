@@ -106,6 +106,50 @@ def bicubic(prob, u, v, outside):  # pragma: no cover
     return value, du, dv
 
 
+@nb.njit(inline="always", **JIT)
+def _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outside, x, y, t, H, g, Hocc,
+               want):  # pragma: no cover
+    """``lsq_match``'s cost at (x, y, t) and its occupied-space part; with ``want`` also the Gauss-Newton
+    gradient ``g`` and Hessian ``H`` of the whole cost and the Hessian ``Hocc`` of the occupied term (into the
+    buffers given)."""
+    n = px.size
+    ct, st = math.cos(t), math.sin(t)
+    cost_occ = 0.0
+    if want:
+        H[:] = 0.0
+        g[:] = 0.0
+        Hocc[:] = 0.0
+    for k in range(n):
+        wx = ct * px[k] - st * py[k] + x
+        wy = st * px[k] + ct * py[k] + y
+        u = (wx - ox) / res - 0.5
+        v = (wy - oy) / res - 0.5
+        val, du, dv = bicubic(prob, u, v, outside)
+        r = s * (1.0 - val)
+        cost_occ += r * r
+        if want:
+            gx = -s * du / res
+            gy = -s * dv / res
+            j0, j1 = gx, gy
+            j2 = gx * (-st * px[k] - ct * py[k]) + gy * (ct * px[k] - st * py[k])
+            J = (j0, j1, j2)
+            for a in range(3):
+                g[a] += J[a] * r
+                for b in range(3):
+                    H[a, b] += J[a] * J[b]
+    dt = math.atan2(math.sin(t - pt_), math.cos(t - pt_))
+    cost = cost_occ + w_trans * w_trans * ((x - px_) ** 2 + (y - py_) ** 2) + w_rot * w_rot * dt * dt
+    if want:
+        Hocc[:] = H
+        H[0, 0] += w_trans * w_trans
+        H[1, 1] += w_trans * w_trans
+        H[2, 2] += w_rot * w_rot
+        g[0] += w_trans * w_trans * (x - px_)
+        g[1] += w_trans * w_trans * (y - py_)
+        g[2] += w_rot * w_rot * dt
+    return cost, cost_occ
+
+
 @nb.njit(**JIT)
 def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_trans, w_rot, iters, outside):  # pragma: no cover
     """Continuous scan-to-grid matching: Gauss-Newton with Levenberg damping on
@@ -119,45 +163,8 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
     H = np.zeros((3, 3))
     g = np.zeros(3)
     Hocc = np.zeros((3, 3))
-
-    def evaluate(x, y, t, H, g, Hocc, want):
-        ct, st = math.cos(t), math.sin(t)
-        cost_occ = 0.0
-        if want:
-            H[:] = 0.0
-            g[:] = 0.0
-            Hocc[:] = 0.0
-        for k in range(n):
-            wx = ct * px[k] - st * py[k] + x
-            wy = st * px[k] + ct * py[k] + y
-            u = (wx - ox) / res - 0.5
-            v = (wy - oy) / res - 0.5
-            val, du, dv = bicubic(prob, u, v, outside)
-            r = s * (1.0 - val)
-            cost_occ += r * r
-            if want:
-                gx = -s * du / res
-                gy = -s * dv / res
-                j0, j1 = gx, gy
-                j2 = gx * (-st * px[k] - ct * py[k]) + gy * (ct * px[k] - st * py[k])
-                J = (j0, j1, j2)
-                for a in range(3):
-                    g[a] += J[a] * r
-                    for b in range(3):
-                        H[a, b] += J[a] * J[b]
-        dt = math.atan2(math.sin(t - pt_), math.cos(t - pt_))
-        cost = cost_occ + w_trans * w_trans * ((x - px_) ** 2 + (y - py_) ** 2) + w_rot * w_rot * dt * dt
-        if want:
-            Hocc[:] = H
-            H[0, 0] += w_trans * w_trans
-            H[1, 1] += w_trans * w_trans
-            H[2, 2] += w_rot * w_rot
-            g[0] += w_trans * w_trans * (x - px_)
-            g[1] += w_trans * w_trans * (y - py_)
-            g[2] += w_rot * w_rot * dt
-        return cost, cost_occ
-
-    cost, cost_occ = evaluate(x, y, t, H, g, Hocc, True)
+    cost, cost_occ = _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outside, x, y, t, H, g,
+                                Hocc, True)
     # a trial step is evaluated with its gradient and Hessian (into the spare buffers): accepted, they are the
     # next iteration's; one pass over the points per iteration instead of a value pass and a gradient pass
     H2 = np.zeros((3, 3))
@@ -171,7 +178,8 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
             A[a, a] += lam * (H[a, a] + 1e-9)
         step = np.linalg.solve(A, -g)
         nx, ny, nt = x + step[0], y + step[1], t + step[2]
-        ncost, nocc = evaluate(nx, ny, nt, H2, g2, Hocc2, True)
+        ncost, nocc = _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outside, nx, ny, nt,
+                                 H2, g2, Hocc2, True)
         if ncost < cost:
             # converged: a step under 0.1 mm and 0.006 deg, or a relative decrease under 1e-6
             small = abs(cost - ncost) < 1e-6 * max(cost, 1e-12) or (
