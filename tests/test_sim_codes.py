@@ -44,10 +44,11 @@ def test_config_rejects_out_of_range_extras_and_keeps_the_reference_metadata():
 @pytest.mark.slow
 def test_ten_wall_codes_each_found_once_within_5_cm(tmp_path):
     """A 500 s tour with 10 foreign codes on the walls and 4 labels without a size, the PTZ taking up to one
-    snapshot per 2 s: with ``vision.foreign_landmarks`` every wall code is one landmark within 6 cm of the
-    truth (measured 0.5-3.9 cm; 0.5-5.7 cm since the loop closures between one pair of submaps count as one
-    measurement, issue 13, which moves the submaps that see QR-D07612A087 and QR-8FB16B8BB9 by 1-2 cm while the
-    anchors improve, 9.4 -> 8.6 mm); without it, none is a landmark. The sizeless labels are located too."""
+    snapshot per 2 s: with ``vision.foreign_landmarks`` every wall code is one landmark within 5 cm of the
+    truth (measured 0.7-3.8 cm, every code ranged by the laser: two codes above furniture are ranged on the wall
+    behind it, the surface nearest their triangulated point, where the first surface along the ray put one
+    1.5 m short and triangulation alone left them at 4.5 and 5.7 cm); without it, none is a landmark. The
+    sizeless labels are located too."""
     from holoslam.config import RunConfig, VisionConfig
     from holoslam.io.mcap import read_log
     from holoslam.pipeline import run
@@ -71,7 +72,7 @@ def test_ten_wall_codes_each_found_once_within_5_cm(tmp_path):
     assert sorted(found) == sorted(codes)  # each exactly once
     assert not {m.object_id.split("@")[0] for m in r.moved_objects} & codes
     errs = np.array([acc.per_object_m[c] for c in codes])
-    assert errs.max() <= 0.06, dict(zip(codes, errs, strict=True))
+    assert errs.max() <= 0.05, dict(zip(codes, errs, strict=True))
     assert all(o.object_type == "qr_code" for o in r.objects if o.object_id in codes)
     assert all(r.holographic.nodes[c]["kind"] == "object" for c in codes)  # the holographic graph lists them
     located_by = r.report.objects.located_by
