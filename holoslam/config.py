@@ -269,13 +269,14 @@ class VisionConfig:
     same_view_deg: float = 1.0  # deg the camera turned since: twice a PTZ head's pointing repeatability
     same_view_max_s: float = 1.0  # s: a view is decoded again at least this often while it lasts
     decodes_per_view: int = 2  # full decodes of a view before its repeats are skipped: a payload's confirmation
+    first_decoder_when_read: bool = True  # zbar only on frames whose quick look left a symbol unread
 
     def stream_settings(self) -> StreamSettings:
         """The stream settings of the vision stage (``holoslam.vision.stream``)."""
         from holoslam.vision.stream import StreamSettings
 
         return StreamSettings(self.prefilter, self.skip_same_view, self.same_view_m, self.same_view_deg,
-                              self.same_view_max_s, self.decodes_per_view)
+                              self.same_view_max_s, self.decodes_per_view, self.first_decoder_when_read)
 
 
 @dataclass(frozen=True)

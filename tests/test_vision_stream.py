@@ -146,6 +146,17 @@ def test_stream_steps_lose_no_object_and_report_counts(both_modes):
         assert per_stream[oid] >= min(n, 2), oid
 
 
+def test_second_decoder_only_where_the_quick_look_left_a_symbol_unread(stream_log, both_modes):
+    """zbar skipped where zxing-cpp's fast path read every symbol: the same objects and sightings."""
+    from holoslam.vision.observe import locate_from_log
+
+    log, _ = stream_log
+    _, stream = both_modes
+    every = locate_from_log(log, stream=StreamSettings(first_decoder_when_read=False))
+    assert set(every.report.object_ids) == set(stream.report.object_ids)
+    assert abs(every.report.observations - stream.report.observations) <= max(1, every.report.observations // 50)
+
+
 def _per_object(res) -> dict[str, int]:
     out: dict[str, int] = {}
     for o in res.observations:

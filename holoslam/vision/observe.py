@@ -227,7 +227,7 @@ def sightings_from_log(
 
     seen: set[tuple[int, str]] = set()
     frames = FrameDecoder(log, stream or StreamSettings(), base_frame,
-                          lambda px: detect_qr(px, decoders, fallback))
+                          lambda px, every: detect_qr(px, decoders, fallback if every else Fallback.NEVER))
     if src in (SightingSource.IMAGES, SightingSource.BOTH):
         every = max(1, -(-len(log.images) // 50))  # at most 50 calls
         for idx, im in enumerate(log.images):
