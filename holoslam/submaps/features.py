@@ -194,7 +194,7 @@ def _merged_pieces(run: np.ndarray, a: int, pieces: list[tuple[int, int]], fit, 
     """The pieces (offsets in ``run``, which starts at point ``a``) with at least ``min_points`` points, adjacent
     collinear ones merged (normals within ``merge_angle_deg``, the next piece's points within 2 ``split_tol`` of
     the line so far)."""
-    fitted = []
+    fitted: list[tuple[int, int, np.ndarray, float, np.ndarray] | None] = []
     for pa, pb in pieces:
         if pb - pa < cfg.min_points:
             fitted.append(None)
