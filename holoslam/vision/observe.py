@@ -265,9 +265,7 @@ def sightings_from_log(
                 continue
             c["labels"] += label is not None
             out.append(s)
-    fc = frames.counts
-    c.update(full_decodes=fc.full_decodes, skipped_no_code=fc.skipped_no_code,
-             skipped_same_view=fc.skipped_same_view, frames_per_s=round(fc.frames_per_s, 1))
+    c.update(frames.counts.for_report())
     c["problems"] = problems
     c["foreign_payloads"] = tuple(foreign_texts)
     c["source"] = src.value
