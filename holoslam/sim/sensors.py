@@ -413,6 +413,34 @@ def readable_labels(
     return readable, corners, draw
 
 
+def _snapshot_target(world: World, order: np.ndarray, d: np.ndarray, count: np.ndarray, cam: np.ndarray, t: int,
+                     shots_of: dict[str, list[np.ndarray]], last_of: dict[str, int], resnap_s: float, cosmax: float,
+                     walls: np.ndarray, positions: np.ndarray, modules: dict[str, np.ndarray], size: tuple[int, int]):
+    """The first label in ``order`` the operator would photograph from the camera at ``cam`` (time ``t``):
+    within range; a second view only from SECOND_VIEW_BASELINE away from the first, a later one only after
+    ``resnap_s``; facing the camera, not behind a wall or an object, and readable within the zoom range.
+    None when there is none."""
+    for i in order:
+        o = world.all_codes[i]
+        if d[i] > MAX_SNAPSHOT_RANGE:
+            continue
+        if count[i] == 1:
+            if np.linalg.norm(shots_of[o.object_id][0][:2] - cam[:2]) < SECOND_VIEW_BASELINE:
+                continue
+        elif t - last_of.get(o.object_id, -(10**19)) < resnap_s * 1e9:
+            continue
+        if _facing_cos(o, cam) < cosmax + 0.05:
+            continue
+        if segments_block(walls, cam[None, :2], positions[i : i + 1, :2])[0] or _occluded(world, cam[:2], o):
+            continue
+        n = modules[o.object_id].shape[0]
+        zoom = TARGET_MODULE_PX * n * d[i] / (F0 * size[0] / 640.0 * o.label_size)
+        if zoom > ZOOM_MAX * 1.25:
+            continue
+        return o
+    return None
+
+
 def camera_snapshots(
     world: World,
     stamps_ns: np.ndarray,
@@ -448,29 +476,8 @@ def camera_snapshots(
         # labels never photographed first, then those photographed once (a second view from a point at
         # least SECOND_VIEW_BASELINE away, for triangulation), then the nearest
         count = np.array([min(len(shots_of.get(o.object_id, ())), 2) for o in world.all_codes])
-        order = np.lexsort((d, count))
-        target = None
-        for i in order:
-            o = world.all_codes[i]
-            if d[i] > MAX_SNAPSHOT_RANGE:
-                continue
-            if count[i] == 1:
-                if np.linalg.norm(shots_of[o.object_id][0][:2] - cam[:2]) < SECOND_VIEW_BASELINE:
-                    continue
-            elif t - last_of.get(o.object_id, -(10**19)) < resnap_s * 1e9:
-                continue
-            if _facing_cos(o, cam) < cosmax + 0.05:
-                continue
-            if segments_block(walls, cam[None, :2], positions[i : i + 1, :2])[0] or _occluded(
-                world, cam[:2], o
-            ):
-                continue
-            n = modules[o.object_id].shape[0]
-            zoom = TARGET_MODULE_PX * n * d[i] / (F0 * size[0] / 640.0 * o.label_size)
-            if zoom > ZOOM_MAX * 1.25:
-                continue
-            target = o
-            break
+        target = _snapshot_target(world, np.lexsort((d, count)), d, count, cam, t, shots_of, last_of, resnap_s,
+                                  cosmax, walls, positions, modules, size)
         if target is None:
             continue
         # aim the head at the label (pan in the base frame, tilt up positive) with a pointing error
