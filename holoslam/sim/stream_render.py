@@ -71,9 +71,10 @@ def _draw_label(img: np.ndarray, world: World, modules: dict[str, np.ndarray], o
     src = np.array([[0, 0], [T, 0], [T, T], [0, T]], dtype=np.float32) - 0.5
     Hm = cv2.getPerspectiveTransform(src, (uv - [x0, y0]).astype(np.float32))
     size = (x1 - x0, y1 - y0)
-    flags = dict(flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    warped = cv2.warpPerspective(tex, Hm, size, **flags)
-    cover = cv2.warpPerspective(np.ones((T, T), np.float32), Hm, size, **flags)
+    warped = cv2.warpPerspective(tex, Hm, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                                 borderValue=0)
+    cover = cv2.warpPerspective(np.ones((T, T), np.float32), Hm, size, flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     val = np.clip(warped / np.maximum(cover, 1e-6), 0, 1)
     col = _INK + (_PAPER - _INK) * val[..., None]
     a = np.clip(cover, 0, 1)[..., None]
@@ -105,7 +106,7 @@ def render_stream_frame(
     ang = np.arctan2(col_dir[1], col_dir[0])
     rw = raycast(world.wall_segments(), wtc[None, :2], ang[None, :], 50.0)[0]
     rw = np.where(np.isfinite(rw), rw, 50.0)
-    img = np.empty((h, w, 3), np.float32)
+    img: np.ndarray = np.empty((h, w, 3), np.float32)
     background(np.ascontiguousarray(K, np.float64), np.ascontiguousarray(wRc, np.float64),
                np.ascontiguousarray(wtc, np.float64), rw.astype(np.float64), CEILING, img)
     for oid in draw_ids:
@@ -121,8 +122,8 @@ def render_stream_frame(
     img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.4, 0.8))
     noise = np.empty_like(img)
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
-    cv2.randn(noise, (0.0, 0.0, 0.0), (2.0, 2.0, 2.0))
-    img += noise
+    cv2.randn(noise, np.zeros(3), np.full(3, 2.0))
+    img = img + noise
     px = np.clip(np.rint(img), 0, 255).astype(np.uint8)
     ok, buf = cv2.imencode(".jpg", px, [cv2.IMWRITE_JPEG_QUALITY, int(quality), cv2.IMWRITE_JPEG_OPTIMIZE, 1])
     if not ok:  # pragma: no cover - OpenCV always encodes a uint8 BGR image

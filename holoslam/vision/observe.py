@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -194,7 +195,7 @@ def sightings_from_log(
     decoded so far, about every 2 % of them. ``stream`` (default ``StreamSettings()``): the quick look and the
     same-view skip in front of the full decode (``holoslam.vision.stream``; ``base_frame`` "" = the log's)."""
     src = resolve_source(log, source)
-    c = {
+    c: dict[str, Any] = {
         k: 0
         for k in (
             "images",

@@ -191,7 +191,10 @@ class FrameDecoder:
         self._full = full_decode
         self._base = base_frame or log.base_frame
         self._tree = None
-        self._stamps, self._odom = log.odometry_arrays() if log.odometry else (np.zeros(0, np.int64), None)
+        self._stamps: np.ndarray = np.zeros(0, np.int64)
+        self._odom: np.ndarray | None = None
+        if log.odometry:
+            self._stamps, self._odom = log.odometry_arrays()
         self._infos = log.camera_infos
         self._info_stamps = np.array([i.stamp_ns for i in self._infos], np.int64)
         self._key: tuple[int, np.ndarray, float, frozenset[str]] | None = None
@@ -206,10 +209,10 @@ class FrameDecoder:
     def _camera_pose(self, image: Image) -> tuple[np.ndarray, float] | None:
         """(odomTc 4x4, focal length px) at the frame's stamp, or None when the odometry does not cover it or
         the transform is missing."""
-        t = image.stamp_ns
-        if self._tree is None or not (self._stamps[0] <= t <= self._stamps[-1]):
+        t, odom = image.stamp_ns, self._odom
+        if self._tree is None or odom is None or not (self._stamps[0] <= t <= self._stamps[-1]):
             return None
-        x, y = (float(np.interp(t, self._stamps, self._odom[:, k])) for k in (0, 1))
+        x, y = (float(np.interp(t, self._stamps, odom[:, k])) for k in (0, 1))
         th = float(np.interp(t, self._stamps, self._theta))
         try:
             bTc = self._tree.lookup(self._base, image.frame_id, t)
