@@ -156,10 +156,14 @@ def decode_gray(image: Image) -> np.ndarray:
 
 
 def quick_look(gray: np.ndarray) -> QuickLook:
-    """zxing-cpp's fast path on ``gray`` and on a half-size copy (module docstring, step 1)."""
+    """zxing-cpp's fast path on ``gray`` and on a half-size copy (module docstring, step 1). Without zxing-cpp
+    every frame is a candidate (decoded in full, as without the quick look)."""
     import cv2
-    import zxingcpp
 
+    try:
+        import zxingcpp
+    except ImportError:  # no fast path here: every frame goes to the full decode, which says what is missing
+        return QuickLook(True)
     fmt = zxingcpp.BarcodeFormat.QRCode
     small = {getattr(zxingcpp.BarcodeFormat, n) for n in ("MicroQRCode", "RMQRCode")
              if hasattr(zxingcpp.BarcodeFormat, n)}
