@@ -12,7 +12,7 @@ if TYPE_CHECKING:
     from holoslam.graph.build import BuildOptions
     from holoslam.solve import SolveOptions
 
-__all__ = ["solve_options", "run_build_options", "reestimate_anchors"]
+__all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes"]
 
 
 def solve_options(cfg: SolverConfig) -> SolveOptions:
@@ -50,3 +50,20 @@ def run_build_options() -> BuildOptions:
     from holoslam.graph.build import BuildOptions
 
     return BuildOptions(loop_kernel=fac.Kernel(fac.RobustKernel.HUBER, 3.0))
+
+
+def revisit_nodes(fe: Any, sol: Any, cfg: Any, progress: Any = None) -> tuple[Any, Any, Any] | None:
+    """The keyframes matched into the old submaps they revisit and solved as poses beside the anchors
+    (``holoslam.submaps.revisits``, ``holoslam.graph.nodes``), with the front end's settings ``cfg``:
+    ``(Nodes, NodeSolution, NodeMatches)`` for the trajectory, the map and the report, or None when
+    ``cfg.revisits.enabled`` is off or the run has no keyframes."""
+    from holoslam.graph.nodes import solve_nodes
+    from holoslam.submaps.revisits import graph_nodes, match_nodes
+
+    if not cfg.revisits.enabled:
+        return None
+    nodes = graph_nodes(fe.submaps)
+    if not len(nodes):
+        return None
+    matches = match_nodes(fe.submaps, nodes, sol.wTa, cfg.revisits, cfg.local.match, progress)
+    return nodes, solve_nodes(nodes, matches, sol.wTa, sol.cov_wTa, cfg.revisits), matches

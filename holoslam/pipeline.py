@@ -86,7 +86,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     from holoslam.io.mcap import read_log
     from holoslam.mapping import build_maps
     from holoslam.objects import located_by, located_objects
-    from holoslam.optimise import reestimate_anchors, solve_options
+    from holoslam.optimise import reestimate_anchors, revisit_nodes, solve_options
     from holoslam.report import build_report
     from holoslam.sightings import see_objects, triangulate_objects
     from holoslam.solve import solve
@@ -105,14 +105,16 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
         options = solve_options(cfg.solver)
         sol = solve(fe.problem, options)
     fe, sol, seen = triangulate_objects(seen, fe, sol, log, cfg, options, clock)
+    with clock.stage("keyframes (revisits)"):
+        revisits = revisit_nodes(fe, sol, cfg.frontend, clock.progress_of("keyframes (revisits)"))
     with clock.stage("trajectory"):
-        traj = run_trajectory(log, fe, sol)
+        traj = run_trajectory(log, fe, sol, revisits)
         objects = located_objects(fe.problem, sol, seen)
     maps = build_maps(log, fe, sol, traj, objects, cfg, clock)
     report = build_report(log=log, ingest_report=ingest_report, sightings=seen, fe=fe, sol=sol, objects=objects,
                           maps=maps, trajectory=traj, timings=clock.total(),
                           located_by=located_by(seen.observations, objects),
-                          codes_truth=cfg.vision.foreign_landmarks)
+                          codes_truth=cfg.vision.foreign_landmarks, revisits=revisits)
     return RunResult(
         source=str(log_path),
         config=cfg,

@@ -62,6 +62,10 @@ class SubmapSummary:
     loop_pairs: int = 0
     # dead-reckoning segments beyond the chi-square 95 % gate against their scan match (slips), down-weighted
     dead_reckoning_slips: int = 0
+    # keyframes solved as poses against the old submaps they revisit (holoslam.graph.nodes): matches kept / tried
+    keyframes_solved: bool = False
+    keyframe_matches: int = 0
+    keyframe_matches_tried: int = 0
 
 
 @dataclass(frozen=True)
@@ -319,6 +323,11 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
             f"against the scan matches; {sm.dead_reckoning_slips} slipped segments down-weighted), loop "
             f"closures between {sm.loop_pairs} anchor pairs (each pair's count as one)"
         )
+    if sm.keyframes_solved:
+        lines.append(
+            f"  keyframes: solved as poses against the old submaps they revisit, {sm.keyframe_matches} of "
+            f"{sm.keyframe_matches_tried} matches into old submaps kept"
+        )
     if sm.odometry_noise:
         lines.append(f"  odometry noise: {sm.odometry_noise['source']} ({sm.odometry_noise['reason']})")
     return lines
@@ -372,7 +381,8 @@ def _count(items: Iterable[str]) -> dict[str, int]:
     return out
 
 
-def submap_summary(fe: Any) -> SubmapSummary:
+def submap_summary(fe: Any, revisits: Any = None) -> SubmapSummary:
+    """The front end's summary; ``revisits`` the ``(Nodes, NodeSolution, NodeMatches)`` of the keyframe solve."""
     return SubmapSummary(
         count=len(fe.submaps),
         split_reasons=_count(str(sm.reason) for sm in fe.submaps),
@@ -384,6 +394,9 @@ def submap_summary(fe: Any) -> SubmapSummary:
         odometry_noise=fe.odometry_noise.to_dict() if fe.odometry_noise is not None else None,
         loop_pairs=int(fe.loop_groups),
         dead_reckoning_slips=int(fe.dead_reckoning_slips),
+        keyframes_solved=revisits is not None,
+        keyframe_matches=0 if revisits is None else len(revisits[2]),
+        keyframe_matches_tried=0 if revisits is None else int(revisits[2].tried),
     )
 
 
@@ -468,7 +481,7 @@ def map_summary(grid: Any) -> MapSummary:
 
 def build_report(*, log: Any, ingest_report: Any, sightings: Any, fe: Any, sol: Any, objects: Sequence[Any],
                  maps: Any, trajectory: Any, timings: dict[str, float], located_by: dict | None = None,
-                 codes_truth: bool = False) -> RunReport:
+                 codes_truth: bool = False, revisits: Any = None) -> RunReport:
     """The run report from every stage's output (``maps``: ``holoslam.mapping.RunMaps``; ``trajectory``:
     ``holoslam.trajectory.RunTrajectory``)."""
     from holoslam.io.mcap import report_to_dict
@@ -478,7 +491,7 @@ def build_report(*, log: Any, ingest_report: Any, sightings: Any, fe: Any, sol: 
         inputs_absent=absent_inputs(log),
         ingest=report_to_dict(ingest_report),
         vision=sightings.report,
-        submaps=submap_summary(fe),
+        submaps=submap_summary(fe, revisits),
         factors=factor_counts(fe.problem),
         solver=solver_summary(sol),
         objects=object_summary(objects, sol, maps.holographic, located_by),

@@ -11,7 +11,7 @@ import numpy as np
 
 from holoslam import geometry as g
 
-__all__ = ["RunTrajectory", "run_trajectory", "keyframe_poses", "optimised_trajectory"]
+__all__ = ["RunTrajectory", "run_trajectory", "keyframe_poses", "node_keyframe_poses", "optimised_trajectory"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,8 +32,9 @@ class RunTrajectory:
         return optimised_trajectory(scan_stamps, odom_stamps, odomTb, self.key_stamps_ns, self.wTk)
 
 
-def run_trajectory(log: Any, fe: Any, sol: Any) -> RunTrajectory:
-    """The trajectory of a run from its front end ``fe`` (dead reckoning, submaps) and solution ``sol``."""
+def run_trajectory(log: Any, fe: Any, sol: Any, nodes: Any = None) -> RunTrajectory:
+    """The trajectory of a run from its front end ``fe`` (dead reckoning, submaps) and solution ``sol``; with
+    ``nodes`` (``(Nodes, NodeSolution)``, ``holoslam.graph.nodes``) the keyframes are the node solve's."""
     from holoslam.submaps.deadreckon import interpolate_poses
 
     odom_stamps, odomTb = log.odometry_arrays()
@@ -41,7 +42,10 @@ def run_trajectory(log: Any, fe: Any, sol: Any) -> RunTrajectory:
     # a pose at every odometry and every scan stamp, so ground truth stamped by scan (relations) scores it
     stamps = np.union1d(odom_stamps, scan_stamps)
     dr = interpolate_poses(fe.dr_stamps_ns, fe.dr_wTb, stamps)
-    key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
+    if nodes is None:
+        key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
+    else:
+        key_stamps, wTk = node_keyframe_poses(fe.submaps, nodes[0].stamps_ns, nodes[1].wTn)
     # between keyframes (a few tenths of a second) the wheel odometry's own motion is the most faithful
     wTb = optimised_trajectory(stamps, odom_stamps, odomTb, key_stamps, wTk)
     return RunTrajectory(stamps, wTb, dr, key_stamps, wTk)
@@ -80,4 +84,28 @@ def keyframe_poses(submaps: Sequence[Any], wTa: np.ndarray) -> tuple[np.ndarray,
     order = np.argsort(s, kind="stable")
     s, p = s[order], p[order]
     keep = np.concatenate([[True], np.diff(s) > 0])
+    return s[keep], p[keep]
+
+
+def node_keyframe_poses(submaps: Sequence[Any], node_stamps_ns: np.ndarray, wTn: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """``keyframe_poses`` from solved node poses ``wTn`` at ``node_stamps_ns`` (``holoslam.graph.nodes``): the
+    keyframes are the nodes; a scan localised in a submap without being inserted hangs from the nearest earlier
+    keyframe of that submap, wTb = wTn ∘ (aTn^-1 ∘ aTb)."""
+    node_t = np.asarray(node_stamps_ns, np.int64)
+    stamps, poses = [node_t], [np.asarray(wTn, np.float64).reshape(-1, 3)]
+    for sm in submaps:
+        tt = np.asarray(sm.track_stamps_ns, np.int64)
+        if not tt.size:
+            continue
+        kt = np.asarray(sm.scan_stamps_ns, np.int64)
+        q = np.clip(np.searchsorted(kt, tt, side="right") - 1, 0, len(kt) - 1)
+        n = np.clip(np.searchsorted(node_t, kt[q]), 0, len(node_t) - 1)
+        aTk = np.reshape(sm.aTb, (-1, 3))[q]
+        stamps.append(tt)
+        poses.append(g.compose(poses[0][n], g.between(aTk, np.reshape(sm.track_aTb, (-1, 3)))))
+    s, p = np.concatenate(stamps), np.concatenate(poses).reshape(-1, 3)
+    order = np.argsort(s, kind="stable")
+    s, p = s[order], p[order]
+    keep = np.concatenate([[True], np.diff(s) > 0]) if len(s) else np.zeros(0, bool)
     return s[keep], p[keep]

@@ -45,6 +45,7 @@ from holoslam.submaps.features import FeatureConfig, ScanFeatures, extract_featu
 from holoslam.submaps.local_slam import ActiveSubmap, LocalSlam, LocalSlamConfig
 from holoslam.submaps.loops import LoopConfig, LoopSearch
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
+from holoslam.submaps.revisits import RevisitConfig
 from holoslam.submaps.segment import Submap, voxel_downsample
 from holoslam.types import LogData, ObjectObservation
 
@@ -62,6 +63,7 @@ class FrontEndConfig:
     dead_reckoning: DeadReckoningConfig = field(default_factory=DeadReckoningConfig)
     local: LocalSlamConfig = field(default_factory=LocalSlamConfig)
     loops: LoopConfig = field(default_factory=LoopConfig)
+    revisits: RevisitConfig = field(default_factory=RevisitConfig)  # keyframes against old submaps, after the solve
     features: FeatureConfig = field(default_factory=FeatureConfig)
     base_frame: str = ""  # "" = the log's base frame (LogData.base_frame: the mapping's, else the odometry's child)
     build_grids: bool = True
