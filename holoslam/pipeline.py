@@ -86,7 +86,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     from holoslam.io.mcap import read_log
     from holoslam.mapping import build_maps
     from holoslam.objects import located_by, located_objects
-    from holoslam.optimise import reestimate_anchors, revisit_nodes, solve_options
+    from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
     from holoslam.report import build_report
     from holoslam.sightings import see_objects, triangulate_objects
     from holoslam.solve import solve
@@ -107,6 +107,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     fe, sol, seen = triangulate_objects(seen, fe, sol, log, cfg, options, clock)
     with clock.stage("keyframes (revisits)"):
         revisits = revisit_nodes(fe, sol, cfg.frontend, clock.progress_of("keyframes (revisits)"))
+        sol = keyframe_anchors(sol, fe.anchor_stamps_ns, revisits)
     with clock.stage("trajectory"):
         traj = run_trajectory(log, fe, sol, revisits)
         objects = located_objects(fe.problem, sol, seen)
