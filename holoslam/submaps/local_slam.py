@@ -25,7 +25,7 @@ import numpy as np
 
 from holoslam import geometry as g
 from holoslam.submaps.probgrid import GridBuilder, GridConfig, ProbGrid
-from holoslam.submaps.scanmatch import MatchConfig, match_scan
+from holoslam.submaps.scanmatch import MatchConfig, WidePyramid, match_scan
 
 __all__ = ["LocalSlamConfig", "Node", "ActiveSubmap", "LocalSlam"]
 
@@ -124,6 +124,7 @@ class LocalSlam:
         self._turn = math.radians(cfg.motion_turn_deg)
         self._scores: deque[float] = deque(maxlen=200)
         self._track_cfg = replace(cfg.match, angular_window_deg=cfg.track_angular_window_deg)
+        self._pyramid = WidePyramid()  # the wide search's pyramid of the host's grid, while it is unchanged
         self.arrivals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (m, n, mTn, cov) of new anchors
 
     def wants(self, stamp: int, odo: np.ndarray) -> bool:
@@ -177,8 +178,9 @@ class LocalSlam:
     def _match(self, host: ActiveSubmap, b_pts: np.ndarray, pred: np.ndarray, cfg: MatchConfig | None = None):
         """Match into the host; the running median of recent scores tells the matcher what is usual."""
         usual = float(np.median(self._scores)) if len(self._scores) >= 20 else None
+        self._pyramid.key = (host.index, host.count)  # the host's grid changes only when a scan is inserted
         m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred,
-                       cfg or self.cfg.match, expected_score=usual)
+                       cfg or self.cfg.match, expected_score=usual, pyramid=self._pyramid)
         if m.ok:
             self._scores.append(m.score)
         return m

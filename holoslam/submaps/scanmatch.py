@@ -20,13 +20,14 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from holoslam import geometry as g
 
-__all__ = ["MatchConfig", "Match", "match_scan", "angular_step", "score_pose"]
+__all__ = ["MatchConfig", "Match", "match_scan", "angular_step", "score_pose", "WidePyramid"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,14 +91,16 @@ def score_pose(prob: np.ndarray, origin, resolution: float, b_pts: np.ndarray, a
 
 def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float, b_pts: np.ndarray,
                predicted_aTb: np.ndarray, cfg: MatchConfig = MatchConfig(), outside: float = 0.1,
-               expected_score: float | None = None) -> Match:
+               expected_score: float | None = None, pyramid: WidePyramid | None = None) -> Match:
     """Register scan points ``b_pts`` (N, 2, base frame) into the grid around ``predicted_aTb``.
 
     ``expected_score``: the score matches usually reach here (the caller's running median). When the best
     score of the window falls more than ``wide_trigger`` below it, the prediction is taken to be wrong (wheel
     odometry that slipped, or that disagrees with the laser for a moment) and a branch-and-bound search over
     ``wide_linear_window`` runs; its pose replaces the prediction when it scores ``wide_margin`` higher. A
-    wide window is never searched routinely: along a corridor it would jump between equally good places."""
+    wide window is never searched routinely: along a corridor it would jump between equally good places.
+    ``pyramid``: the caller's cache of the grid's branch-and-bound pyramid (``WidePyramid``), reused while the
+    grid is unchanged (scans localised between insertions often trigger several wide searches of one grid)."""
     from holoslam.submaps import _grid_fast as fast
 
     pred = np.asarray(predicted_aTb, np.float64)
@@ -116,7 +119,7 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
         # the wide pose must score like a usual match (not merely better than a poor window: a scan that sees
         # unexplored space scores low wherever it is put, and a wide window then finds a corridor's alias)
         need = max(float(S.max()) + cfg.wide_margin, expected_score - cfg.wide_tolerance)
-        wide = _wide_search(prob, origin, res, pts, pred, cfg, need)
+        wide = _wide_search(prob, origin, res, pts, pred, cfg, need, pyramid)
         if wide is not None:
             pred = wide
             S = fast.window_scores(prob, origin[0], origin[1], res, px, py, pred[0], pred[1], pred[2], nxy,
@@ -138,11 +141,31 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     return Match(aTb, cov, score, bool(score >= cfg.min_score))
 
 
-def _wide_search(prob, origin, res, pts, pred, cfg: MatchConfig, min_score: float) -> np.ndarray | None:
+class WidePyramid:
+    """A one-grid cache of the wide search's pyramid. The caller sets ``key`` to name the content of the grid
+    it matches into (e.g. the submap and its number of inserted scans); a pyramid built for another key is
+    rebuilt."""
+
+    def __init__(self) -> None:
+        self.key: object = None
+        self._built_for: object = None
+        self._grids: object = None
+
+    def grids(self, build: Callable[[], object]) -> object:
+        if self._grids is None or self._built_for != self.key:
+            self._grids, self._built_for = build(), self.key
+        return self._grids
+
+
+def _wide_search(prob, origin, res, pts, pred, cfg: MatchConfig, min_score: float,
+                 pyramid: WidePyramid | None = None) -> np.ndarray | None:
     """Branch-and-bound over the wide window (a shallow pyramid: the window is a few dozen cells)."""
     from holoslam.submaps import bnb
 
-    grids = bnb.precompute(prob, cfg.wide_depth, origin=origin, res=res)
+    def build():
+        return bnb.precompute(prob, cfg.wide_depth, origin=origin, res=res)
+
+    grids = build() if pyramid is None or pyramid.key is None else pyramid.grids(build)
     hit = bnb.search(grids, pts, pred, cfg.wide_linear_window, math.radians(cfg.angular_window_deg),
                      min_score)
     return None if hit is None else np.asarray(hit.aTb, np.float64)
