@@ -30,6 +30,7 @@ from holoslam.errors import HoloslamError, ImageDecodeError, PayloadError, Visio
 from holoslam.types import LogData, ObjectObservation, TagSighting
 
 if TYPE_CHECKING:
+    from holoslam.vision.label import ObjectLabel
     from holoslam.vision.observe import Sighting
 
 __all__ = [
@@ -301,6 +302,136 @@ def _nearest_index(stamps: np.ndarray, stamp_ns: int, tol_ns: int) -> int:
     return j if abs(int(stamps[j]) - stamp_ns) <= tol_ns else -1
 
 
+class _CropSource:
+    """The log's images as ``object_crops_from_log`` reads them: image and camera-info stamps, the robot's tag
+    sightings by stamp, and each image decoded (and its codes detected) at most once. Problem lines are
+    appended to ``problems`` in the order they are met."""
+
+    def __init__(self, log: LogData, stamp_tolerance_ns: int) -> None:
+        self.log = log
+        self.tol_ns = stamp_tolerance_ns
+        self.img_stamps = np.array([im.stamp_ns for im in log.images], dtype=np.int64)
+        self.info_stamps = np.array([ci.stamp_ns for ci in log.camera_infos], dtype=np.int64)
+        self.tags_at: dict[int, list[TagSighting]] = {}
+        for t in log.tags:
+            self.tags_at.setdefault(t.stamp_ns, []).append(t)
+        self.pixels: dict[int, np.ndarray | None] = {}
+        self.decoded: dict[int, list] = {}
+        self.problems: list[str] = []
+
+    def object_label(self, item: Sighting | TagSighting | ObjectObservation) -> tuple[str, ObjectLabel] | None:
+        """The item's object id and parsed label, or None (with a problem line) when its payload is not a
+        holoslam label."""
+        from holoslam.vision.label import parse_label
+
+        oid = getattr(item, "object_id", None)
+        label = getattr(item, "label", None)
+        payload = getattr(item, "payload", "")
+        if oid is None:  # a TagSighting: the id is in the payload
+            if label is None:
+                try:
+                    label = parse_label(payload)
+                except PayloadError as e:
+                    self.problems.append(f"tag sighting at {item.stamp_ns} ns: not a holoslam label: {e}")
+                    return None
+            oid = label.object_id
+        if label is None:
+            try:
+                label = parse_label(payload)
+            except PayloadError as e:
+                self.problems.append(f"{oid} at {item.stamp_ns} ns: payload is not a holoslam label: {e}")
+                return None
+        return oid, label
+
+    def image_index(self, item: Sighting | TagSighting | ObjectObservation, where: str) -> int:
+        """The item's image (its own index, else the image nearest its stamp), or -1 with a problem line."""
+        k = int(getattr(item, "image_index", -1))
+        if k < 0 or k >= len(self.log.images):
+            k = _nearest_index(self.img_stamps, int(item.stamp_ns), self.tol_ns)
+        if k < 0:
+            self.problems.append(f"{where}: no image within {self.tol_ns / 1e6:g} ms of the sighting")
+        return k
+
+    def tag_corners(self, oid: str, k: int) -> np.ndarray | None:
+        """The corners of ``oid``'s label among the robot's tag sightings at image ``k``'s stamp, if any."""
+        from holoslam.vision.label import parse_label
+
+        for t in self.tags_at.get(self.log.images[k].stamp_ns, []):
+            try:
+                if parse_label(t.payload).object_id == oid:
+                    return t.corners
+            except PayloadError:
+                continue
+        return None
+
+    def image_pixels(self, k: int, where: str) -> np.ndarray | None:
+        """Image ``k`` as 8-bit BGR (decoded once), or None with a problem line."""
+        if k not in self.pixels:
+            try:
+                px = self.log.images[k].decode()
+            except ImageDecodeError as e:
+                self.problems.append(f"{where}: {e}")
+                px = None
+            if px is not None and (px.dtype != np.uint8 or px.ndim not in (2, 3)):
+                self.problems.append(
+                    f"{where}: image {k} is {px.dtype} {px.shape}, not an 8-bit grey/colour image"
+                )
+                px = None
+            if px is not None and px.ndim == 2:
+                import cv2
+
+                px = cv2.cvtColor(px, cv2.COLOR_GRAY2BGR)
+            self.pixels[k] = px
+        return self.pixels[k]
+
+    def decoded_corners(self, oid: str, k: int, px: np.ndarray, where: str) -> np.ndarray | None:
+        """The corners of ``oid``'s label decoded in image ``k`` (``detect_qr``, once an image), or None with
+        a problem line."""
+        from holoslam.vision.qr import detect_qr
+
+        if k not in self.decoded:
+            self.decoded[k] = detect_qr(px)
+        hits = [d for d in self.decoded[k] if d.label is not None and d.label.object_id == oid]
+        if not hits:
+            self.problems.append(f"{where}: the label is not among the codes decoded in image {k}")
+            return None
+        return hits[0].corners
+
+    def label_range(self, corners: np.ndarray, side: float, k: int, where: str) -> float:
+        """PnP's range to the label centre (m) with the camera info nearest image ``k``; NaN when the label's
+        size or the camera info is unknown, or (with a problem line) when PnP fails."""
+        from holoslam.vision.camera import PinholeCamera
+        from holoslam.vision.locate import pnp_label
+
+        j = _nearest_index(self.info_stamps, self.log.images[k].stamp_ns, self.tol_ns)
+        if not (np.isfinite(side) and j >= 0):
+            return float("nan")
+        try:
+            est = pnp_label(corners, side, PinholeCamera.from_camera_info(self.log.camera_infos[j]))
+        except HoloslamError as e:
+            self.problems.append(f"{where}: no range ({e})")
+            return float("nan")
+        return float(np.linalg.norm(est.c_position))
+
+
+def _cut_crop(px: np.ndarray, corners: np.ndarray, crop_scale: float, mask_label: bool,
+              max_side_px: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """The crop around ``corners`` (``crop_scale`` times the label), its label mask (``mask_label``), both
+    shrunk to ``max_side_px`` at most. Raises VisionError when the box leaves the image."""
+    import cv2
+
+    x0, y0, x1, y1 = _crop_box(px.shape[:2], corners, crop_scale)
+    crop = px[y0:y1, x0:x1]
+    mask = label_mask(crop.shape[:2], corners - np.array([x0, y0], np.float64)) if mask_label else None
+    f = max_side_px / max(crop.shape[:2])
+    if f < 1.0:
+        size = (max(3, round(crop.shape[1] * f)), max(3, round(crop.shape[0] * f)))
+        crop = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
+        if mask is not None:
+            mask = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST)
+    return crop, mask
+
+
 def object_crops_from_log(
     log: LogData,
     items: Sequence[Sighting | TagSighting | ObjectObservation],
@@ -321,119 +452,41 @@ def object_crops_from_log(
     mask (``label_mask``) that leaves the label and its quiet zone out of the object's features. Crops larger
     than ``max_side_px`` are shrunk to it (``INTER_AREA``; bounds SIFT's cost and evens out the scale);
     ``ObjectCrop.corners`` stay in full-image pixels."""
-    import cv2
-
-    from holoslam.vision.camera import PinholeCamera
-    from holoslam.vision.label import parse_label
-    from holoslam.vision.locate import pnp_label
-    from holoslam.vision.qr import detect_qr
-
     if crop_scale <= 1.0:
         raise VisionError(f"crop_scale must be > 1 (crop larger than the label), got {crop_scale}")
     keep = None if accepted is None else set(accepted)
-    img_stamps = np.array([im.stamp_ns for im in log.images], dtype=np.int64)
-    info_stamps = np.array([ci.stamp_ns for ci in log.camera_infos], dtype=np.int64)
-    tags_at: dict[int, list[TagSighting]] = {}
-    for t in log.tags:
-        tags_at.setdefault(t.stamp_ns, []).append(t)
-    pixels: dict[int, np.ndarray | None] = {}
-    decoded: dict[int, list] = {}
-    problems: list[str] = []
+    src = _CropSource(log, stamp_tolerance_ns)
     out: dict[str, list[ObjectCrop]] = {}
     done: set[tuple[str, int]] = set()
-
-    def image_pixels(k: int, where: str) -> np.ndarray | None:
-        if k not in pixels:
-            try:
-                px = log.images[k].decode()
-            except ImageDecodeError as e:
-                problems.append(f"{where}: {e}")
-                px = None
-            if px is not None and (px.dtype != np.uint8 or px.ndim not in (2, 3)):
-                problems.append(
-                    f"{where}: image {k} is {px.dtype} {px.shape}, not an 8-bit grey/colour image"
-                )
-                px = None
-            if px is not None and px.ndim == 2:
-                import cv2
-
-                px = cv2.cvtColor(px, cv2.COLOR_GRAY2BGR)
-            pixels[k] = px
-        return pixels[k]
-
     for item in items:
-        oid = getattr(item, "object_id", None)
-        label = getattr(item, "label", None)
-        payload = getattr(item, "payload", "")
-        if oid is None:  # a TagSighting: the id is in the payload
-            if label is None:
-                try:
-                    label = parse_label(payload)
-                except PayloadError as e:
-                    problems.append(f"tag sighting at {item.stamp_ns} ns: not a holoslam label: {e}")
-                    continue
-            oid = label.object_id
-        if label is None:
-            try:
-                label = parse_label(payload)
-            except PayloadError as e:
-                problems.append(f"{oid} at {item.stamp_ns} ns: payload is not a holoslam label: {e}")
-                continue
+        named = src.object_label(item)
+        if named is None:
+            continue
+        oid, label = named
         if keep is not None and oid not in keep:
             continue
-        stamp = int(item.stamp_ns)
-        where = f"{oid} at {stamp} ns"
-        k = int(getattr(item, "image_index", -1))
-        if k < 0 or k >= len(log.images):
-            k = _nearest_index(img_stamps, stamp, stamp_tolerance_ns)
-        if k < 0:
-            problems.append(f"{where}: no image within {stamp_tolerance_ns / 1e6:g} ms of the sighting")
-            continue
-        if (oid, k) in done:
+        where = f"{oid} at {int(item.stamp_ns)} ns"
+        k = src.image_index(item, where)
+        if k < 0 or (oid, k) in done:
             continue
         corners = getattr(item, "corners", None)
         if corners is None:
-            for t in tags_at.get(log.images[k].stamp_ns, []):
-                try:
-                    if parse_label(t.payload).object_id == oid:
-                        corners = t.corners
-                        break
-                except PayloadError:
-                    continue
-        px = image_pixels(k, where)
+            corners = src.tag_corners(oid, k)
+        px = src.image_pixels(k, where)
         if px is None:
             continue
         if corners is None:
-            if k not in decoded:
-                decoded[k] = detect_qr(px)
-            hits = [d for d in decoded[k] if d.label is not None and d.label.object_id == oid]
-            if not hits:
-                problems.append(f"{where}: the label is not among the codes decoded in image {k}")
+            corners = src.decoded_corners(oid, k, px, where)
+            if corners is None:
                 continue
-            corners = hits[0].corners
         corners = np.asarray(corners, np.float64).reshape(4, 2)
         try:
-            x0, y0, x1, y1 = _crop_box(px.shape[:2], corners, crop_scale)
+            crop, mask = _cut_crop(px, corners, crop_scale, mask_label, max_side_px)
         except VisionError as e:
-            problems.append(f"{where}: {e}")
+            src.problems.append(f"{where}: {e}")
             continue
-        crop = px[y0:y1, x0:x1]
-        mask = label_mask(crop.shape[:2], corners - np.array([x0, y0], np.float64)) if mask_label else None
-        f = max_side_px / max(crop.shape[:2])
-        if f < 1.0:
-            size = (max(3, round(crop.shape[1] * f)), max(3, round(crop.shape[0] * f)))
-            crop = cv2.resize(crop, size, interpolation=cv2.INTER_AREA)
-            if mask is not None:
-                mask = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST)
         side = label.size_m if label.size_m is not None else float("nan")
-        rng = float("nan")
-        j = _nearest_index(info_stamps, log.images[k].stamp_ns, stamp_tolerance_ns)
-        if np.isfinite(side) and j >= 0:
-            try:
-                est = pnp_label(corners, side, PinholeCamera.from_camera_info(log.camera_infos[j]))
-                rng = float(np.linalg.norm(est.c_position))
-            except HoloslamError as e:
-                problems.append(f"{where}: no range ({e})")
+        rng = src.label_range(corners, side, k, where)
         done.add((oid, k))
         out.setdefault(oid, []).append(
             ObjectCrop(
@@ -442,7 +495,7 @@ def object_crops_from_log(
         )
     for crops in out.values():
         crops.sort(key=lambda c: c.stamp_ns)
-    return out, problems
+    return out, src.problems
 
 
 def best_views(items: Sequence[Sighting | TagSighting | ObjectObservation],

@@ -178,6 +178,107 @@ def _gated_laser_ranges(
     return laser_ranges(views, ks, aTb, cov_aTb, submaps, sigma_px, near_a=near, gate_m=gate)
 
 
+def _with_anchor_uncertainty(
+    points: Sequence[MultiViewPoint], views: Sequence[View], ks: np.ndarray, aTb: np.ndarray,
+    cov_local: np.ndarray, wTb: np.ndarray, cov_wTa: np.ndarray, sigma_px: float,
+) -> list[MultiViewPoint]:
+    """The points' covariances again, each view in another submap than its point's reference view holding
+    both anchors' marginal covariances besides its own (module docstring)."""
+    C_anchor = np.asarray(cov_wTa, np.float64).reshape(-1, 3, 3)
+    redone = []
+    for p in points:
+        idx = list(p.views)
+        ref_k = int(ks[p.reference])
+        C = cov_local[idx].copy()
+        for m, n in enumerate(idx):
+            if ks[n] != ref_k:
+                A = g.adjoint(g.inverse(aTb[n]))
+                C[m] += A @ (C_anchor[ks[n]] + C_anchor[ref_k]) @ A.T
+        _, cov, _ = point_covariance([views[n] for n in idx], wTb[idx], C, sigma_px)
+        redone.append(replace(p, cov_w_position=cov))
+    return redone
+
+
+def _laser_ranged(
+    points: Sequence[MultiViewPoint], laser: Sequence[tuple[np.ndarray, np.ndarray] | None], ks: np.ndarray,
+    wTa: np.ndarray, inlier_m: float,
+) -> tuple[set[int], list[int]]:
+    """The points replaced by their views' laser ranges (indices into ``points``) and those views: at least
+    two views whose laser-ranged points agree within ``inlier_m`` and, together, with the triangulated point
+    (chi-square 3 dof 0.999)."""
+    drop: set[int] = set()
+    ranged: list[int] = []
+    for j, p in enumerate(points):
+        a_X = {n: hit[0] for n in p.views if (hit := laser[n]) is not None}
+        Lw = {n: np.r_[g.transform_points(wTa[ks[n]], X[None, :2])[0], X[2]] for n, X in a_X.items()}
+        idx = list(Lw)
+        support = [[m for m in idx if np.linalg.norm(Lw[m] - Lw[n]) <= inlier_m] for n in idx]
+        group = max(support, key=len, default=[])
+        if len(group) < 2:
+            continue
+        d = np.mean([Lw[n] for n in group], axis=0) - p.w_position
+        if d @ np.linalg.solve(p.cov_w_position + np.eye(3) * LASER_RANGE_SIGMA_M**2, d) > _CHI2_3_999:
+            continue  # the laser saw something else along these rays (furniture before the wall)
+        drop.add(j)
+        ranged.extend(group)
+    return drop, ranged
+
+
+class _LandmarkRows:
+    """The landmark measurements and observations as they are collected (``TriangulatedLandmarks``' fields)."""
+
+    def __init__(self) -> None:
+        self.obs: list[ObjectObservation] = []
+        self.i: list[int] = []
+        self.ids: list[str] = []
+        self.axy: list[np.ndarray] = []
+        self.acov: list[np.ndarray] = []
+        self.z: list[float] = []
+        self.initial: dict[str, np.ndarray] = {}
+
+    def _add(self, k: int, oid: str, a_xy: np.ndarray, cov_a_xy: np.ndarray, z: float,
+             w_xy: np.ndarray) -> None:
+        self.i.append(k)
+        self.ids.append(oid)
+        self.axy.append(a_xy)
+        self.acov.append(cov_a_xy)
+        self.z.append(z)
+        self.initial.setdefault(oid, w_xy)
+
+    def add_laser_view(self, v: View, k: int, X: np.ndarray, C2: np.ndarray, wTa_k: np.ndarray,
+                       aTb_n: np.ndarray) -> None:
+        """View ``v``'s laser-ranged point ``X`` (anchor ``k``'s frame, covariance ``C2`` of its xy)."""
+        self._add(k, v.object_id, X[:2], C2, float(X[2]), g.transform_points(wTa_k, X[None, :2])[0])
+        b = np.r_[g.transform_points(g.inverse(aTb_n), X[None, :2])[0], X[2]]
+        Rb = np.eye(3)
+        Rb[:2, :2] = g.rot2(aTb_n[2])
+        C3 = np.diag([0.0, 0.0, LASER_RANGE_SIGMA_M**2])
+        C3[:2, :2] = C2
+        self.obs.append(ObjectObservation(v.stamp_ns, v.object_id, v.payload, b, Rb.T @ C3 @ Rb,
+                                          "laser_range", v.source))
+
+    def add_point(self, p: MultiViewPoint, k: int, a: np.ndarray, R: np.ndarray, wTb_r: np.ndarray,
+                  source: Any) -> None:
+        """Point ``p`` in anchor ``k``'s frame (``a``; ``R`` the anchor's rotation), observed from its
+        reference view's pose ``wTb_r``."""
+        self._add(k, p.object_id, a, R.T @ p.cov_w_position[:2, :2] @ R, float(p.w_position[2]),
+                  p.w_position[:2].copy())
+        Rb = g.rot2(wTb_r[2])
+        b = np.r_[Rb.T @ (p.w_position[:2] - wTb_r[:2]), p.w_position[2]]
+        Rb3 = np.eye(3)
+        Rb3[:2, :2] = Rb
+        self.obs.append(ObjectObservation(p.stamp_ns, p.object_id, p.payload, b, Rb3.T @ p.cov_w_position @ Rb3,
+                                          "triangulation", source))
+
+    def result(self, points: Sequence[MultiViewPoint], report: MultiViewReport,
+               n_ranged: int) -> TriangulatedLandmarks:
+        return TriangulatedLandmarks(
+            tuple(points), tuple(self.obs), np.array(self.i, np.int64), tuple(self.ids),
+            np.array(self.axy).reshape(-1, 2), np.array(self.acov).reshape(-1, 2, 2), np.array(self.z),
+            self.initial, report, n_ranged,
+        )
+
+
 def triangulated_landmarks(
     views: Sequence[View],
     submaps: Sequence[Any],
@@ -200,54 +301,19 @@ def triangulated_landmarks(
 
     points, report = locate_from_views(views, wTb, cov_local, sigma_px, min_parallax_deg, inlier_m)
     if cov_wTa is not None:  # views in other submaps than the reference view's: add both anchors' uncertainty
-        C_anchor = np.asarray(cov_wTa, np.float64).reshape(-1, 3, 3)
-        redone = []
-        for p in points:
-            idx = list(p.views)
-            ref_k = int(ks[p.reference])
-            C = cov_local[idx].copy()
-            for m, n in enumerate(idx):
-                if ks[n] != ref_k:
-                    A = g.adjoint(g.inverse(aTb[n]))
-                    C[m] += A @ (C_anchor[ks[n]] + C_anchor[ref_k]) @ A.T
-            X, cov, _ = point_covariance([views[n] for n in idx], wTb[idx], C, sigma_px)
-            redone.append(replace(p, cov_w_position=cov))
-        points = redone
-    obs, i, ids, axy, acov, z = [], [], [], [], [], []
-    initial: dict[str, np.ndarray] = {}
-    laser = _gated_laser_ranges(views, points, ks, aTb, cov_local, wTa, submaps, sigma_px) if laser_range else [None] * V
-    drop: set[int] = set()  # triangulated points replaced by their views' laser ranges
-    ranged: list[int] = []
-    for j, p in enumerate(points):
-        idx = [n for n in p.views if laser[n] is not None]
-        Lw = {n: np.r_[g.transform_points(wTa[ks[n]], laser[n][0][None, :2])[0], laser[n][0][2]] for n in idx}
-        support = [[m for m in idx if np.linalg.norm(Lw[m] - Lw[n]) <= inlier_m] for n in idx]
-        group = max(support, key=len, default=[])
-        if len(group) < 2:
-            continue
-        d = np.mean([Lw[n] for n in group], axis=0) - p.w_position
-        if d @ np.linalg.solve(p.cov_w_position + np.eye(3) * LASER_RANGE_SIGMA_M**2, d) > _CHI2_3_999:
-            continue  # the laser saw something else along these rays (furniture before the wall)
-        drop.add(j)
-        ranged.extend(group)
+        points = _with_anchor_uncertainty(points, views, ks, aTb, cov_local, wTb, cov_wTa, sigma_px)
+    laser: list[tuple[np.ndarray, np.ndarray] | None] = (
+        _gated_laser_ranges(views, points, ks, aTb, cov_local, wTa, submaps, sigma_px) if laser_range else [None] * V
+    )
+    drop, ranged = _laser_ranged(points, laser, ks, wTa, inlier_m)
+    rows = _LandmarkRows()
     for n in sorted(ranged, key=lambda n: views[n].stamp_ns):
-        X, C2 = laser[n]
-        k = int(ks[n])
+        hit = laser[n]
+        assert hit is not None  # a ranged view has a laser range
+        X, C2 = hit
         if np.hypot(*X[:2]) < 1e-3:
             continue
-        i.append(k)
-        ids.append(views[n].object_id)
-        axy.append(X[:2])
-        acov.append(C2)
-        z.append(float(X[2]))
-        initial.setdefault(views[n].object_id, g.transform_points(wTa[k], X[None, :2])[0])
-        b = np.r_[g.transform_points(g.inverse(aTb[n]), X[None, :2])[0], X[2]]
-        Rb = np.eye(3)
-        Rb[:2, :2] = g.rot2(aTb[n, 2])
-        C3 = np.diag([0.0, 0.0, LASER_RANGE_SIGMA_M**2])
-        C3[:2, :2] = C2
-        obs.append(ObjectObservation(views[n].stamp_ns, views[n].object_id, views[n].payload, b, Rb.T @ C3 @ Rb,
-                                     "laser_range", views[n].source))
+        rows.add_laser_view(views[n], int(ks[n]), X, C2, wTa[int(ks[n])], aTb[n])
     points = [p for j, p in enumerate(points) if j not in drop]
     for p in points:
         r = p.reference
@@ -256,22 +322,8 @@ def triangulated_landmarks(
         a = R.T @ (p.w_position[:2] - wTa[k, :2])
         if np.hypot(*a) < 1e-3:  # at the anchor's origin: no bearing (never for a code seen from a robot)
             continue
-        i.append(k)
-        ids.append(p.object_id)
-        axy.append(a)
-        acov.append(R.T @ p.cov_w_position[:2, :2] @ R)
-        z.append(float(p.w_position[2]))
-        initial.setdefault(p.object_id, p.w_position[:2].copy())
-        Rb = g.rot2(wTb[r, 2])
-        b = np.r_[Rb.T @ (p.w_position[:2] - wTb[r, :2]), p.w_position[2]]
-        Rb3 = np.eye(3)
-        Rb3[:2, :2] = Rb
-        obs.append(ObjectObservation(p.stamp_ns, p.object_id, p.payload, b, Rb3.T @ p.cov_w_position @ Rb3,
-                                     "triangulation", views[r].source))
-    return TriangulatedLandmarks(
-        tuple(points), tuple(obs), np.array(i, np.int64), tuple(ids), np.array(axy).reshape(-1, 2),
-        np.array(acov).reshape(-1, 2, 2), np.array(z), initial, report, len(ranged),
-    )
+        rows.add_point(p, k, a, R, wTb[r], views[r].source)
+    return rows.result(points, report, len(ranged))
 
 
 def with_landmarks(problem: Any, tl: TriangulatedLandmarks, initial_wTa: np.ndarray | None = None) -> Any:
