@@ -1,8 +1,8 @@
 """``holoslam solve`` on the standard 2D pose graphs, as a user runs it: whole processes beside a plain gtsam script.
 
 For each graph, in the same run and interleaved: ``holoslam solve IN -o OUT --json`` (default start: LM from the
-file's guess and from the chordal start, the lower kept, the incremental start only when that solution disagrees
-with the measurements) and a plain script that calls gtsam's ``readG2o`` (``load2D`` for the TORO / iSAM text
+chordal start, from the file's guess only when that solution disagrees with the measurements, the lower kept,
+the incremental start only when the kept solution still disagrees) and a plain script that calls gtsam's ``readG2o`` (``load2D`` for the TORO / iSAM text
 files) and ``LevenbergMarquardtOptimizer`` with a prior on the first pose. Both are whole processes (interpreter
 start, imports, read, solve; holoslam also writes the optimised graph). Printed: both final errors beside the
 known optimum, the medians of wall and CPU seconds (user + system of the child: the machine is shared, CPU time

@@ -403,9 +403,10 @@ def _add_solve(sub: Any) -> None:
         "--init",
         choices=["auto", "file", "odometry", "lago", "chordal", "incremental"],
         default=None,
-        help="start of the optimisation (default with lm: auto, LM from the file's guess and from the chordal "
-        "start, the lower kept, and the slow incremental start only when that solution disagrees with the "
-        "measurements; the output says what each start reached and whether they agree; with isam2: file)",
+        help="start of the optimisation (default with lm: auto, LM from the chordal start, from the file's guess "
+        "only when that solution disagrees with the measurements (the lower kept), and the slow incremental start "
+        "only when the kept solution still disagrees; the output says what each start reached, which did not run "
+        "and why, and whether they agree; with isam2: file)",
     )
     s.add_argument(
         "--kernel",

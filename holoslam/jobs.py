@@ -245,7 +245,7 @@ def solve_g2o_file(
 ) -> tuple[G2oSolveSummary, Solution]:
     """Read a 2D g2o / TORO / iSAM graph, optimise it with its first pose fixed (or the FIX vertices) and no robust
     kernels, and write the optimised graph as g2o (when ``out_path`` is given). ``initialisation`` defaults to
-    ``AUTO``: LM from the file's guess and from the chordal start, the lower kept (see
+    ``AUTO``: LM from the chordal start, then from the file's guess only when that solution does not fit (see
     :mod:`holoslam.graph.starts`). ``options`` (when given) replaces ``method`` and ``initialisation``."""
     from holoslam.graph.build import BuildOptions
     from holoslam.graph.problem import problem_from_g2o
@@ -308,9 +308,9 @@ def solve_graph_file(
 ) -> G2oSolveSummary:
     """``holoslam solve``: optimise a g2o / TORO / iSAM text pose graph (first pose fixed) and write the result
     (g2o, and TUM). ``method``: lm (batch Levenberg-Marquardt) or isam2; ``init``: file (the file's vertices),
-    odometry, lago, chordal, incremental or auto (default with lm: LM from the file's guess and from the chordal
-    start, the lower kept, the incremental start only when that solution disagrees with the measurements; with
-    isam2: file). ``kernel`` (none, huber, cauchy, dcs, geman_mcclure; parameter in whitened units) puts a robust
+    odometry, lago, chordal, incremental or auto (default with lm: LM from the chordal start, from the file's
+    guess only when that solution disagrees with the measurements, the lower kept, the incremental start only when
+    the kept solution still disagrees; with isam2: file). ``kernel`` (none, huber, cauchy, dcs, geman_mcclure; parameter in whitened units) puts a robust
     kernel on every edge and landmark measurement, as g2o's ``-robustKernel`` does: a few wrong loop closures
     then no longer bend the graph, at the price of a non-convex cost. ``noise`` says how the noise numbers of
     EDGE2 / EDGE / ODOMETRY / LANDMARK lines read (g2o's EDGE_SE2 always carries information): gtsam_auto (as

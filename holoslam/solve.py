@@ -14,8 +14,8 @@ noise on the accepted measurements gives the final estimate and honest marginal 
 
 Initialisation (``SolveOptions.initialisation``): the problem's guess, the odometry chain, LAGO, the chordal start
 (:mod:`holoslam.graph.initialise`), an incremental iSAM2 pass, or ``AUTO`` (:mod:`holoslam.graph.starts`): LM
-from the problem's guess and from the chordal start, the lower kept, the incremental start only when the kept
-solution disagrees with the measurements; ``Solution.starts`` says what each start reached and whether they agree.
+from the chordal start, from the problem's guess only when that solution disagrees with the measurements (the
+lower kept), the incremental start only when the kept solution still disagrees; ``Solution.starts`` says what each start reached and whether they agree.
 
 ``Method.ISAM2`` feeds the graph anchor by anchor (:mod:`holoslam.graph.isam2`); ``isam2_final_lm_iterations``
 polishes the incremental estimate with a few batch LM iterations (on Victoria Park, 2 of them land on the batch

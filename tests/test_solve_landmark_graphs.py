@@ -100,12 +100,21 @@ def test_auto_reaches_the_incremental_optimum(vp_head: Path, reference: tuple[fl
     e_lm, e_inc = reference
     problem = problem_from_g2o(read_g2o(vp_head))
     sol = solve(problem, replace(_options(), initialisation=Initialisation.AUTO))
-    got = dict(sol.candidates)
     assert sol.initialisation is Initialisation.CHORDAL
     assert sol.final_error == pytest.approx(e_inc, rel=1e-6)
+    assert sol.starts is not None and sol.starts.fits
+    # the chordal solution explains the sightings: neither the file's chain nor the incremental pass runs
+    assert [c for c, _why in sol.starts.skipped] == [Initialisation.PROBLEM] and not sol.starts.fallback_ran
+    both = solve(
+        problem, replace(_options(), initialisation=Initialisation.AUTO, auto_enough_when_fits=False)
+    )
+    got = dict(both.candidates)
     assert got[Initialisation.PROBLEM] == pytest.approx(e_lm, rel=1e-6)  # LM from the file's chain: trapped
-    assert sol.starts is not None and sol.starts.agree is False and sol.starts.fits
-    assert not sol.starts.fallback_ran  # the chordal solution explains the sightings: no incremental pass
+    assert (
+        both.starts is not None
+        and both.starts.agree is False
+        and both.initialisation is Initialisation.CHORDAL
+    )
 
 
 def test_auto_runs_the_incremental_start_when_the_best_does_not_fit(

@@ -1,6 +1,7 @@
-"""The default start of ``holoslam solve`` (``Initialisation.AUTO``): LM from the file's guess and from the chordal
-start, the lower kept, the incremental start only when that solution disagrees with the measurements; and the
-output says which starts ran, what each reached and whether they agree.
+"""The default start of ``holoslam solve`` (``Initialisation.AUTO``): LM from the chordal start, then from the
+file's guess only when that solution disagrees with the measurements (the lower kept), the incremental start only
+when the kept solution still disagrees; and the output says which starts ran, what each reached, which were not
+run and why, and whether they agree.
 
 MITb (808 poses, ``../shared/posegraph``) is the graph where LM from the file's guess stops in a local minimum
 (E 385.12, where the optimum is 20.6035): the default must not."""
@@ -84,18 +85,29 @@ def test_chordal_start_pins_each_unconnected_part_at_its_guess():
     assert set(landmarks) == {"L"} and np.all(np.isfinite(wTa))
 
 
-def test_auto_keeps_the_chordal_solution_when_the_file_guess_traps_lm():
-    """The square with every heading of the guess flipped: LM from it stops in a local minimum, LM from the
-    chordal start reaches the truth; the report says the starts disagree and which was kept."""
+def _trapped_square() -> SlamProblem:
+    """A square with loop closures, exact measurements (optimum 0) and a guess whose headings are flipped: LM
+    from the guess stops in a local minimum."""
     truth = square_loop(n_side=6)
     n = len(truth)
     rng = np.random.default_rng(0)
     bad = truth.copy()
     bad[1:, 2] = geo.wrap(bad[1:, 2] + rng.choice([-2.5, 2.5], n - 1))
     pairs = [(k, k + 1) for k in range(n - 1)] + [(k, k + n // 2) for k in range(0, n // 2, 2)]
-    problem = _exact_problem(truth, bad, pairs)
+    return _exact_problem(truth, bad, pairs)
+
+
+AUTO = replace(PLAIN, initialisation=Initialisation.AUTO)
+FILE_FIRST = replace(AUTO, auto_candidates=(Initialisation.PROBLEM, Initialisation.CHORDAL))
+
+
+def test_auto_keeps_the_chordal_solution_when_the_file_guess_traps_lm():
+    """Every candidate run (auto_enough_when_fits off), the file's guess first: LM from it stops in a local
+    minimum, LM from the chordal start reaches the truth; the report says the starts disagree and which was
+    kept."""
+    problem = _trapped_square()
     file_only = solve(problem, PLAIN)
-    auto = solve(problem, replace(PLAIN, initialisation=Initialisation.AUTO))
+    auto = solve(problem, replace(FILE_FIRST, auto_enough_when_fits=False))
     assert file_only.final_error > 1.0  # trapped (the measurements are exact: the optimum is 0)
     assert auto.final_error < 1e-9 and auto.initialisation is Initialisation.CHORDAL
     report = auto.starts
@@ -103,7 +115,39 @@ def test_auto_keeps_the_chordal_solution_when_the_file_guess_traps_lm():
     got = {o.initialisation: o for o in report.outcomes}
     assert got[Initialisation.PROBLEM].final_error == pytest.approx(file_only.final_error, rel=1e-9)
     assert got[Initialisation.PROBLEM].max_dxy > 0.1 and got[Initialisation.CHORDAL].max_dxy == 0.0
-    assert report.fits and not report.fallback_ran
+    assert report.fits and not report.fallback_ran and report.skipped == ()
+
+
+def test_default_auto_runs_the_chordal_start_first_and_stops_when_it_fits():
+    """The default: the chordal start first; its solution explains the measurements (none beyond the chi-square
+    bound), so the file's guess is not solved, and the report says why."""
+    auto = solve(_trapped_square(), AUTO)
+    report = auto.starts
+    assert auto.final_error < 1e-9 and report is not None and report.kept is Initialisation.CHORDAL
+    assert [o.initialisation for o in report.outcomes] == [Initialisation.CHORDAL]
+    assert report.agree is None and report.beyond == 0 and report.fits and not report.fallback_ran
+    ((skipped, why),) = report.skipped
+    assert skipped is Initialisation.PROBLEM
+    assert why.startswith("the chordal start's solution already fits the measurements: 0 of ")
+    assert "at most 5 allowed" in why
+
+
+def test_a_later_start_runs_when_the_first_solution_does_not_fit():
+    """The file's guess first: its local minimum leaves measurements beyond the chi-square bound, so the chordal
+    start runs (and is kept); from a good guess the file's solution fits and the chordal start is not solved."""
+    problem = _trapped_square()
+    auto = solve(problem, FILE_FIRST)
+    report = auto.starts
+    assert report is not None and [o.initialisation for o in report.outcomes] == [
+        Initialisation.PROBLEM,
+        Initialisation.CHORDAL,
+    ]
+    assert report.kept is Initialisation.CHORDAL and auto.final_error < 1e-9 and report.skipped == ()
+    assert solve(problem, PLAIN).final_error > 1.0  # the file's guess alone: trapped
+    good = replace(problem, initial_wTa=square_loop(n_side=6))
+    report = solve(good, FILE_FIRST).starts
+    assert report is not None and [o.initialisation for o in report.outcomes] == [Initialisation.PROBLEM]
+    assert [c for c, _ in report.skipped] == [Initialisation.CHORDAL] and report.fits
 
 
 # ---------------------------------------------------------------------------------------------- MITb
@@ -116,45 +160,44 @@ def test_default_solve_of_mitb_reaches_the_global_optimum(tmp_path):
     summary, sol = solve_g2o_file(_mitb(), out)
     assert sol.final_error == pytest.approx(MITB_OPTIMUM, rel=1e-5)
     assert summary.initialisation == "chordal"
-    starts = dict(summary.candidates)
-    assert starts["problem"] == pytest.approx(MITB_TRAP, rel=1e-5)  # the trap is measured, not assumed
+    trap, _ = solve_g2o_file(_mitb(), initialisation="problem")
+    assert trap.final_error == pytest.approx(MITB_TRAP, rel=1e-5)  # the trap is measured, not assumed
+    both, _ = solve_g2o_file(_mitb(), options=replace(AUTO, auto_enough_when_fits=False))
+    assert dict(both.candidates)["problem"] == pytest.approx(MITB_TRAP, rel=1e-5)
+    assert both.final_error == pytest.approx(MITB_OPTIMUM, rel=1e-5) and both.initialisation == "chordal"
     graph, values = gtsam.readG2o(str(out))
     first = min(values.keys())
     graph.add(gtsam.PriorFactorPose2(first, values.atPose2(first), gtsam.noiseModel.Isotropic.Sigma(3, 1e-4)))
     assert graph.error(values) == pytest.approx(MITB_OPTIMUM, rel=1e-5)
 
 
-def test_holoslam_solve_says_which_starts_ran_and_that_they_disagree_on_mitb(tmp_path, capsys):
+def test_holoslam_solve_says_which_starts_ran_and_why_the_file_start_did_not_on_mitb(tmp_path, capsys):
     src = _mitb()
     assert main(["solve", str(src), "-o", str(tmp_path / "o.g2o")]) == 0
     text = capsys.readouterr().out
     assert "initialisation: chordal" in text
-    assert "  file: E 385.122 " in text and "  chordal: E 20.6035 " in text and ", kept" in text
-    assert "starts_agree: no: the lowest final error is kept" in text
+    assert "  chordal: E 20.6035 " in text and ", kept" in text
+    assert "  file: not solved (the chordal start's solution already fits the measurements: 1 of 827 " in text
+    assert "starts_agree: only one start ran" in text
     assert "incremental: not run, the kept solution fits the measurements" in text
     assert main(["solve", str(src), "-o", str(tmp_path / "o.g2o"), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["final_error"] == pytest.approx(MITB_OPTIMUM, rel=1e-5)
-    assert [s["start"] for s in d["starts"]] == ["file", "chordal"]
-    assert d["starts"][0]["final_error"] == pytest.approx(MITB_TRAP, rel=1e-5)
-    assert d["starts"][0]["max_dxy_m"] > 10.0  # a different solution, metres away
-    assert d["starts_agree"] is False and d["fallback"] == "incremental" and d["fallback_ran"] is False
+    assert [s["start"] for s in d["starts"]] == ["chordal"]
+    assert [s[0] for s in d["starts_skipped"]] == ["file"]
+    assert d["beyond_chi2"] == 1 and d["beyond_limit"] == 5
+    assert d["starts_agree"] is None and d["fallback"] == "incremental" and d["fallback_ran"] is False
 
 
-def test_holoslam_solve_says_when_the_starts_agree(tmp_path, capsys):
-    """The gtsam wheel's w100.graph: both starts reach one solution (the chordal start's LM stops when it gets
-    there); the text says so."""
+def test_the_starts_agree_when_every_candidate_runs(tmp_path):
+    """The gtsam wheel's w100.graph with every candidate run: both starts reach one solution (the file start's
+    LM stops when it gets to the chordal start's); the summary says so."""
     src = gtsam.findExampleDataFile("w100.graph")
-    assert main(["solve", src, "-o", str(tmp_path / "o.g2o"), "--json"]) == 0
-    d = json.loads(capsys.readouterr().out)
-    assert d["starts_agree"] is True and d["initialisation"] == "file"
-    assert {s["start"] for s in d["starts"]} == {"file", "chordal"}
-    assert main(["solve", src, "-o", str(tmp_path / "o.g2o")]) == 0
-    text = capsys.readouterr().out
-    assert (
-        "starts:\n  file: E " in text
-        and "starts_agree: yes: every start ends at the kept solution's error" in text
-    )
+    summary, _ = solve_g2o_file(src, options=replace(AUTO, auto_enough_when_fits=False))
+    d = summary.to_dict()
+    assert d["starts_agree"] is True and d["initialisation"] == "chordal"
+    assert [s["start"] for s in d["starts"]] == ["chordal", "file"]
+    assert d["starts"][1]["reached"] == "chordal"
 
 
 def test_explicit_start_has_no_starts_report(tmp_path, capsys):

@@ -4,11 +4,13 @@ agree and whether the kept solution explains the measurements.
 No single start reaches the global optimum of every graph: on MITb LM from the file's guess (or the odometry
 chain, or LAGO) stops at E 385.12 while the chordal start reaches 20.6035; on Victoria Park both stop far off and
 only the incremental start (an iSAM2 pass) gets there. The default candidates are the problem's own guess and the
-chordal start, each followed by LM to convergence; a later start whose LM reaches an earlier start's solution (the
-same error to the LM tolerance and the same poses to ``auto_agree_*``) stops there, so agreeing starts cost little
-more than one solve. The slow incremental start (``auto_fallback``) runs only when the best solution disagrees
-with the measurements: more than ``auto_fallback_beyond`` of them (and at least 5) beyond the chi-square bound
-``chi2_probability`` of their dimension, where a consistent solution leaves 1 - chi2_probability.
+chordal start, chordal first, each followed by LM to convergence. A later candidate runs only when the best
+solution so far disagrees with the measurements (``auto_enough_when_fits``): more than ``auto_fallback_beyond``
+of them (and at least 5) beyond the chi-square bound ``chi2_probability`` of their dimension, where a consistent
+solution leaves 1 - chi2_probability; the report names each start not run and why. A later start whose LM
+reaches an earlier start's solution (the same error to the LM tolerance and the same poses to ``auto_agree_*``)
+stops there, so agreeing starts cost little more than one solve. The slow incremental start (``auto_fallback``)
+runs only when the best of the candidates still disagrees with the measurements.
 
 The solver itself is passed in (:class:`StartRunner`), so this module does not import ``holoslam.solve``.
 """
@@ -112,6 +114,7 @@ class _Search:
         self.skipped: list[tuple[Initialisation, str]] = []
         self.seen: list[tuple[Initialisation, Start]] = []
         self.best: tuple[Initialisation, Solution, Any] | None = None
+        self._fit: tuple[Any, tuple[int, int, int]] | None = None
 
     def tried(self, cand: Initialisation) -> bool:
         return any(c is cand for c, *_ in self.raw) or any(c is cand for c, _ in self.skipped)
@@ -134,6 +137,29 @@ class _Search:
         self.raw.append((cand, sol, time.perf_counter() - t0, "", by))
         if self.best is None or sol.final_error < self.best[1].final_error * (1.0 - 1e-9):
             self.best = (cand, sol, state)
+
+    def fit(self) -> tuple[int, int, int]:
+        """(measurements beyond the chi-square bound, measurements tested, the most allowed) at the best solution
+        so far (computed once per best)."""
+        assert self.best is not None
+        if self._fit is None or self._fit[0] is not self.best[2]:
+            beyond, total = self.runner.fit(self.best[2])
+            limit = max(5, int(self.options.auto_fallback_beyond * total))
+            self._fit = (self.best[2], (beyond, total, limit))
+        return self._fit[1]
+
+    def enough(self) -> str:
+        """Why the remaining candidates need not run (``auto_enough_when_fits`` and the best solution so far fits
+        the measurements), else ''."""
+        if self.best is None or not self.options.auto_enough_when_fits:
+            return ""
+        beyond, total, limit = self.fit()
+        if beyond > limit:
+            return ""
+        return (
+            f"the {self.best[0].value} start's solution already fits the measurements: {beyond} of {total} "
+            f"beyond the chi-square bound, at most {limit} allowed"
+        )
 
     def outcomes(self) -> tuple[StartOutcome, ...]:
         assert self.best is not None
@@ -168,19 +194,23 @@ def solve_from_starts(problem: SlamProblem, options: SolveOptions, runner: Start
     t0 = time.perf_counter()
     search = _Search(problem, options, runner)
     for cand in dict.fromkeys(Initialisation(c) for c in options.auto_candidates):
-        if cand is not Initialisation.AUTO:
+        if cand is Initialisation.AUTO:
+            continue
+        why = search.enough()
+        if why:
+            search.skipped.append((cand, why))
+        else:
             search.run(cand)
     if search.best is None:
         failures = "; ".join(f"{c.value}: {why}" for c, _s, _t, why, _r in search.raw if why)
         raise SolverError("every initialisation failed: " + (failures or "no start to try"))
-    beyond, total = runner.fit(search.best[2])
-    limit = max(5, int(options.auto_fallback_beyond * total))
+    beyond, total, limit = search.fit()
     fallback = None if options.auto_fallback is None else Initialisation(options.auto_fallback)
     ran = False
     if fallback not in (None, Initialisation.AUTO) and beyond > limit and not search.tried(fallback):
         search.run(fallback)
         ran = True
-        beyond, total = runner.fit(search.best[2])
+        beyond, total, limit = search.fit()
     kept, best, state = search.best
     outcomes = search.outcomes()
     report = StartsReport(
