@@ -12,7 +12,7 @@ if TYPE_CHECKING:
     from holoslam.graph.build import BuildOptions
     from holoslam.solve import SolveOptions
 
-__all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes", "keyframe_anchors"]
+__all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes", "keyframe_anchors", "map_log"]
 
 
 def solve_options(cfg: SolverConfig) -> SolveOptions:
@@ -84,3 +84,18 @@ def keyframe_anchors(sol: Any, anchor_stamps_ns: np.ndarray, revisits: Any) -> A
     hit = nodes.stamps_ns[k] == stamps
     wTa = np.where(hit[:, None], ns.wTn[k], np.asarray(sol.wTa, np.float64))
     return dataclasses.replace(sol, wTa=wTa)
+
+
+def map_log(log: Any, frontend: Any = None, covariances: bool = True) -> tuple[Any, Any]:
+    """The SLAM part of a run on a read log, without vision or maps: the front end with loops re-estimated, the
+    final solve (the run's kernels and outlier rounds; anchor covariances when ``covariances``), the keyframe
+    solve and its anchors, as ``holoslam.pipeline.run`` does. ``frontend``: a ``FrontEndConfig`` (default
+    settings when None). Returns ``(FrontEnd, Solution)``."""
+    from holoslam.solve import CovarianceScope, SolveOptions, solve
+    from holoslam.submaps.frontend import FrontEndConfig, build_problem
+
+    cfg = frontend or FrontEndConfig()
+    fe = build_problem(log, config=cfg, optimize=reestimate_anchors)
+    scope = CovarianceScope.ANCHORS if covariances else CovarianceScope.NONE
+    sol = solve(fe.problem, SolveOptions(covariances=scope, build=run_build_options()))
+    return fe, keyframe_anchors(sol, fe.anchor_stamps_ns, revisit_nodes(fe, sol, cfg))

@@ -19,20 +19,14 @@ DURATION_S = 300.0
 def _map(profile: str, seed: int, folder) -> dict:
     from holoslam.evaluate import trajectory_errors, truth_at
     from holoslam.io.mcap import read_log
-    from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, run_build_options
-    from holoslam.submaps.frontend import FrontEndConfig
+    from holoslam.optimise import map_log
     from holoslam.sim import simulate_to_file
     from holoslam.sim.profiles import profile_config
-    from holoslam.solve import CovarianceScope, SolveOptions, solve
-    from holoslam.submaps.frontend import build_problem
 
     path = folder / f"{profile}_{seed}.mcap"
     simulate_to_file(path, profile_config(profile, seed=seed, duration_s=DURATION_S, image_rate_hz=0.0))
     log, _ = read_log(path)
-    # as a run does (holoslam.pipeline.run): the default front end, loops re-estimated, the run's kernels
-    fe = build_problem(log, optimize=reestimate_anchors)
-    sol = solve(fe.problem, SolveOptions(covariances=CovarianceScope.ANCHORS, build=run_build_options()))
-    sol = keyframe_anchors(sol, fe.anchor_stamps_ns, revisit_nodes(fe, sol, FrontEndConfig()))
+    fe, sol = map_log(log)  # as a run does: loops re-estimated, the run's kernels, the keyframe solve's anchors
     gt_t, gt = log.ground_truth_arrays()
     true = truth_at(fe.anchor_stamps_ns, gt_t, gt)
     te = trajectory_errors(sol.wTa, true, sol.cov_wTa)
