@@ -216,8 +216,8 @@ def starts_table(rows: list[dict]) -> None:
                 continue
             how = " (reached)" if s["reached"] else ""
             cells[s["start"]] = f"{s['final_error']:.7g} {s['iterations']:3d} {s['seconds']:5.2f}{how}"
-        for name, _why in d.get("starts_skipped", []):
-            cells[name] = "(same start)"
+        for name, why in d.get("starts_skipped", []):
+            cells[name] = "(same start)" if why.startswith("the same start") else "(not run: fits)"
         fb = "-" if not d.get("fallback_ran") else cells.get("incremental", "ran")
         beyond = f"{d.get('beyond_chi2')}/{d.get('measurements')}"
         print(
