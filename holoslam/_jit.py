@@ -26,14 +26,25 @@ import os
 import re
 from functools import cache
 from types import ModuleType
+from typing import TypedDict
 
 from numba.core import caching
 from numba.core.dispatcher import Dispatcher
 
-__all__ = ["JIT", "JIT_FASTMATH", "LOCATORS_INSTALLED", "kernel_files", "takes_policy"]
+__all__ = ["JIT", "JIT_FASTMATH", "JitOptions", "LOCATORS_INSTALLED", "kernel_files", "takes_policy"]
 
-JIT = {"cache": True, "nogil": True}
-JIT_FASTMATH = {**JIT, "fastmath": True}
+
+
+class JitOptions(TypedDict, total=False):
+    """The keyword arguments of ``nb.njit`` this policy sets (typed, so ``njit(**JIT)`` type-checks)."""
+
+    cache: bool
+    nogil: bool
+    fastmath: bool
+
+
+JIT: JitOptions = {"cache": True, "nogil": True}
+JIT_FASTMATH: JitOptions = {**JIT, "fastmath": True}
 
 _PARENT, _, _NAME = __name__.rpartition(".")
 _IMPORTS_ME = re.compile(

@@ -51,7 +51,8 @@ def gt_room_labels(gt_grey: np.ndarray) -> np.ndarray:
     g = np.asarray(gt_grey)
     if g.ndim != 2:
         raise ValueError(f"ground truth must be a 2-D grey image, got shape {g.shape}")
-    n, lab = cv2.connectedComponents((g > GT_WHITE_ABOVE).astype(np.uint8), connectivity=8)
+    n, cc = cv2.connectedComponents((g > GT_WHITE_ABOVE).astype(np.uint8), connectivity=8)
+    lab = np.asarray(cc, dtype=np.int32)  # connectedComponents' labels are int32 already: no copy
     size = np.bincount(lab.ravel(), minlength=n)
     big = size > MIN_PIXELS
     big[0] = False

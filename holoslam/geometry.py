@@ -12,6 +12,8 @@ wrapped to [-pi, pi). This module depends on numpy alone.
 
 from __future__ import annotations
 
+from typing import overload
+
 import numpy as np
 
 __all__ = [
@@ -29,6 +31,10 @@ __all__ = [
 ]
 
 
+@overload
+def wrap(theta: float) -> float: ...
+@overload
+def wrap(theta: np.ndarray) -> np.ndarray: ...
 def wrap(theta: np.ndarray | float) -> np.ndarray | float:
     """Wrap angles to [-pi, pi)."""
     if type(theta) is float:  # one Python float: the same arithmetic without an array round trip (~10x faster)

@@ -26,16 +26,18 @@ def _native_lines(graph: G2oGraph, source_text: str) -> str | None:
     """The graph's EDGE_SE2 and EDGE_SE2_XY lines as they stand in ``source_text`` (the text it was parsed from),
     in file order; None when some measurement did not come from such a line (TORO / iSAM tags, built in
     memory): then the writer formats them."""
-    nums = np.concatenate([graph.edge_line, graph.landmark_line])
+    el, ll = graph.edge_line, graph.landmark_line
+    if el is None or ll is None:  # filled in by G2oGraph.__post_init__
+        return None
+    nums = np.concatenate([el, ll])
     if nums.size == 0 or nums.min() <= 0:
         return None
     lines = source_text.splitlines()
     if nums.max() > len(lines):
         return None
     picked = [lines[k - 1] for k in np.sort(nums).tolist()]
-    n_edge = graph.edge_line.size
     tags = [line.split(None, 1)[0] for line in picked]
-    if tags.count("EDGE_SE2") != n_edge or tags.count("EDGE_SE2_XY") != graph.landmark_line.size:
+    if tags.count("EDGE_SE2") != el.size or tags.count("EDGE_SE2_XY") != ll.size:
         return None
     return "\n".join(picked) + "\n"
 

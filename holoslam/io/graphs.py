@@ -151,7 +151,7 @@ def to_graphml_graph(G):
     H = nx.MultiDiGraph() if G.is_directed() else nx.MultiGraph()
     if not G.is_multigraph():
         H = nx.DiGraph() if G.is_directed() else nx.Graph()
-    gmixed = set()
+    gmixed: set[str] = set()
     H.graph.update(_encode_attrs(dict(G.graph), gmixed))
     H.graph["holoslam_graph_class"] = _graph_class(G)
     H.graph["holoslam_node_ids"] = id_mode

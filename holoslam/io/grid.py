@@ -153,7 +153,7 @@ def decode_pgm(data: bytes, where: str = "PGM") -> np.ndarray:
         body = data[pos + 1 : pos + 1 + w * h]
         if len(body) != w * h:
             raise MapError(f"{where}: PGM body has {len(body)} bytes, header says {w}x{h} = {w * h}")
-        img = np.frombuffer(body, dtype=np.uint8).reshape(h, w)
+        img: np.ndarray = np.frombuffer(body, dtype=np.uint8).reshape(h, w)
     else:
         vals = data[pos:].split()
         if len(vals) < w * h:

@@ -370,6 +370,11 @@ def export_saved(saved: SavedRun, to: Path, formats: set[str]) -> list[Path]:
     from holoslam.io.results_mcap import write_results_mcap
     from holoslam.io.trajectory import write_tum
 
+    if saved.stamps_ns is None or saved.wTb is None:
+        raise IngestError(
+            f"{saved.folder}: the run was loaded without its trajectory; load it with the 'trajectory' part "
+            "(load_run's default) to export it"
+        )
     out = prepare_output_folder(to)
     every = "all" in formats
     written: list[Path] = []

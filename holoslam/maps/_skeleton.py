@@ -175,7 +175,7 @@ def _cluster_holes(
 
     junction = sk.deg >= 3
     jcells = np.flatnonzero(junction)
-    empty = (np.zeros(0, dtype=np.int64), [])
+    empty: tuple[np.ndarray, list[np.ndarray]] = (np.zeros(0, dtype=np.int64), [])
     if jcells.shape[0] < 4:  # a hole needs at least four enclosing cells
         return empty
     w2 = sk.w2

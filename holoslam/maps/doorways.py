@@ -451,5 +451,4 @@ def segment_regions(
     two = np.column_stack([2 * active, 2 * active + 1]).ravel()
     first = side_walks.labels(lab.reshape(-1), two).tolist()
     sides = list(zip(first[0::2], first[1::2], strict=True))
-    active = active.tolist()
-    return RegionSegmentation([cands[j] for j in active], int(n_lab), lab, area, sides)
+    return RegionSegmentation([cands[j] for j in active.tolist()], int(n_lab), lab, area, sides)

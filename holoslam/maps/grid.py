@@ -47,7 +47,7 @@ class OccupancyGrid:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.occupancy.shape  # type: ignore[return-value]
+        return self.occupancy.shape
 
     @property
     def free(self) -> np.ndarray:

@@ -11,6 +11,8 @@ skeleton cell nearest to it in L1 distance (the first in row-major order among e
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 __all__ = ["SkeletonPaths", "EdgePaths"]
@@ -80,10 +82,10 @@ class SkeletonPaths:
 
         ep = edge_paths if edge_paths is not None else EdgePaths(topology)
         self.res = float(res)
-        self._tree = None
+        self._tree: Any = None  # scipy's cKDTree of the cells, built on first need
         if len(ep) == 0:
             self.cells = np.zeros((0, 2), dtype=np.int64)
-            self.csr = None
+            self.csr: Any = None  # scipy's csr_matrix of the cell graph (none without cells)
             return
         allc = ep.cells
         key = allc[:, 0] * (int(allc[:, 1].max()) + 2) + allc[:, 1]

@@ -427,7 +427,9 @@ def _rooms(seg, cands, kind, lines, free, clr, res: float, r: RoomRules) -> Room
                 width_m=float(2.0 * clr[k]),
                 kind=kinds[k],
                 rooms=(int(room_id[sa]), int(room_id[sb])),
-                line=None if line is None else tuple((int(q[0]), int(q[1])) for q in line),
+                line=None if line is None else (
+                    (int(line[0][0]), int(line[0][1])), (int(line[1][0]), int(line[1][1]))
+                ),
             )
         )
     return RoomSegmentation(labels, room_cells, count[1:] * res * res, tuple(doorways), r)

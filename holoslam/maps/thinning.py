@@ -406,7 +406,7 @@ def preprocess_free(free: np.ndarray, *, erode_cells: int = 0, close_cells: int 
     disc of radius erode_cells (the robot radius in cells)."""
     import cv2
 
-    m = _as_mask(free).astype(np.uint8)
+    m: np.ndarray = _as_mask(free).astype(np.uint8)
     if close_cells < 0 or erode_cells < 0:
         raise MapError(f"close_cells and erode_cells must be >= 0, got {close_cells} and {erode_cells}")
     if close_cells:

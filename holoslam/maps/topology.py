@@ -272,7 +272,7 @@ def _bulk_multigraph(node_attrs: list[dict], u: np.ndarray, v: np.ndarray, edge_
     key[order] = np.arange(m) - group_start
     G = nx.MultiGraph()
     G._node.update(enumerate(node_attrs))
-    nbrs = [{} for _ in range(n)]
+    nbrs: list[dict] = [{} for _ in range(n)]
     G._adj.update(enumerate(nbrs))
     first = key == 0
     for a, b, d in zip(
@@ -427,6 +427,7 @@ def topology_from_grid(
     G.graph.update(close_cells=int(close_cells), erode_cells=int(erode_cells))
     if cleaning is not None:
         G.graph.update(cleaning.as_graph_attrs())
+    if report is not None:  # cleaned (set exactly when cleaning is)
         G.graph.update(report.as_graph_attrs())
     return G
 

@@ -67,7 +67,9 @@ def to_log_data(run, source: str = "simulated household") -> LogData:
         Transform(t0, "base_link", "laser", LASER_MOUNT, _quat_xyzw(quaternion_from_yaw(0.0)), static=True),
         Transform(t0, "base_link", "ptz_base", PTZ_MOUNT, _quat_xyzw(quaternion_from_yaw(0.0)), static=True),
     ]
-    images, infos, tags = [], [], []
+    images: list[Image] = []
+    infos: list[CameraInfo] = []
+    tags: list[TagSighting] = []
     for snap in run.snapshots:
         st = int(snap.stamp_ns)
         transforms.append(

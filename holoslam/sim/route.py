@@ -200,16 +200,16 @@ def _leg_keyframes(xy: np.ndarray, v_cap: float) -> tuple[np.ndarray, np.ndarray
     T = np.r_[0.0, np.cumsum(dt)]
     # dense samples (10 ms) with constant acceleration inside each segment, so the speed is continuous
     tt = np.r_[np.arange(0.0, T[-1], 0.01), T[-1]]
-    j = np.clip(np.searchsorted(T, tt, side="right") - 1, 0, len(ds) - 1)
-    tau = tt - T[j]
-    ua, ub = u[j], u[j + 1]
-    acc = (ub - ua) / dt[j]
-    full = 0.5 * (ua + ub) * dt[j]
+    piece = np.clip(np.searchsorted(T, tt, side="right") - 1, 0, len(ds) - 1)
+    tau = tt - T[piece]
+    ua, ub = u[piece], u[piece + 1]
+    acc = (ub - ua) / dt[piece]
+    full = 0.5 * (ua + ub) * dt[piece]
     with np.errstate(divide="ignore", invalid="ignore"):
-        f = np.where(full > 1e-12, (ua * tau + 0.5 * acc * tau**2) / full, tau / dt[j])
+        f = np.where(full > 1e-12, (ua * tau + 0.5 * acc * tau**2) / full, tau / dt[piece])
     f = np.clip(f, 0.0, 1.0)
-    pos = xy[j] + f[:, None] * (xy[j + 1] - xy[j])
-    heading = th[j] + f * wrap(th[j + 1] - th[j])
+    pos = xy[piece] + f[:, None] * (xy[piece + 1] - xy[piece])
+    heading = th[piece] + f * wrap(th[piece + 1] - th[piece])
     return np.column_stack([pos, heading]), tt
 
 

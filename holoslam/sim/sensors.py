@@ -217,9 +217,9 @@ def odometry(
         C[k + 1] = cov
     P[:, 2] = wrap_angle(P[:, 2])
     # to the ROS convention: covariance of the numbers (x, y, yaw) in the odom frame
-    c, s = np.cos(P[:, 2]), np.sin(P[:, 2])
+    cos_th, sin_th = np.cos(P[:, 2]), np.sin(P[:, 2])
     J = np.zeros((n + 1, 3, 3))
-    J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1], J[:, 2, 2] = c, -s, s, c, 1.0
+    J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1], J[:, 2, 2] = cos_th, -sin_th, sin_th, cos_th, 1.0
     C = J @ C @ np.transpose(J, (0, 2, 1))
     C[0] = np.diag([1e-9, 1e-9, 1e-9])
     if covariance == "constant":

@@ -336,7 +336,7 @@ def reference_household(wall_codes: int = 0, sizeless_labels: int = 0) -> World:
                 kind,
                 room,
                 payload,
-                tuple(float(v) for v in pos),
+                (float(pos[0]), float(pos[1]), float(pos[2])),
                 math.radians(yaw_deg),
                 side_mm / 1000.0,
                 furn,
@@ -491,7 +491,7 @@ def segments_block(segments: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nda
         t = (wx * ey - wy * ex) / den
         u = (wx * dy - wy * dx) / den
     hit = (np.abs(den) > 1e-12) & (t > 1e-6) & (t < 1 - 1e-6) & (u >= 0) & (u <= 1)
-    return hit.any(axis=1)
+    return np.asarray(hit.any(axis=1))
 
 
 # ---------------------------------------------------------------------------------------------- JSON
@@ -564,7 +564,7 @@ def world_from_json(text: str) -> World:
         width=float(d["width"]),
         height=float(d["height"]),
         rooms=tuple(Room(r["name"], r["xmin"], r["ymin"], r["xmax"], r["ymax"]) for r in d["rooms"]),
-        walls=tuple(tuple(float(v) for v in w) for w in d["walls"]),
+        walls=tuple((float(w[0]), float(w[1]), float(w[2]), float(w[3])) for w in d["walls"]),
         doorways=tuple(
             Doorway(x["name"], tuple(x["rooms"]), tuple(x["p0"]), tuple(x["p1"])) for x in d["doorways"]
         ),

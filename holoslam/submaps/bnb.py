@@ -59,7 +59,7 @@ class PrecomputedGrids:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.prob.shape  # type: ignore[return-value]
+        return self.prob.shape
 
     @property
     def nbytes(self) -> int:

@@ -311,7 +311,7 @@ def _convert_heading(c: _Conv, kind: str, msg: Any) -> Converted:
 def _convert_image(c: _Conv, kind: str, msg: Any) -> Converted:
     if isinstance(msg, dict) and "stamp_ns" in msg:
         stamp, frame = msg["stamp_ns"], msg["frame_id"]
-        get = msg.get
+        get: Callable[..., Any] = msg.get
     else:
         stamp, frame = _header_stamp(msg)
         get = lambda k, d=None: _get(msg, k, d)  # noqa: E731

@@ -107,8 +107,9 @@ class LogReader:
         self._sensor_frames: dict[str, str] = {}  # frame -> topic
         self._choices = tuple(choices)
         # the robot's base frame: the mapping's frames.base, else the odometry's child frame (see _note_frames)
-        self._base_frame_fixed = self.mapping is not None and self.mapping.base_frame is not None
-        self._base_frame = (self.mapping.base_frame if self._base_frame_fixed else None) or "base_link"
+        fixed_base = self.mapping.base_frame if self.mapping is not None else None
+        self._base_frame_fixed = fixed_base is not None
+        self._base_frame = fixed_base or "base_link"
         self._base_frame_seen = self._base_frame_fixed
         self._start: int | None = None
         self._end: int | None = None
@@ -121,7 +122,8 @@ class LogReader:
         enc = channel.message_encoding
         kind = normalize_schema_name(schema.name) if schema is not None else ""
         if enc == "cdr":
-            fast = cdr.FAST_DECODERS.get(kind) if not ts.conv.fields else None
+            fields = ts.conv.fields if ts.conv is not None else {}
+            fast = cdr.FAST_DECODERS.get(kind) if not fields else None
             if fast is None:
                 generic = cdr.generic_decoder(schema.name, schema.data.decode("utf-8"))
                 ts.decoder_name = "generic-cdr"
@@ -172,7 +174,7 @@ class LogReader:
             st = _FileState(path)
             self._files.append(st)
             schemas: dict[int, Any] = {}
-            decoders: dict[int, tuple[_TopicState, Callable[[memoryview], Any] | None, str]] = {}
+            decoders: dict[int, tuple[_TopicState | None, Callable[[memoryview], Any] | None, str]] = {}
             last_progress = 0
             for op, rec in _iter_file(st):
                 if op == _OP_MESSAGE:
@@ -182,7 +184,7 @@ class LogReader:
                         self._warnings.append(
                             f"{path.name}: message on unknown channel id {cid} (no Channel record)"
                         )
-                        decoders[cid] = entry = (None, None, "")  # type: ignore[assignment]
+                        decoders[cid] = entry = (None, None, "")
                     ts, dec, kind = entry
                     if ts is None:
                         continue
@@ -191,9 +193,9 @@ class LogReader:
                         self._start = self._end = log_time
                     elif log_time < self._start:
                         self._start = log_time
-                    elif log_time > self._end:  # type: ignore[operator]
+                    elif log_time > self._end:
                         self._end = log_time
-                    if dec is None:
+                    if dec is None or ts.conv is None:  # a channel without a role has no decoder
                         continue
                     try:
                         stamp, records = _convert(ts.conv, kind, dec(data))

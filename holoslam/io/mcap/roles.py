@@ -194,10 +194,10 @@ def _scan_channels(files: list[Path]) -> tuple[dict[str, _Topic], bool, int, int
                     t.channels.append((fi, rec))
             else:
                 cid, lt, _ = rec
-                ch = chan.get(cid)
-                if ch is None:
+                known = chan.get(cid)
+                if known is None:
                     continue
-                t = topics[ch.topic]
+                t = topics[known.topic]
                 t.count += 1
                 t.first_ns = lt if t.first_ns is None else min(t.first_ns, lt)
                 t.last_ns = lt if t.last_ns is None else max(t.last_ns, lt)

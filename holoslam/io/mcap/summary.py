@@ -160,8 +160,8 @@ def format_summary(s: LogSummary) -> str:
     out.append("a run would use: " + (", ".join(f"{r}={t}" for r, t in s.uses) or "nothing"))
     if s.missing:
         out.append("missing for a SLAM run: " + ", ".join(s.missing))
-    for c in s.choices:
-        out.append(f"chosen: {c.text()}")
+    for choice in s.choices:
+        out.append(f"chosen: {choice.text()}")
     for p in s.problems:
         out.append(f"problem: {p}")
     for n in s.notes:
