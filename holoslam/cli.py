@@ -154,7 +154,7 @@ def _starts_lines(d: dict) -> list[str]:
     agree = {
         True: "yes: every start ends at the kept solution's error",
         False: "no: the lowest final error is kept",
-        None: "only one start ran",
+        None: "only one start ran" + (" (above: why the others did not)" if d["starts_skipped"] else ""),
     }
     lines.append(f"starts_agree: {agree[d['starts_agree']]}")
     fits = f"{d['beyond_chi2']} of {d['measurements']} measurements beyond the 99.99% chi-square bound"

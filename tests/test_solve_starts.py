@@ -178,7 +178,7 @@ def test_holoslam_solve_says_which_starts_ran_and_why_the_file_start_did_not_on_
     assert "initialisation: chordal" in text
     assert "  chordal: E 20.6035 " in text and ", kept" in text
     assert "  file: not solved (the chordal start's solution already fits the measurements: 1 of 827 " in text
-    assert "starts_agree: only one start ran" in text
+    assert "starts_agree: only one start ran (above: why the others did not)" in text
     assert "incremental: not run, the kept solution fits the measurements" in text
     assert main(["solve", str(src), "-o", str(tmp_path / "o.g2o"), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
