@@ -47,6 +47,6 @@ case "$cmd" in
     $VENV/bin/python -m pytest -q -n 2 "$@"
     ;;
   bench) ensure_zbar; ensure_venv; for b in benchmarks/*.py; do $VENV/bin/python "$b" "$@"; done ;;
-  lint) ensure_venv; $VENV/bin/ruff check holoslam tests benchmarks ;;
+  lint) ensure_venv; $VENV/bin/ruff check holoslam tests benchmarks && $VENV/bin/mypy ;;  # mypy: [tool.mypy] in pyproject.toml
   *) echo "usage: ./dev.sh demo|test|install|bench|lint" >&2; exit 2 ;;
 esac

@@ -107,18 +107,21 @@ class _DependencyStamp:
     """Mixin for numba's cache locators: the source stamp of a kernel whose file imports this module also
     holds the hashes of this file and of the kernel files its module can call into (module docstring)."""
 
+    _holoslam_deps: tuple[str, ...] = ()  # this file and the kernel files, set per locator by from_function
+
     @classmethod
     def from_function(cls, py_func, py_file):
         if not takes_policy(py_file):
             return None  # not a kernel of a file that takes its settings from here: numba's locators decide
-        self = super().from_function(py_func, py_file)
+        # a mixin: numba's locator class follows it in the MRO (``_install_locators``)
+        self = super().from_function(py_func, py_file)  # type: ignore[misc]
         if self is not None:
             self._holoslam_deps = (os.path.abspath(__file__), *kernel_files(py_func))
         return self
 
     def get_source_stamp(self):
         deps = tuple((os.path.basename(p), _facts(p)[0]) for p in self._holoslam_deps)
-        return super().get_source_stamp(), deps
+        return super().get_source_stamp(), deps  # type: ignore[misc]  # numba's locator (a mixin, as above)
 
 
 def _install_locators() -> bool:

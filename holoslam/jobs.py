@@ -270,6 +270,7 @@ def solve_g2o_file(
     t2 = time.perf_counter()
     if out_path is not None:
         lm_ids = [int(n) for n in sol.landmark_ids]
+        assert problem.pose_ids is not None  # set by SlamProblem.__post_init__
         # measurements read from EDGE_SE2 lines are copied as they stand (exact, and fast)
         write_g2o(
             with_estimate(g, problem.pose_ids, sol.wTa, lm_ids, sol.w_landmarks), out_path, source_text=text

@@ -231,6 +231,7 @@ class _State:
 def _with_gauge(problem: SlamProblem, options: SolveOptions) -> SlamProblem:
     if problem.priors or not options.fix_first:
         return problem
+    assert problem.initial_wTa is not None  # set by SlamProblem.__post_init__
     return replace(problem, priors=(default_prior(0, problem.initial_wTa[0]),))
 
 
@@ -251,6 +252,7 @@ def _start_values(state: _State, start: Start | None) -> Any:
     elif init is Initialisation.CHORDAL:
         wTa, w_lm = chordal(problem)
     else:
+        assert problem.initial_wTa is not None  # set by SlamProblem.__post_init__
         wTa = problem.initial_wTa
     return initial_values(problem, built, wTa, w_lm, landmark_labels=state.labels)
 

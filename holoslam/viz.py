@@ -200,7 +200,9 @@ def draw_planning(ax: Axes, tl: TwoLayerGraph, layer: int = 2, edges: bool = Fal
         if e.shape[0]:
             arts.append(
                 ax.add_collection(
-                    LineCollection(np.stack([c[e[:, 0]], c[e[:, 1]]], 1), colors="tab:blue", linewidths=0.5)
+                    # an (E, 2, 2) array of segments (the stub names a sequence)
+                    LineCollection(np.stack([c[e[:, 0]], c[e[:, 1]]], 1),  # type: ignore[arg-type]
+                                   colors="tab:blue", linewidths=0.5)
                 )
             )
     ax.autoscale_view()
@@ -249,7 +251,7 @@ def draw_trajectory(
     from matplotlib.collections import LineCollection
 
     T = np.asarray(wTb, dtype=np.float64).reshape(-1, 3)
-    style = dict(ls="none", marker="o", ms=2.5) if points else dict(ls="-", lw=1.2)
+    style: dict[str, Any] = dict(ls="none", marker="o", ms=2.5) if points else dict(ls="-", lw=1.2)
     (line,) = ax.plot(T[:, 0], T[:, 1], color=colour, label=label, **style)
     arts: list[Any] = [line]
     if cov_wTb is not None:

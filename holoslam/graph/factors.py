@@ -179,7 +179,7 @@ def _plan_models(plan: _NoisePlan, est: Any) -> list[Any]:
     import gtsam
 
     diag_model, full_model = gtsam.noiseModel.Diagonal.Sigmas, gtsam.noiseModel.Gaussian.SqrtInformation
-    models = [
+    models: list[Any] = [
         diag_model(s_k) if d_k else full_model(r_k, False)
         for d_k, s_k, r_k in zip(plan.is_diag.tolist(), plan.sigmas, plan.R, strict=True)
     ]
@@ -276,7 +276,7 @@ def heading_factors(
     for k, y, s in zip(
         np.asarray(anchor_keys).tolist(), np.asarray(yaw).tolist(), np.asarray(sigma).tolist(), strict=True
     ):
-        model = gtsam.noiseModel.Diagonal.Sigmas(np.array([xy_sigma, xy_sigma, s]))
+        model: Any = gtsam.noiseModel.Diagonal.Sigmas(np.array([xy_sigma, xy_sigma, s]))
         if est is not None:
             model = gtsam.noiseModel.Robust.Create(est, model)
         graph.add(gtsam.BetweenFactorPose2(magnetic_key, k, gtsam.Pose2(0.0, 0.0, y), model))

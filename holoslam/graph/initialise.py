@@ -92,6 +92,7 @@ def _rotations(problem: SlamProblem, a0: int, theta0: float) -> np.ndarray:
     rel = problem.relative
     sq = np.sqrt(1.0 / rel.cov_iTj[:, 2, 2])[:, None, None]  # rotation information of each measurement
     R = geo.rot2(rel.iTj[:, 2])
+    assert problem.initial_wTa is not None  # set by SlamProblem.__post_init__
     guess = np.column_stack([np.cos(problem.initial_wTa[:, 2]), np.sin(problem.initial_wTa[:, 2])])
     guess[a0] = np.cos(theta0), np.sin(theta0)
     m = len(rel)
@@ -121,6 +122,7 @@ def _positions(
     ).reshape(-1, 2, 2)
     U = chol_upper(info)  # U^T U = information (world frame)
     guess = np.zeros((n + len(names), 2))
+    assert problem.initial_wTa is not None  # set by SlamProblem.__post_init__
     guess[:n] = problem.initial_wTa[:, :2]
     for name in names:
         guess[var[name]] = problem.initial_landmarks.get(name, np.zeros(2))
@@ -132,6 +134,7 @@ def _positions(
 def chordal(problem: SlamProblem) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The chordal start (see the module docstring): anchor poses (N, 3) and landmark positions by object id.
     The anchor of the problem's first prior (else anchor 0) keeps its pose (the prior's, else the guess)."""
+    assert problem.initial_wTa is not None  # set by SlamProblem.__post_init__
     a0, w0 = (problem.priors[0].i, problem.priors[0].wTa) if problem.priors else (0, problem.initial_wTa[0])
     w0 = np.asarray(w0, dtype=float)
     theta = _rotations(problem, a0, float(w0[2]))
@@ -168,5 +171,6 @@ def lago(problem: SlamProblem, relative_rows: np.ndarray) -> np.ndarray:
         if v.exists(k):
             p = v.atPose2(k)
             wTa[a] = (p.x(), p.y(), p.theta())
+    assert problem.initial_wTa is not None  # set by SlamProblem.__post_init__
     align = geo.compose(problem.initial_wTa[0], geo.inverse(wTa[0]))
     return geo.compose(align, wTa)

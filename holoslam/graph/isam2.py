@@ -58,6 +58,7 @@ def isam2_feed(
 
     rel, lm = problem.relative, problem.landmarks
     init = problem.initial_wTa
+    assert init is not None  # set by SlamProblem.__post_init__
     n = problem.num_poses
     order = np.argsort(built.stage, kind="stable")
     stages = built.stage[order]

@@ -211,6 +211,7 @@ class LandmarkMeasurements:
 
     def select(self, mask: np.ndarray) -> LandmarkMeasurements:
         idx = np.flatnonzero(np.asarray(mask)) if np.asarray(mask).dtype == bool else np.asarray(mask)
+        assert self.z is not None  # set by __post_init__
         return LandmarkMeasurements(
             self.i[idx],
             tuple(self.landmark[k] for k in idx),
@@ -420,6 +421,7 @@ def problem_from_g2o(graph: G2oGraph, fix_first: bool = True) -> SlamProblem:
         str(int(k)): np.asarray(p, dtype=float)
         for k, p in zip(graph.point_ids, graph.point_positions, strict=True)
     }
+    assert graph.edge_line is not None and graph.landmark_line is not None  # set by G2oGraph.__post_init__
     chain = None
     if not placed.any() and n > 1:
         chain = _chain_initialisation(

@@ -73,6 +73,7 @@ def _start(
     problem: SlamProblem, cand: Initialisation, seen: list[tuple[Initialisation, Start]]
 ) -> tuple[Start | None, str]:
     """The start array of a candidate (None: the solver makes it) and, when it is not to be solved, why."""
+    assert problem.initial_wTa is not None  # set by SlamProblem.__post_init__
     if cand is Initialisation.LAGO:
         a0 = problem.initial_wTa[0]
         if any(np.allclose(s[0][0], a0, rtol=0.0, atol=1e-9) and _exact(problem, s[0]) for _c, s in seen):

@@ -72,6 +72,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -131,7 +132,7 @@ class RoutePlanner:
     adj_w: np.ndarray = field(repr=False)  # (A,) cells
     landmark_dist: np.ndarray = field(repr=False)  # (F, L) portal-graph distances from L landmark portals
     free: np.ndarray = field(repr=False)  # (H, W) bool planner free mask
-    kernels: object = field(repr=False, default=None)
+    kernels: Any = field(repr=False, default=None)  # the compiled kernel module
     _cache: dict = field(repr=False, default_factory=dict, compare=False)
 
 
@@ -241,10 +242,10 @@ def build_planner(graph: TwoLayerGraph, n_landmarks: int = 14) -> RoutePlanner:
     aptr = np.searchsorted(src, np.arange(NP + 1))
     comp = _components(R, graph.region_edges)
     D = _landmarks(aptr, dst, d, NP, n_landmarks)
-    ro = [
-        _ro(a) for a in (cen, boxes, ports, port_portal, ptr, pid, comp, aptr, dst, d.astype(np.float64), D)
-    ]
-    planner = RoutePlanner(graph, *ro, free=_ro(graph.free_mask()), kernels=_kernels())
+    planner = RoutePlanner(
+        graph, _ro(cen), _ro(boxes), _ro(ports), _ro(port_portal), _ro(ptr), _ro(pid), _ro(comp), _ro(aptr),
+        _ro(dst), _ro(d.astype(np.float64)), _ro(D), free=_ro(graph.free_mask()), kernels=_kernels(),
+    )
     _query_arrays(planner)  # derived query structures: built here, not by the first query
     return planner
 

@@ -128,10 +128,11 @@ def _immutable_float32(a: np.ndarray) -> bool:
     """A C-contiguous float32 array that no array in its chain of bases lets anyone write."""
     if a.dtype != np.float32 or not a.flags.c_contiguous:
         return False
-    while isinstance(a, np.ndarray):
-        if a.flags.writeable:
+    chain: object = a
+    while isinstance(chain, np.ndarray):
+        if chain.flags.writeable:
             return False
-        a = a.base
+        chain = chain.base
     return True
 
 

@@ -283,8 +283,10 @@ def dead_reckon(
     var_o = cfg.odo_sigma_turn_per_sqrt_rad**2 * np.abs(dth_o) + cfg.odo_sigma_heading_per_sqrt_m**2 * np.abs(s)
     use_c = np.zeros(s.size, dtype=bool)
     dth = dth_o.copy()
+    if heading_stamps_ns is not None and heading_yaw is None:
+        raise ValueError("dead_reckon: heading_stamps_ns given without heading_yaw; pass the yaws at those stamps")
     have_compass = cfg.use_compass and heading_stamps_ns is not None and len(heading_stamps_ns) >= 2
-    if have_compass:
+    if have_compass and heading_yaw is not None:  # (not None with the stamps, checked above)
         hst = np.asarray(heading_stamps_ns, dtype=np.int64)
         hsig = np.full(hst.size, cfg.compass_sigma) if heading_sigma is None else np.asarray(heading_sigma, float)
         hsig = np.where(np.isfinite(hsig) & (hsig > 0), hsig, cfg.compass_sigma)

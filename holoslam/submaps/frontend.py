@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -45,6 +45,7 @@ from holoslam.submaps.features import FeatureConfig, ScanFeatures, extract_featu
 from holoslam.submaps.local_slam import ActiveSubmap, LocalSlam, LocalSlamConfig
 from holoslam.submaps.loops import LoopConfig, LoopSearch
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
+from holoslam.submaps.probgrid import ProbGrid
 from holoslam.submaps.revisits import RevisitConfig
 from holoslam.submaps.segment import Submap, voxel_downsample
 from holoslam.types import LogData, ObjectObservation
@@ -183,7 +184,10 @@ class _Graph:
         return self._dist[2]
 
     def add(self, i: int, j: int, T, cov, kind: str) -> None:
-        self.i.append(i), self.j.append(j), self.T.append(np.asarray(T, float)), self.kind.append(kind)
+        self.i.append(i)
+        self.j.append(j)
+        self.T.append(np.asarray(T, float))
+        self.kind.append(kind)
         self.cov.append(np.asarray(cov, float) + np.eye(3) * 1e-10)
 
     def _dr_vs_scan(self, min_pairs: int = 5) -> tuple[np.ndarray, np.ndarray] | None:
@@ -327,9 +331,9 @@ def _dead_reckoning(log: LogData, cfg: FrontEndConfig) -> _Run:
     dr_cfg = noise.config
     hsig = np.where(np.isfinite(hsig) & (hsig > 0), hsig, dr_cfg.compass_sigma)
     have_h = hst.size >= 2
-    hargs = dict(heading_stamps_ns=hst if have_h else None, heading_yaw=hyaw if have_h else None,
+    hargs: dict[str, Any] = dict(heading_stamps_ns=hst if have_h else None, heading_yaw=hyaw if have_h else None,
                  heading_sigma=hsig if have_h else None, config=dr_cfg)
-    short = dict(config=replace(dr_cfg, use_compass=False))
+    short: dict[str, Any] = dict(config=replace(dr_cfg, use_compass=False))
     scans = [s for s in log.scans if ost[0] <= s.stamp_ns <= ost[-1]]
     if not scans:
         raise IngestError(f"{log.source}: no scan lies within the odometry's time span")
@@ -369,9 +373,10 @@ def _local_slam(
             if cfg.local.match_every_scan:
                 slam.track(t, run.odo_at_scans[k], scan.points())
             continue
-        lt = last_t
-        node = slam.add(t, run.odo_at_scans[k],
-                        lambda lt=lt, t=t: dead_reckon(ost, opose, lt, t, **run.short).cov_aTb_end,
+        def cov_odo_step(lt: int = last_t, t: int = t) -> np.ndarray:
+            return dead_reckon(ost, opose, lt, t, **run.short).cov_aTb_end
+
+        node = slam.add(t, run.odo_at_scans[k], cov_odo_step,
                         scan.points(), np.where(scan.valid, scan.ranges, np.inf).astype(np.float64),
                         scan.angles, float(travelled[k]))
         last_t, n_nodes = t, n_nodes + 1
@@ -384,7 +389,7 @@ def _local_slam(
         n_arrivals = len(slam.arrivals)
         for sm in slam.pop_finished():  # the growing grids are dropped here: only the cropped ones are kept
             closed.append(_submap_record(sm, cfg, "scans"))
-            if closed[-1].grid is not None:
+            if isinstance(closed[-1].grid, ProbGrid):  # a finished submap's grid (None without build_grids)
                 loops.add_submap(sm.index, closed[-1].grid)
         if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
@@ -462,7 +467,11 @@ def _landmarks(observations, closed, anchors, ost, opose, short):
         if np.hypot(*xy) < 1e-3:
             skipped += 1
             continue
-        li.append(k), lid.append(ob.object_id), lxy.append(xy), lcov.append(c2), lz.append(z)
+        li.append(k)
+        lid.append(ob.object_id)
+        lxy.append(xy)
+        lcov.append(c2)
+        lz.append(z)
     return li, lid, lxy, lcov, lz, skipped
 
 

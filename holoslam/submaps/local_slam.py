@@ -191,6 +191,7 @@ class LocalSlam:
         # the last node in the host's frame (it may have been matched into the submap finished just before)
         prev = last.aTb if last.submap == host.index else g.compose(
             g.inverse(self._arrival(last.submap, host.index)), last.aTb)
+        assert self._last_odo is not None  # set by the first node, which is not predicted
         return g.compose(prev, g.between(self._last_odo, odo))
 
     def close(self) -> None:

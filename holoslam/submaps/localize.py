@@ -25,6 +25,7 @@ the match: enough inliers, small RMS, a well-conditioned information matrix.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -225,7 +226,8 @@ class NearestIndex:
         try:
             from holoslam.submaps import _fast
 
-            self._kernel, self._grid = _fast, _fast.bucket_grid(self._x, self._y, float(cell), 4_000_000)
+            self._kernel: Any = _fast
+            self._grid: Any = _fast.bucket_grid(self._x, self._y, float(cell), 4_000_000)
         except ImportError:  # pragma: no cover - numba is a declared dependency
             self._kernel, self._grid = None, None
 

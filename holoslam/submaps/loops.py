@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -401,7 +402,7 @@ def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top,
     return best, ba, bx, by, k_break, buf[:nd]
 
 
-_bnb_fast = None  # holoslam.submaps._bnb_fast once _kernels() has run (the compiled functions call into it)
+_bnb_fast: Any = None  # holoslam.submaps._bnb_fast once _kernels() has run (the compiled functions call into it)
 _KERNELS = None
 
 

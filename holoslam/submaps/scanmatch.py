@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -149,9 +150,9 @@ class WidePyramid:
     def __init__(self) -> None:
         self.key: object = None
         self._built_for: object = None
-        self._grids: object = None
+        self._grids: Any = None
 
-    def grids(self, build: Callable[[], object]) -> object:
+    def grids(self, build: Callable[[], Any]) -> Any:
         if self._grids is None or self._built_for != self.key:
             self._grids, self._built_for = build(), self.key
         return self._grids

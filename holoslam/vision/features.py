@@ -169,7 +169,7 @@ def dominant_colours(
     Pi = P.astype(np.int64)
     k = int(min(k, len(np.unique((Pi[:, 0] << 16) | (Pi[:, 1] << 8) | Pi[:, 2]))))
     cv2.setRNGSeed(seed)
-    _, lab, centres = cv2.kmeans(
+    _, lab, centres = cv2.kmeans(  # type: ignore[call-overload]  # bestLabels None: OpenCV allocates them
         P, k, None, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.5), 3, cv2.KMEANS_PP_CENTERS
     )
     w = np.bincount(lab.ravel(), minlength=k).astype(np.float64)
@@ -242,7 +242,7 @@ def object_features(
     ms = list(masks) if masks is not None else [None] * len(crops)
     texture = np.mean([lbp_histogram(c, m) for c, m in zip(crops, ms, strict=True)], axis=0)
     colours, weights = dominant_colours(crops, n_colours, masks=ms)
-    sift = cv2.SIFT_create(nfeatures=max_sift)
+    sift = cv2.SIFT_create(nfeatures=max_sift)  # type: ignore[attr-defined]  # in cv2 since 4.4; not in its stub
     kps, descs = [], []
     for i, c in enumerate(crops):
         m = None if ms[i] is None else (np.asarray(ms[i]) != 0).astype(np.uint8) * 255

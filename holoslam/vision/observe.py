@@ -301,7 +301,7 @@ def locate_from_log(
     tree = TransformTree(log.transforms)
     infos = log.camera_infos
     info_stamps = np.array([i.stamp_ns for i in infos], dtype=np.int64)
-    miss = {"missing_camera_info": 0, "missing_transform": 0, "missing_size": 0, "pnp_failures": 0}
+    miss: dict[str, Any] = {"missing_camera_info": 0, "missing_transform": 0, "missing_size": 0, "pnp_failures": 0}
     obs: list[ObjectObservation] = []
     views: list[View] = []
     used: list[Sighting] = []
@@ -333,7 +333,7 @@ def locate_from_log(
             continue
         try:
             cam = PinholeCamera.from_camera_info(info)
-            if sized:
+            if side is not None and sized:
                 ob = observation_from_pnp(s.stamp_ns, s.object_id, s.payload, s.corners, side, cam, bTc, sigma_px)
                 obs.append(replace(ob, source=s.source))
             else:

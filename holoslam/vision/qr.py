@@ -43,6 +43,7 @@ import warnings
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -204,7 +205,8 @@ def _sample(gray_f: np.ndarray, pts: np.ndarray) -> np.ndarray:
     import cv2
 
     m = pts.astype(np.float32).reshape(1, -1, 2)
-    return cv2.remap(gray_f, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()
+    # map2 None: one float map of (x, y) pairs, as OpenCV documents (the stub requires an array)
+    return cv2.remap(gray_f, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()  # type: ignore[call-overload]
 
 
 def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -260,20 +262,20 @@ def orient_and_refine(
 def _orient_and_refine(gray_f: np.ndarray, c: np.ndarray, n_modules: int, refine: bool, min_agreement: float,
                        ordered: bool) -> tuple[np.ndarray, int, bool] | None:
     ns = [n_modules] if n_modules in MODULE_COUNTS else list(MODULE_COUNTS)
-    best = (-1.0, 0, 0, None)
+    best: tuple[float, int, int, np.ndarray | None] = (-1.0, 0, 0, None)
     for rot in range(1 if ordered else 4):
         cr = np.roll(c, -rot, axis=0)
         for n in ns:
             pts, dark = _fixed_pattern(n)
-            H = _homography(np.array([[0, 0], [n, 0], [n, n], [0, n]], float), cr)
-            v = _sample(gray_f, _apply_h(H, pts))
+            Hn = _homography(np.array([[0, 0], [n, 0], [n, n], [0, n]], float), cr)
+            v = _sample(gray_f, _apply_h(Hn, pts))
             srt = np.sort(v)  # 5th and 95th percentiles (np.percentile costs 20x more per call)
             lo, hi = srt[int(0.05 * (len(srt) - 1))], srt[int(0.95 * (len(srt) - 1))]
             if hi - lo < 1e-6:
                 continue
             agree = float(np.mean((v < 0.5 * (lo + hi)) == dark))
             if agree > best[0]:
-                best = (agree, rot, n, H)
+                best = (agree, rot, n, Hn)
     agree, rot, n, H = best
     if H is None or agree < min_agreement:
         return None
@@ -381,7 +383,7 @@ def to_gray(image: np.ndarray) -> np.ndarray:
 
 def _make_detection(code: RawCode, corners: np.ndarray, decoder: str, n: int, refined: bool,
                     verified: bool) -> QrDetection:
-    common = dict(n_modules=n, refined=refined, raw=code.raw, content=code.content, verified=verified,
+    common: dict[str, Any] = dict(n_modules=n, refined=refined, raw=code.raw, content=code.content, verified=verified,
                   text_guessed=code.text_guessed)
     try:
         label = parse_label(code.text)

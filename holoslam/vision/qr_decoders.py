@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -91,7 +92,9 @@ def read_zxing(gray: np.ndarray, pure: bool = False) -> list[RawCode]:
     small = {getattr(F, name) for name in ("MicroQRCode", "RMQRCode") if hasattr(F, name)}
     res = zxingcpp.read_barcodes(
         gray,
-        formats=F.QRCode,  # zxing-cpp 3: the QR family, Micro QR and rMQR included (dropped below)
+        # zxing-cpp 3: the QR family, Micro QR and rMQR included (dropped below); one BarcodeFormat converts
+        # to the BarcodeFormats the stub names (zxing-cpp 2 has no such class to build it with)
+        formats=F.QRCode,  # type: ignore[arg-type]
         try_rotate=True,
         try_downscale=True,
         try_invert=True,
@@ -115,7 +118,8 @@ def read_zxing(gray: np.ndarray, pure: bool = False) -> list[RawCode]:
         # zxing puts corners on pixel boundaries (pixel centre at +0.5); holoslam uses OpenCV's centres
         c -= 0.5
         try:
-            version = int(b.extra.get("Version", 0))
+            extra: Any = b.extra  # a dict in zxing-cpp 3; absent or without .get before
+            version = int(extra.get("Version", 0))
         except (TypeError, ValueError, AttributeError):
             version = 0
         n = 17 + 4 * version if 1 <= version <= 40 else 0
@@ -172,7 +176,7 @@ def _zbar_scan(gray: np.ndarray, binary: bool) -> list[tuple[bytes, np.ndarray]]
         with _image() as img:
             zw.zbar_image_set_format(img, _FOURCC["L800"])
             zw.zbar_image_set_size(img, w, h)
-            zw.zbar_image_set_data(img, cast(buf, c_void_p), len(buf), None)
+            zw.zbar_image_set_data(img, cast(buf, c_void_p), len(buf), None)  # type: ignore[arg-type]  # ctypes casts a bytes object's buffer
             if zw.zbar_scan_image(scanner, img) < 0:  # pragma: no cover - Y800 is always supported
                 return []
             for sym in _symbols_for_image(img):

@@ -170,7 +170,9 @@ def quick_look(gray: np.ndarray) -> QuickLook:
     found = []
     half = cv2.resize(gray, (gray.shape[1] // 2, gray.shape[0] // 2), interpolation=cv2.INTER_AREA)
     for g in (gray, half):
-        res = zxingcpp.read_barcodes(g, formats=fmt, try_rotate=False, try_downscale=False, try_invert=False,
+        # one BarcodeFormat converts to the stub's BarcodeFormats (zxing-cpp 2 has no such class to build it with)
+        res = zxingcpp.read_barcodes(g, formats=fmt,  # type: ignore[arg-type]
+                                     try_rotate=False, try_downscale=False, try_invert=False,
                                      text_mode=zxingcpp.TextMode.Plain, return_errors=True)
         found += [b for b in res if b.format not in small]
         if any(b.valid for b in found):

@@ -224,10 +224,13 @@ def render_labels_view(
         img = cv2.filter2D(img, -1, ker / ker.sum(), borderType=cv2.BORDER_REFLECT)
     if cond.noise_sigma > 0:
         img = img + rng.normal(0.0, cond.noise_sigma, img.shape).astype(np.float32)
-    out = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    out: np.ndarray = np.clip(np.rint(img), 0, 255).astype(np.uint8)
     if cond.jpeg_quality > 0:
         ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(cond.jpeg_quality)])
-        out = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
+        decoded = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
+        if decoded is None:  # pragma: no cover - OpenCV reads the JPEG it has just written
+            raise RuntimeError("OpenCV could not read back the JPEG it encoded")
+        out = decoded
     return out, truths
 
 
