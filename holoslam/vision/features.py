@@ -327,20 +327,16 @@ class _CropSource:
         oid = getattr(item, "object_id", None)
         label = getattr(item, "label", None)
         payload = getattr(item, "payload", "")
-        if oid is None:  # a TagSighting: the id is in the payload
-            if label is None:
-                try:
-                    label = parse_label(payload)
-                except PayloadError as e:
-                    self.problems.append(f"tag sighting at {item.stamp_ns} ns: not a holoslam label: {e}")
-                    return None
-            oid = label.object_id
         if label is None:
             try:
                 label = parse_label(payload)
             except PayloadError as e:
-                self.problems.append(f"{oid} at {item.stamp_ns} ns: payload is not a holoslam label: {e}")
+                what = "tag sighting" if oid is None else f"{oid}"
+                why = "not a holoslam label" if oid is None else "payload is not a holoslam label"
+                self.problems.append(f"{what} at {item.stamp_ns} ns: {why}: {e}")
                 return None
+        if oid is None:  # a TagSighting: the id is in the payload
+            oid = label.object_id
         return oid, label
 
     def image_index(self, item: Sighting | TagSighting | ObjectObservation, where: str) -> int:
