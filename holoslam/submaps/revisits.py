@@ -8,7 +8,7 @@ the old submap's map of the same place then disagree by that much, though each i
 module finds those constraints once the anchors are solved, and ``holoslam.graph.nodes`` solves for the nodes.
 
 ``match_nodes``: every ``sample_every``-th node is matched into the old submaps (not its own, not its chain
-neighbours) that hold a keyframe within ``radius_m`` of it (the robot stood there, so the scan sees what that
+neighbours) that hold a keyframe within ``keyframe_distance_m`` of it (the robot stood there, so the scan sees what that
 submap mapped), the ``max_submaps`` nearest first, by the real-time matcher (correlative window + refinement,
 ``scanmatch.match_scan``) seeded by the solved anchors; a match is kept when it scores like a loop closure and
 lies within ``max_shift_m`` of the seed (the anchors are solved: a larger shift is an alias).
@@ -41,7 +41,7 @@ class RevisitConfig:
 
     enabled: bool = True
     sample_every: int = 3  # nodes: match every k-th node (Cartographer samples 30 % of node-submap pairs)
-    radius_m: float = 6.0  # m: an old submap is tried when one of its keyframes lies this near the node
+    keyframe_distance_m: float = 6.0  # m: an old submap is tried when one of its keyframes lies this near the node
     max_submaps: int = 6  # old submaps tried per node, the nearest first
     skip_recent: int = 2  # submaps this many before or after the node's own are its chain neighbours: skipped
     angular_window_deg: float = 5.0  # deg, half-width of the correlative window (the anchors are solved)
@@ -124,7 +124,7 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
         if progress is not None and done % 200 == 0:
             progress(done, len(sample))
         d = np.hypot(keyframes[:, 0] - wTn[n, 0], keyframes[:, 1] - wTn[n, 1])
-        near = (d <= cfg.radius_m) & (np.abs(owner - nodes.host[n]) > cfg.skip_recent)
+        near = (d <= cfg.keyframe_distance_m) & (np.abs(owner - nodes.host[n]) > cfg.skip_recent)
         if not near.any():
             continue
         best: dict[int, float] = {}
