@@ -102,15 +102,17 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
     """Front end + solve + errors for one log and observation list -> dict of numbers."""
     from holoslam import geometry as g
     from holoslam.evaluate import object_errors, trajectory_errors, truth_at
-    from holoslam.optimise import reestimate_anchors, run_build_options
+    from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, run_build_options
     from holoslam.solve import CovarianceScope, SolveOptions, solve
-    from holoslam.submaps.frontend import build_problem
+    from holoslam.submaps.frontend import FrontEndConfig, build_problem
 
-    # as holoslam.pipeline.run does: anchors re-estimated after loop closures, the run's robust kernels
+    # as holoslam.pipeline.run does: anchors re-estimated after loop closures, the run's robust kernels, the
+    # anchors from the keyframe solve
     t0 = time.perf_counter()
     fe = build_problem(log, obs, optimize=reestimate_anchors)
     t1 = time.perf_counter()
     sol = solve(fe.problem, SolveOptions(covariances=CovarianceScope.ANCHORS, build=run_build_options()))
+    sol = keyframe_anchors(sol, fe.anchor_stamps_ns, revisit_nodes(fe, sol, FrontEndConfig()))
     gt_t, gt_wTb = log.ground_truth_arrays()
     true = truth_at(fe.anchor_stamps_ns, gt_t, gt_wTb)
     te = trajectory_errors(sol.wTa, true, sol.cov_wTa)
