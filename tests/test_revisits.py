@@ -31,6 +31,16 @@ def test_a_keyframe_belongs_to_the_submap_it_was_matched_into():
     assert nodes.aTb[2].tolist() == [2, 0, 0] and nodes.aTb[3].tolist() == [1, 0, 0]
 
 
+def test_bad_settings_are_a_config_error_that_names_them():
+    from holoslam.errors import ConfigError
+    from holoslam.submaps.revisits import RevisitConfig
+
+    with pytest.raises(ConfigError, match="sample_every"):
+        RevisitConfig(sample_every=0)
+    with pytest.raises(ConfigError, match="keyframe_distance_m = -1"):
+        RevisitConfig(keyframe_distance_m=-1.0)
+
+
 def _corridor_there_and_back():
     """Submap 0: 21 nodes from x = 0 to 4 m. Submap 1, anchored at (4, 0) facing back: 21 nodes back to x = 0,
     its map warped sideways by 1.25 cm per metre from its anchor (5 cm at the far end), within its covariance."""

@@ -57,6 +57,21 @@ class RevisitConfig:
     match_floor_m: float = 0.01  # m, floor of a node match's sigma (the score surface's lattice floor is 1.4 cm)
     match_floor_deg: float = 0.2
 
+    def __post_init__(self) -> None:
+        from holoslam.errors import ConfigError
+
+        if self.sample_every < 1 or self.max_submaps < 1 or self.skip_recent < 0:
+            raise ConfigError(f"frontend.revisits: sample_every and max_submaps must be >= 1 and skip_recent >= 0, got "
+                              f"{self.sample_every}, {self.max_submaps}, {self.skip_recent}")
+        positive = {"keyframe_distance_m": self.keyframe_distance_m, "angular_window_deg": self.angular_window_deg,
+                    "max_shift_m": self.max_shift_m, "step_sigma_m": self.step_sigma_m,
+                    "step_sigma_deg": self.step_sigma_deg, "huber_k": self.huber_k,
+                    "match_floor_m": self.match_floor_m, "match_floor_deg": self.match_floor_deg}
+        bad = [f"{k} = {v}" for k, v in positive.items() if not v > 0]
+        if bad or self.step_sigma_rate < 0:
+            raise ConfigError(f"frontend.revisits: {', '.join(bad) or f'step_sigma_rate = {self.step_sigma_rate}'} "
+                              "must be > 0 (step_sigma_rate >= 0); fix the run configuration")
+
 
 @dataclass(frozen=True, eq=False)
 class Nodes:
@@ -119,7 +134,7 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
     wTn = g.compose(wTa[nodes.host], nodes.aTb) if len(nodes) else np.zeros((0, 3))
     out: list[tuple[int, int, np.ndarray, np.ndarray, float]] = []
     tried = 0
-    sample = range(0, len(nodes), max(1, cfg.sample_every))
+    sample = range(0, len(nodes), cfg.sample_every)
     for done, n in enumerate(sample):
         if progress is not None and done % 200 == 0:
             progress(done, len(sample))
