@@ -328,8 +328,6 @@ class _Regions:
         self.parent = np.arange(cap, dtype=np.int64)
         self.area = np.zeros(cap)
         self.area[:n] = np.bincount(self.lab, minlength=n)
-        from holoslam.maps.rooms import _label_max
-
         self.mx = np.zeros(cap)
         self.mx[:n] = _label_max(clr_flat, self.lab, n)
         self.next = n
@@ -452,3 +450,17 @@ def segment_regions(
     first = side_walks.labels(lab.reshape(-1), two).tolist()
     sides = list(zip(first[0::2], first[1::2], strict=True))
     return RegionSegmentation([cands[j] for j in active.tolist()], int(n_lab), lab, area, sides)
+
+
+def _label_max(values: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
+    """(n,) the largest value per label 0..n-1 (0 for a label without cells; values are >= 0)."""
+    from holoslam.maps.passages import kernels
+
+    v = np.ascontiguousarray(values).reshape(-1)
+    lab = np.ascontiguousarray(labels).reshape(-1)
+    fast = kernels()
+    if fast is not None:
+        return fast.label_max(v, lab, n)
+    out = np.zeros(n)
+    np.maximum.at(out, lab, v)
+    return out

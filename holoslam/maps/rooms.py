@@ -191,20 +191,6 @@ def _furniture_islands(free: np.ndarray, res: float, rules: RoomRules):
     return lab, furn
 
 
-def _label_max(values: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
-    """(n,) the largest value per label 0..n-1 (0 for a label without cells; values are >= 0)."""
-    from holoslam.maps.passages import kernels
-
-    v = np.ascontiguousarray(values).reshape(-1)
-    lab = np.ascontiguousarray(labels).reshape(-1)
-    fast = kernels()
-    if fast is not None:
-        return fast.label_max(v, lab, n)
-    out = np.zeros(n)
-    np.maximum.at(out, lab, v)
-    return out
-
-
 def _label_stats(labels: np.ndarray, values: np.ndarray, n: int):
     """Per label 0..n-1: the largest value (>= 0), the last flat index (raster order) holding it (-1 for an
     empty label) and the number of cells."""
