@@ -10,6 +10,7 @@ import numpy as np
 if TYPE_CHECKING:
     from holoslam.config import SolverConfig
     from holoslam.graph.build import BuildOptions
+    from holoslam.graph.nodes import KeyframeSolve
     from holoslam.solve import SolveOptions
 
 __all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes", "keyframe_anchors", "map_log"]
@@ -52,12 +53,12 @@ def run_build_options() -> BuildOptions:
     return BuildOptions(loop_kernel=fac.Kernel(fac.RobustKernel.HUBER, 3.0))
 
 
-def revisit_nodes(fe: Any, sol: Any, cfg: Any, progress: Any = None) -> tuple[Any, Any, Any] | None:
+def revisit_nodes(fe: Any, sol: Any, cfg: Any, progress: Any = None) -> KeyframeSolve | None:
     """The keyframes matched into the old submaps they revisit and solved as poses beside the anchors
     (``holoslam.submaps.revisits``, ``holoslam.graph.nodes``), with the front end's settings ``cfg``:
-    ``(Nodes, NodeSolution, NodeMatches)`` for the trajectory, the map and the report, or None when
+    a ``KeyframeSolve`` for the trajectory, the map and the report, or None when
     ``cfg.revisits.enabled`` is off or the run has no keyframes."""
-    from holoslam.graph.nodes import solve_nodes
+    from holoslam.graph.nodes import KeyframeSolve, solve_nodes
     from holoslam.submaps.revisits import graph_nodes, match_nodes
 
     if not cfg.revisits.enabled:
@@ -66,10 +67,10 @@ def revisit_nodes(fe: Any, sol: Any, cfg: Any, progress: Any = None) -> tuple[An
     if not len(nodes):
         return None
     matches = match_nodes(fe.submaps, nodes, sol.wTa, cfg.revisits, cfg.local.match, progress)
-    return nodes, solve_nodes(nodes, matches, sol.wTa, sol.cov_wTa, cfg.revisits), matches
+    return KeyframeSolve(nodes, matches, solve_nodes(nodes, matches, sol.wTa, sol.cov_wTa, cfg.revisits))
 
 
-def keyframe_anchors(sol: Any, anchor_stamps_ns: np.ndarray, revisits: Any) -> Any:
+def keyframe_anchors(sol: Any, anchor_stamps_ns: np.ndarray, revisits: KeyframeSolve | None) -> Any:
     """``sol`` with each anchor's pose taken from the keyframe solve (``revisit_nodes``): an anchor is the robot's
     pose at its stamp, a keyframe of the submap before it, and the keyframe solve holds every scan's evidence where
     the anchor solve holds each submap rigid (simulated household: anchors 7.8 -> 5.7 mm RMSE). The anchors'
@@ -78,7 +79,7 @@ def keyframe_anchors(sol: Any, anchor_stamps_ns: np.ndarray, revisits: Any) -> A
 
     if revisits is None:
         return sol
-    nodes, ns = revisits[0], revisits[1]
+    nodes, ns = revisits.nodes, revisits.solution
     stamps = np.asarray(anchor_stamps_ns, np.int64)
     k = np.clip(np.searchsorted(nodes.stamps_ns, stamps), 0, len(nodes) - 1)
     hit = nodes.stamps_ns[k] == stamps

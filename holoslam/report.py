@@ -382,7 +382,7 @@ def _count(items: Iterable[str]) -> dict[str, int]:
 
 
 def submap_summary(fe: Any, revisits: Any = None) -> SubmapSummary:
-    """The front end's summary; ``revisits`` the ``(Nodes, NodeSolution, NodeMatches)`` of the keyframe solve."""
+    """The front end's summary; ``revisits`` the keyframe stage's ``holoslam.graph.nodes.KeyframeSolve``."""
     return SubmapSummary(
         count=len(fe.submaps),
         split_reasons=_count(str(sm.reason) for sm in fe.submaps),
@@ -395,8 +395,8 @@ def submap_summary(fe: Any, revisits: Any = None) -> SubmapSummary:
         loop_pairs=int(fe.loop_groups),
         dead_reckoning_slips=int(fe.dead_reckoning_slips),
         keyframes_solved=revisits is not None,
-        keyframe_matches=0 if revisits is None else len(revisits[2]),
-        keyframe_matches_tried=0 if revisits is None else int(revisits[2].tried),
+        keyframe_matches=0 if revisits is None else len(revisits.matches),
+        keyframe_matches_tried=0 if revisits is None else int(revisits.matches.tried),
     )
 
 

@@ -34,7 +34,7 @@ class RunTrajectory:
 
 def run_trajectory(log: Any, fe: Any, sol: Any, nodes: Any = None) -> RunTrajectory:
     """The trajectory of a run from its front end ``fe`` (dead reckoning, submaps) and solution ``sol``; with
-    ``nodes`` (``(Nodes, NodeSolution)``, ``holoslam.graph.nodes``) the keyframes are the node solve's."""
+    ``nodes`` (a ``holoslam.graph.nodes.KeyframeSolve``) the keyframes are the keyframe solve's."""
     from holoslam.submaps.deadreckon import interpolate_poses
 
     odom_stamps, odomTb = log.odometry_arrays()
@@ -45,7 +45,7 @@ def run_trajectory(log: Any, fe: Any, sol: Any, nodes: Any = None) -> RunTraject
     if nodes is None:
         key_stamps, wTk = keyframe_poses(fe.submaps, sol.wTa)
     else:
-        key_stamps, wTk = node_keyframe_poses(fe.submaps, nodes[0].stamps_ns, nodes[1].wTn)
+        key_stamps, wTk = node_keyframe_poses(fe.submaps, nodes.nodes.stamps_ns, nodes.solution.wTn)
     # between keyframes (a few tenths of a second) the wheel odometry's own motion is the most faithful
     wTb = optimised_trajectory(stamps, odom_stamps, odomTb, key_stamps, wTk)
     return RunTrajectory(stamps, wTb, dr, key_stamps, wTk)
@@ -80,11 +80,7 @@ def keyframe_poses(submaps: Sequence[Any], wTa: np.ndarray) -> tuple[np.ndarray,
     poses = [g.compose(np.broadcast_to(wTa[sm.index], r.shape), r) for sm, r in zip(submaps, rel, strict=True)]
     if not stamps:
         return np.zeros(0, np.int64), np.zeros((0, 3))
-    s, p = np.concatenate(stamps), np.concatenate(poses).reshape(-1, 3)
-    order = np.argsort(s, kind="stable")
-    s, p = s[order], p[order]
-    keep = np.concatenate([[True], np.diff(s) > 0])
-    return s[keep], p[keep]
+    return _first_per_stamp(stamps, poses)
 
 
 def node_keyframe_poses(submaps: Sequence[Any], node_stamps_ns: np.ndarray, wTn: np.ndarray
@@ -104,6 +100,11 @@ def node_keyframe_poses(submaps: Sequence[Any], node_stamps_ns: np.ndarray, wTn:
         aTk = np.reshape(sm.aTb, (-1, 3))[q]
         stamps.append(tt)
         poses.append(g.compose(poses[0][n], g.between(aTk, np.reshape(sm.track_aTb, (-1, 3)))))
+    return _first_per_stamp(stamps, poses)
+
+
+def _first_per_stamp(stamps: list[np.ndarray], poses: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The poses sorted by stamp, the first given kept where stamps repeat (a node in two submaps: its host's)."""
     s, p = np.concatenate(stamps), np.concatenate(poses).reshape(-1, 3)
     order = np.argsort(s, kind="stable")
     s, p = s[order], p[order]

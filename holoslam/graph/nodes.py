@@ -28,7 +28,7 @@ from holoslam.graph.factors import Kernel, RobustKernel, between_factors, prior_
 from holoslam.graph.keys import anchor_keys, node_keys
 from holoslam.submaps.revisits import NodeMatches, Nodes, RevisitConfig
 
-__all__ = ["NodeSolution", "solve_nodes"]
+__all__ = ["NodeSolution", "KeyframeSolve", "solve_nodes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,6 +41,15 @@ class NodeSolution:
     error: float
     initial_error: float
     iterations: int
+
+
+@dataclass(frozen=True, eq=False)
+class KeyframeSolve:
+    """What the keyframe stage of a run produced: the keyframes, their matches into old submaps, the solution."""
+
+    nodes: Nodes
+    matches: NodeMatches
+    solution: NodeSolution
 
 
 def _step_covariances(wTn: np.ndarray, cfg: RevisitConfig) -> tuple[np.ndarray, np.ndarray]:
