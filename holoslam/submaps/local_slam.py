@@ -2,7 +2,8 @@
 
 A scan becomes a **node** when the robot moved ``motion_distance``, turned ``motion_turn_deg`` or waited
 ``motion_time_s`` since the last node (Cartographer's motion filter, SPEC §8). Its base pose is predicted from
-the previous node by the odometry increment, then matched into the older of the two **active submaps**
+the previous node by the odometry increment (and, when that window scores low, from the laser's own motion:
+the last matched pose moved on at the last matched velocity), then matched into the older of the two **active submaps**
 (``scanmatch.match_scan``: correlative window, then continuous refinement; a match under ``min_score`` keeps the
 prediction, with the dead-reckoning covariance). The node is inserted into both active submaps. A submap is
 finished after ``scans_per_submap`` insertions; a new one starts, anchored at the current node, when the newest
@@ -126,6 +127,10 @@ class LocalSlam:
         self._track_cfg = replace(cfg.match, angular_window_deg=cfg.track_angular_window_deg)
         self._pyramid = WidePyramid()  # the wide search's pyramid of the host's grid, while it is unchanged
         self.arrivals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (m, n, mTn, cov) of new anchors
+        # the laser's own motion: the last matched pose (host frame, host index, stamp) and the body-frame
+        # velocity between the last two (m/s, m/s, rad/s), the alternative to a wheel odometry that is wrong
+        self._last_fix: tuple[int, int, np.ndarray] | None = None
+        self._twist = np.zeros(3)
 
     def wants(self, stamp: int, odo: np.ndarray) -> bool:
         """The motion filter: is a scan at ``stamp`` with odometry pose ``odo`` a new node?"""
@@ -148,11 +153,13 @@ class LocalSlam:
             host = self.active[0]
             last = self.nodes[-1]
             pred = self._predict(host, odo)
-            m = self._match(host, b_pts, pred) if host.count >= self.cfg.min_scans_to_match else None
+            m = (self._match(host, b_pts, pred, alternative=self._laser_predict(host, stamp))
+                 if host.count >= self.cfg.min_scans_to_match else None)
             drift = self._drift(travelled - host.travelled0)
             if m is not None and m.ok:
                 node = Node(int(stamp), host.index, self._polish(host, b_pts, m.aTb), m.cov_aTb + drift, b_pts,
                             m.score, True)
+                self._fix(host, stamp, node.aTb)
             else:
                 prev_cov = last.cov_aTb if last.submap == host.index else np.zeros((3, 3))
                 node = Node(int(stamp), host.index, pred, prev_cov + cov_odo_step() + drift, b_pts,
@@ -171,16 +178,47 @@ class LocalSlam:
         if host.count < self.cfg.min_scans_to_match:
             return
         pred = self._predict(host, odo)
-        m = self._match(host, g.transform_points(self.bTs, s_points), pred, self._track_cfg)
+        m = self._match(host, g.transform_points(self.bTs, s_points), pred, self._track_cfg,
+                        self._laser_predict(host, stamp))
         if m.ok:
             host.tracked.append((int(stamp), m.aTb))
+            self._fix(host, stamp, m.aTb)
 
-    def _match(self, host: ActiveSubmap, b_pts: np.ndarray, pred: np.ndarray, cfg: MatchConfig | None = None):
+    def _in_host(self, host: ActiveSubmap, index: int, aTb: np.ndarray) -> np.ndarray | None:
+        """A pose in submap ``index``'s frame moved into the host's frame (None: no known relation)."""
+        if index == host.index:
+            return aTb
+        try:
+            return g.compose(g.inverse(self._arrival(index, host.index)), aTb)
+        except KeyError:
+            return None
+
+    def _laser_predict(self, host: ActiveSubmap, stamp: int) -> np.ndarray | None:
+        """The pose at ``stamp`` from the laser alone: the last matched pose moved on at the last velocity."""
+        if self._last_fix is None:
+            return None
+        t, index, aTb = self._last_fix
+        prev = self._in_host(host, index, aTb)
+        return None if prev is None else g.compose(prev, self._twist * ((stamp - t) * 1e-9))
+
+    def _fix(self, host: ActiveSubmap, stamp: int, aTb: np.ndarray) -> None:
+        """Record a matched pose and the body-frame velocity since the last one."""
+        if self._last_fix is not None:
+            t, index, prev = self._last_fix
+            prev_h = self._in_host(host, index, prev)
+            dt = (stamp - t) * 1e-9
+            self._twist = (g.between(prev_h, aTb) / dt if prev_h is not None and 0 < dt <= self.cfg.motion_time_s
+                           else np.zeros(3))
+        self._last_fix = (int(stamp), host.index, np.asarray(aTb, np.float64))
+
+    def _match(self, host: ActiveSubmap, b_pts: np.ndarray, pred: np.ndarray, cfg: MatchConfig | None = None,
+               alternative: np.ndarray | None = None):
         """Match into the host; the running median of recent scores tells the matcher what is usual."""
         usual = float(np.median(self._scores)) if len(self._scores) >= 20 else None
         self._pyramid.key = (host.index, host.count)  # the host's grid changes only when a scan is inserted
         m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred,
-                       cfg or self.cfg.match, expected_score=usual, pyramid=self._pyramid)
+                       cfg or self.cfg.match, expected_score=usual, pyramid=self._pyramid,
+                       alternative_aTb=alternative)
         if m.ok:
             self._scores.append(m.score)
         return m

@@ -34,7 +34,8 @@ __all__ = ["MatchConfig", "Match", "match_scan", "angular_step", "score_pose", "
 @dataclass(frozen=True, slots=True)
 class MatchConfig:
     """Scan-to-grid matching settings. Defaults: Cartographer's 2D real-time correlative window (0.1 m, 20 deg,
-    delta-cost weights 0.1) and Ceres weights for real lasers (SPEC §8: occupied space 20, rotation 1e2);
+    delta-cost weights 0.1) and Ceres weights for real lasers (SPEC §8: occupied space 20, rotation 1e2;
+    rotation 60 here, measured below);
     translation 30: measured on the real logs (first 300-400 s, relation error between scans < 30 s apart),
     weight 10 / 30 / 100 gave ACES 3.8 / 3.4 / 3.2 cm and fr079 3.6 / 3.7 / 4.8 cm: a strong prior helps where
     the wheel odometry is good (ACES: 1.0 cm over a scan interval) and hurts where it is not (fr079: 2.4 cm);
@@ -48,7 +49,11 @@ class MatchConfig:
     rotation_delta_weight: float = 0.1  # score discount per rad^2
     occupied_weight: float = 20.0
     translation_weight: float = 30.0
-    rotation_weight: float = 100.0
+    # rotation 60: measured on the whole real logs (with the laser prediction below): weight 100 / 60 / 40 gave
+    # fr079 0.585 / 0.447 / 0.446 deg, ACES 0.341 / 0.350 / 0.340 deg (3.98 / 3.68 / 3.89 cm); intel 0.415 (100)
+    # -> 0.357 deg (60). fr079's wheel odometry turns up to 20 deg the wrong way in a few seconds (169-179 s:
+    # -17 deg where a scan-to-scan match and the ground truth say +5 deg): a strong prior holds the match there
+    rotation_weight: float = 60.0
     iterations: int = 20
     kappa: float = 200.0  # 1 / score units: weights exp(kappa (s - s_best)) of the score surface
     min_score: float = 0.3  # mean probability below which a match is not trusted (p_min = 0.1 is no overlap)
@@ -62,6 +67,13 @@ class MatchConfig:
     wide_tolerance: float = 0.05  # and it must come this close to the usual score
     wide_depth: int = 4
     min_points: int = 20
+    # when the window around the odometry's prediction scores low (``wide_trigger``), the window around the
+    # laser's own prediction (the last matched pose moved on at the last matched velocity) replaces it when it
+    # scores this much higher. fr079's odometry reports forward motion while the robot backs up (301-308 s: +0.5
+    # where the ground truth says -0.5 m/s): there the laser's window scores 0.05-0.3 higher; on ACES, whose
+    # odometry is good, the laser's window never scored 0.05 higher (197 of 423 low windows scored higher, all by
+    # less than 0.05); a margin of 0.02 took ACES 3.68 -> 3.76 cm (an alias chosen), 0.1 left fr079's breaks
+    laser_prediction_margin: float = 0.05
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,7 +104,8 @@ def score_pose(prob: np.ndarray, origin, resolution: float, b_pts: np.ndarray, a
 
 def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float, b_pts: np.ndarray,
                predicted_aTb: np.ndarray, cfg: MatchConfig = MatchConfig(), outside: float = 0.1,
-               expected_score: float | None = None, pyramid: WidePyramid | None = None) -> Match:
+               expected_score: float | None = None, pyramid: WidePyramid | None = None,
+               alternative_aTb: np.ndarray | None = None) -> Match:
     """Register scan points ``b_pts`` (N, 2, base frame) into the grid around ``predicted_aTb``.
 
     ``expected_score``: the score matches usually reach here (the caller's running median). When the best
@@ -100,6 +113,9 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     odometry that slipped, or that disagrees with the laser for a moment) and a branch-and-bound search over
     ``wide_linear_window`` runs; its pose replaces the prediction when it scores ``wide_margin`` higher. A
     wide window is never searched routinely: along a corridor it would jump between equally good places.
+    ``alternative_aTb``: a second prediction (the laser's own motion, ``LocalSlam``), searched when the window
+    around ``predicted_aTb`` scores low, and kept when it scores ``laser_prediction_margin`` higher: wheel
+    odometry can be wrong for seconds (a wheel that slips, an encoder sign lost when backing up).
     ``pyramid``: the caller's cache of the grid's branch-and-bound pyramid (``WidePyramid``), reused while the
     grid is unchanged (scans localised between insertions often trigger several wide searches of one grid)."""
     from holoslam.submaps import _grid_fast as fast
@@ -116,6 +132,12 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     nxy = int(math.ceil(cfg.linear_window / res))
     S = fast.window_scores(prob, origin[0], origin[1], res, px, py, pred[0], pred[1], pred[2], nxy, angles,
                            outside)
+    alt = None if alternative_aTb is None else np.asarray(alternative_aTb, np.float64)
+    if alt is not None and expected_score is not None and S.max() < expected_score - cfg.wide_trigger:
+        S_alt = fast.window_scores(prob, origin[0], origin[1], res, px, py, alt[0], alt[1], alt[2], nxy, angles,
+                                   outside)
+        if S_alt.max() > S.max() + cfg.laser_prediction_margin:
+            pred, S = alt, S_alt
     if expected_score is not None and S.max() < expected_score - cfg.wide_trigger:
         # the wide pose must score like a usual match (not merely better than a poor window: a scan that sees
         # unexplored space scores low wherever it is put, and a wide window then finds a corridor's alias)

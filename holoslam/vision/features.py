@@ -169,7 +169,7 @@ def dominant_colours(
     Pi = P.astype(np.int64)
     k = int(min(k, len(np.unique((Pi[:, 0] << 16) | (Pi[:, 1] << 8) | Pi[:, 2]))))
     cv2.setRNGSeed(seed)
-    _, lab, centres = cv2.kmeans(  # type: ignore[call-overload]  # bestLabels None: OpenCV allocates them
+    _, lab, centres = cv2.kmeans(  # type: ignore[call-overload, unused-ignore]  # bestLabels None: OpenCV allocates them
         P, k, None, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.5), 3, cv2.KMEANS_PP_CENTERS
     )
     w = np.bincount(lab.ravel(), minlength=k).astype(np.float64)

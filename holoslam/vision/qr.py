@@ -206,7 +206,7 @@ def _sample(gray_f: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
     m = pts.astype(np.float32).reshape(1, -1, 2)
     # map2 None: one float map of (x, y) pairs, as OpenCV documents (the stub requires an array)
-    return cv2.remap(gray_f, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()  # type: ignore[call-overload]
+    return cv2.remap(gray_f, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()  # type: ignore[call-overload, unused-ignore]
 
 
 def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
