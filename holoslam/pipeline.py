@@ -49,6 +49,7 @@ __all__ = [
     "load_run_config",
     "RunResult",
     "run",
+    "run_data",
     "FRONT_END",
 ]
 
@@ -84,6 +85,24 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     """The main job on one log: ingest, locate objects, build and optimise the graph, build the maps and
     graphs. Raises ``IngestError`` when the log lacks what a run needs (odometry and laser scans)."""
     from holoslam.io.mcap import read_log
+
+    cfg = config or RunConfig()
+    clock = StageClock(progress)
+    with clock.stage("ingest"):
+        log, ingest_report = read_log(log_path, mapping=cfg.mapping, require=["odometry", "scan"])
+    return _run_stages(log, ingest_report, cfg, clock, str(log_path))
+
+
+def run_data(log: Any, ingest_report: Any, config: RunConfig | None = None,
+             progress: Progress | None = None) -> RunResult:
+    """``run`` on a log already in memory (a ``holoslam.types.LogData`` and the ``IngestReport`` that
+    ``holoslam.io.mcap.read_log`` returned with it), e.g. one edited in a notebook."""
+    cfg = config or RunConfig()
+    return _run_stages(log, ingest_report, cfg, StageClock(progress), str(log.source))
+
+
+def _run_stages(log: Any, ingest_report: Any, cfg: RunConfig, clock: StageClock, source: str) -> RunResult:
+    """The stages after ingestion (``run``)."""
     from holoslam.mapping import build_maps
     from holoslam.objects import located_by, located_objects
     from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
@@ -93,10 +112,6 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
     from holoslam.submaps.frontend import build_problem
     from holoslam.trajectory import run_trajectory
 
-    cfg = config or RunConfig()
-    clock = StageClock(progress)
-    with clock.stage("ingest"):
-        log, ingest_report = read_log(log_path, mapping=cfg.mapping, require=["odometry", "scan"])
     seen = see_objects(log, cfg.vision, clock)
     with clock.stage(FRONT_END):
         fe = build_problem(log, seen.observations, cfg.frontend, clock.progress_of(FRONT_END),
@@ -117,7 +132,7 @@ def run(log_path: str | Path, config: RunConfig | None = None, progress: Progres
                           located_by=located_by(seen.observations, objects),
                           codes_truth=cfg.vision.foreign_landmarks, revisits=revisits)
     return RunResult(
-        source=str(log_path),
+        source=source,
         config=cfg,
         stamps_ns=traj.stamps_ns,
         wTb=traj.wTb,

@@ -149,3 +149,20 @@ def test_optimised_trajectory_follows_anchors():
     assert np.allclose(out[0], wTa[0]) and np.allclose(out[50], wTa[1])
     # after the second anchor the motion is dead reckoning expressed from the corrected anchor
     assert np.allclose(out[60], g.compose(wTa[1], np.array([1.0, 0.0, 0.0])))
+
+
+def test_run_data_maps_a_log_in_memory_as_run_maps_its_file(tmp_path):
+    from holoslam.io.mcap import read_log
+    from holoslam.pipeline import run, run_data
+    from holoslam.sim import SimConfig, simulate_to_file
+
+    path = tmp_path / "short.mcap"
+    simulate_to_file(path, SimConfig(seed=3, duration_s=60.0, image_rate_hz=0.5))
+    from_file = run(path)
+    log, ingest = read_log(path)
+    in_memory = run_data(log, ingest)
+    assert in_memory.source == from_file.source == str(path)
+    assert len(in_memory.wTa) == len(from_file.wTa) >= 3
+    np.testing.assert_allclose(in_memory.wTa, from_file.wTa, atol=1e-9)
+    assert [o.object_id for o in in_memory.objects] == [o.object_id for o in from_file.objects]
+    assert "ingest" in from_file.report.timings_s and "ingest" not in in_memory.report.timings_s

@@ -1,0 +1,106 @@
+"""Peak memory and run time of a long ``holoslam run``: a shared real log played several times end to end.
+
+    .venv/bin/python benchmarks/bench_memory.py [--log intel] [--times 1 2] [--budget-mb 2000]
+
+The issue's budget: a log of 80 minutes maps in under 2 GB. The shared logs are shorter (intel: 45 min), so the
+log is played ``N`` times in a row in memory: the copies' stamps follow each other, and each copy's odometry
+continues from where the last ended (the robot is carried back to its start: a kidnapping, which the front end
+sees as a jump of metres and the loop search closes). Each row runs in a child process (this script with
+``--child``) doing what ``holoslam run`` does on the read log (``holoslam.pipeline.run_data``, default
+settings, nothing written); the parent reads the child's peak resident set from ``os.wait4``'s rusage and its
+wall time. Columns: minutes of log, scans, submaps, wall s, peak RSS MB, RSS per log minute above the 1-copy
+row, and whether the peak is within the budget. Exit status 1 when a row exceeds it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "realdata"
+
+
+def repeated(log, times: int):
+    """``log`` (a ``LogData``) with its odometry and scans played ``times`` times end to end (module docstring)."""
+    from holoslam import geometry as g
+    from holoslam.types import Pose2
+
+    span = log.scans[-1].stamp_ns - log.scans[0].stamp_ns + 1_000_000_000  # the next copy starts 1 s later
+    odo, scans = list(log.odometry), list(log.scans)
+    o_first = log.odometry[0].odomTb.as_array()
+    for k in range(1, times):
+        T = g.compose(odo[-1].odomTb.as_array(), g.inverse(o_first))
+        odo += [dataclasses.replace(o, stamp_ns=o.stamp_ns + k * span,
+                                    odomTb=Pose2.from_array(g.compose(T, o.odomTb.as_array())))
+                for o in log.odometry]
+        scans += [dataclasses.replace(s, stamp_ns=s.stamp_ns + k * span) for s in log.scans]
+    return dataclasses.replace(log, odometry=tuple(odo), scans=tuple(scans))
+
+
+def child(log_path: str, times: int, out: str) -> None:
+    from holoslam.io.mcap import read_log
+    from holoslam.pipeline import run_data
+
+    log, ingest = read_log(log_path, require=["odometry", "scan"])
+    log = repeated(log, times)
+    result = run_data(log, ingest)
+    minutes = (log.scans[-1].stamp_ns - log.scans[0].stamp_ns) / 60e9
+    Path(out).write_text(json.dumps({"minutes": minutes, "scans": len(log.scans),
+                                     "submaps": len(result.frontend.submaps)}))
+
+
+def run_child(log: Path, times: int) -> dict:
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "child.json"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(log), str(times), str(out)]
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd)
+        _, status, usage = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        if os.waitstatus_to_exitcode(status) != 0:
+            raise SystemExit(f"bench_memory: the child for {log.name} x{times} failed")
+        row = json.loads(out.read_text())
+    row.update(times=times, wall_s=wall, rss_mb=usage.ru_maxrss / 1024.0)
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--log", default="intel", help="a log of the data folder (default intel, 45 min)")
+    ap.add_argument("--times", type=int, nargs="+", default=[1, 2], help="copies played end to end")
+    ap.add_argument("--budget-mb", type=float, default=2000.0, help="peak RSS budget (MB)")
+    ap.add_argument("--data", type=Path, default=DATA)
+    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        child(args.child[0], int(args.child[1]), args.child[2])
+        return 0
+    log = args.data / f"{args.log}.mcap"
+    if not log.is_file():
+        print(f"bench_memory: no {log} (the shared real logs, see ../shared/realdata/README.md)")
+        return 0
+    rows = [run_child(log, t) for t in sorted(set(args.times))]
+    base = rows[0]
+    print(f"\npeak memory of a whole run on {args.log} played N times end to end (budget {args.budget_mb:.0f} MB)")
+    print(f"{'N':>3} {'minutes':>8} {'scans':>7} {'submaps':>8} {'wall s':>7} {'RSS MB':>7} {'MB/min':>7}  budget")
+    failed = False
+    for r in rows:
+        grow = ((r["rss_mb"] - base["rss_mb"]) / (r["minutes"] - base["minutes"])
+                if r["minutes"] > base["minutes"] else float("nan"))
+        ok = r["rss_mb"] <= args.budget_mb
+        failed |= not ok
+        print(f"{r['times']:>3} {r['minutes']:>8.1f} {r['scans']:>7} {r['submaps']:>8} {r['wall_s']:>7.1f} "
+              f"{r['rss_mb']:>7.0f} {grow:>7.1f}  {'within' if ok else 'OVER'}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
