@@ -174,6 +174,13 @@ def compare_logs(ref: DecodedLog, got: DecodedLog, max_problems: int = 20) -> li
                 bad = None if (type(va) is type(vb) and va == vb) else f"{va!r:.80} != {vb!r:.80}"
             if bad and fail(f"message {k} on {topic} at {path or 'value'}: {bad}"):
                 return problems
+    _compare_columns(cols_a, cols_b, fail)
+    return problems
+
+
+def _compare_columns(cols_a: dict, cols_b: dict, fail) -> None:
+    """Each float field of the two logs (gathered per (topic, path)) within its tolerance; ``fail`` takes
+    each problem and says when enough were found."""
     for key, parts in cols_a.items():
         a, b = np.concatenate(parts), np.concatenate(cols_b[key])
         fin_a, fin_b = np.isfinite(a), np.isfinite(b)
@@ -182,7 +189,7 @@ def compare_logs(ref: DecodedLog, got: DecodedLog, max_problems: int = 20) -> li
         )
         if not same_nonfinite:
             if fail(f"{key[0]} {key[1]}: non-finite values in other places"):
-                return problems
+                return
             continue
         a, b = a[fin_a], b[fin_b]
         if a.size == 0:
@@ -202,8 +209,7 @@ def compare_logs(ref: DecodedLog, got: DecodedLog, max_problems: int = 20) -> li
                 f"{key[0]} {key[1]}: {n_bad} of {a.size} values differ beyond tolerance, worst "
                 f"{a[worst]!r} vs {b[worst]!r} (|d| = {d[worst]:.3g} > {tol[worst]:.3g})"
             ):
-                return problems
-    return problems
+                return
 
 
 def max_differences(ref: DecodedLog, got: DecodedLog) -> dict[tuple[str, str], float]:

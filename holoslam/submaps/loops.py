@@ -305,6 +305,30 @@ def _defer(buf, n, a, x, y, d, bound):  # pragma: no cover - compiled
     return buf, n + 1
 
 
+def _workspace(box, d_top, rows, cols, defer):  # pragma: no cover - compiled
+    """``_descend_py``'s arrays: the top level's node counts (nx, ny), the scan's cell boxes, the depth-first
+    stack (angle, x, y, level, bound), the children scratch (cx, cy, cs) and the set-aside buffer."""
+    w = 1 << d_top
+    cap = 4 * d_top + 4
+    st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
+          np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
+    return ((box[1] - box[0]) // w + 1, (box[3] - box[2]) // w + 1, _bnb_fast._boxes(rows, cols), st,
+            np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64),
+            np.empty((64 if defer >= 0 else 0, 5), dtype=np.float64))
+
+
+def _seed(seeds, j):  # pragma: no cover - compiled
+    """Row j of the seeds (angle, x, y, level, bound) as a stack entry."""
+    return int(seeds[j, 0]), int(seeds[j, 1]), int(seeds[j, 2]), int(seeds[j, 3]), seeds[j, 4]
+
+
+def _top_node(k, nx, ny, x_lo, y_lo, d_top, top):  # pragma: no cover - compiled
+    """Top-level node k (angle-major, then x, then y) as a stack entry (angle, x, y, level, bound)."""
+    w = 1 << d_top
+    a, rem = divmod(k, nx * ny)
+    return a, x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, d_top, top[k]
+
+
 def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, order, k0, seeds, centres, ex,
                 first, defer):  # pragma: no cover - compiled
     """The rest of ``_bnb_fast.branch_and_bound`` (depth first, best child first): first from the nodes
@@ -321,32 +345,21 @@ def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top,
     never exceeds the final best). Returns (sum, a, x, y, k_break, set-aside nodes (m', 5)); a = -1 when nothing
     outside the boxes beats best0 (strictly)."""
     x_lo, x_hi, y_lo, y_hi = box
-    w = 1 << d_top
-    nx = (x_hi - x_lo) // w + 1
-    ny = (y_hi - y_lo) // w + 1
-    bb = _bnb_fast._boxes(rows, cols)
-    cap = 4 * d_top + 4
-    st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
-          np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
-    cx, cy, cs = np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64)
-    buf = np.empty((64 if defer >= 0 else 0, 5), dtype=np.float64)
+    nx, ny, bb, st, cx, cy, cs, buf = _workspace(box, d_top, rows, cols, defer)
     nd = 0
     best, ba, bx, by = best0, -1, 0, 0
     k_break = order.size
     for kk in range(-seeds.shape[0], order.size - k0):
         if kk < 0:  # a seed
-            j = kk + seeds.shape[0]
-            a0, x0, y0, d0, b0 = int(seeds[j, 0]), int(seeds[j, 1]), int(seeds[j, 2]), int(seeds[j, 3]), seeds[j, 4]
-            if b0 <= best:
+            st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = _seed(seeds, kk + seeds.shape[0])
+            if st[4][0] <= best:
                 continue
         else:
             k = order[k0 + kk]
             if top[k] <= best:
                 k_break = k0 + kk
                 break
-            a0, rem = divmod(k, nx * ny)
-            x0, y0, d0, b0 = x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, d_top, top[k]
-        st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = a0, x0, y0, d0, b0
+            st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = _top_node(k, nx, ny, x_lo, y_lo, d_top, top)
         sp = 1
         while sp > 0:
             sp -= 1
@@ -418,7 +431,8 @@ def _kernels():
 
         _bnb_fast = fast
         jit = nb.njit(**JIT)
-        global _defer
-        _defer = jit(_defer)  # called by _descend_py: compiled first, as the global it reads
+        global _defer, _workspace, _seed, _top_node
+        # called by _descend_py: compiled first, as the globals it reads
+        _defer, _workspace, _seed, _top_node = jit(_defer), jit(_workspace), jit(_seed), jit(_top_node)
         _KERNELS = (jit(_top_py), jit(_descend_py))
     return _KERNELS
