@@ -4,13 +4,33 @@ pixels."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from holoslam.errors import ImageDecodeError
-from holoslam.types import Image
 
-__all__ = ["decode_image", "read_image_file", "COMPRESSED_FORMATS", "RAW_ENCODINGS"]
+__all__ = ["EncodedImage", "decode_image", "read_image_file", "COMPRESSED_FORMATS", "RAW_ENCODINGS"]
+
+
+class EncodedImage(Protocol):
+    """What decoding reads of an image record (``holoslam.types.Image`` has it): this module does not import
+    the record types, so ``Image.decode`` can call it without an import cycle."""
+
+    @property
+    def stamp_ns(self) -> int: ...
+    @property
+    def frame_id(self) -> str: ...
+    @property
+    def encoding(self) -> str: ...
+    @property
+    def data(self) -> bytes: ...
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def step(self) -> int: ...
 
 COMPRESSED_FORMATS = ("jpeg", "jpg", "png", "bmp", "tiff", "webp")
 
@@ -39,7 +59,7 @@ def _compressed_kind(encoding: str) -> str | None:
     return None
 
 
-def decode_image(image: Image) -> np.ndarray:
+def decode_image(image: EncodedImage) -> np.ndarray:
     """The pixels of ``image``: (H, W) for single-channel images (uint8, or uint16/float32 for depth-like
     encodings) and (H, W, 3) uint8 BGR for colour ones (alpha dropped, RGB reordered).
 
@@ -84,7 +104,7 @@ def _imdecode(buf: np.ndarray, flags: int, where: str) -> np.ndarray | None:
         ) from None
 
 
-def _decode_raw(image: Image, enc: str, where: str) -> np.ndarray:
+def _decode_raw(image: EncodedImage, enc: str, where: str) -> np.ndarray:
     channels, dt = RAW_ENCODINGS[enc]
     h, w = int(image.height), int(image.width)
     if h <= 0 or w <= 0:

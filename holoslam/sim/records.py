@@ -33,7 +33,8 @@ def _quat_xyzw(d: dict) -> tuple[float, float, float, float]:
 
 def to_log_data(run, source: str = "simulated household") -> LogData:
     """The records of ``run`` (a ``holoslam.sim.SimulatedRun``), sorted by stamp within each kind."""
-    from holoslam.sim.sensors import LASER_MOUNT, PTZ_MOUNT, ptz_rotation
+    from holoslam.sim.camera import PTZ_MOUNT, ptz_rotation
+    from holoslam.sim.sensors import LASER_MOUNT
     from holoslam.sim.world import world_to_json
     from holoslam.sim.writer import quaternion_from_matrix, quaternion_from_yaw
 

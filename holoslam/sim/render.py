@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from holoslam.sim.sensors import IMAGE_SIZE, LABEL_MARGIN_MODULES, label_corners_world, project
+from holoslam.sim.camera import IMAGE_SIZE, LABEL_MARGIN_MODULES, label_corners_world, project
 from holoslam.sim.world import World, raycast
 
 __all__ = ["render_image", "render_pixels", "CEILING"]

@@ -53,6 +53,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from holoslam.geometry import adjoint, compose, inverse, wrap
+from holoslam.sim.camera import (
+    F0,
+    IMAGE_SIZE,
+    LABEL_MARGIN_MODULES,
+    camera_pose_world,
+    intrinsics,
+    label_corners_world,
+    project,
+    qr_modules,
+)
 from holoslam.sim.world import World, raycast, segments_block
 
 __all__ = [
@@ -66,27 +76,18 @@ __all__ = [
     "camera_snapshots",
     "interpolate_poses",
     "LASER_MOUNT",
-    "PTZ_MOUNT",
-    "F0",
     "ZOOM_MAX",
     "MIN_MODULE_PX",
-    "IMAGE_SIZE",
-    "ptz_rotation",
-    "qr_modules",
 ]
 
 ODOM_COVARIANCES = ("propagated", "constant", "zero")  # what the simulated odometry driver publishes
 LASER_MOUNT = (0.12, 0.0, 0.30)  # bTl: x, y, z (yaw 0)
-PTZ_MOUNT = (0.05, 0.0, 1.10)  # bTptz: x, y, z (axes of the base)
-F0 = 525.0
 ZOOM_MAX = 10.0
 MIN_MODULE_PX = 3.0
-IMAGE_SIZE = (640, 480)
 MAX_FACING_DEG = 60.0
 MAX_SNAPSHOT_RANGE = 3.5
 TARGET_MODULE_PX = 5.0
 SECOND_VIEW_BASELINE = 0.5  # m between the camera positions of a label's first two snapshots
-LABEL_MARGIN_MODULES = 2  # white quiet zone printed around the code, in modules
 
 
 @dataclass(frozen=True)
@@ -304,63 +305,6 @@ def laser_scans(
 
 
 # ----------------------------------------------------------------------------------------------- camera
-
-
-def qr_modules(payload: str) -> np.ndarray:
-    """The QR code's dark modules (n, n) bool for ``payload`` (segno, error level M, no quiet zone)."""
-    import segno
-
-    q = segno.make_qr(payload, error="m", boost_error=False)
-    return np.array([[bool(v) for v in row] for row in q.matrix], dtype=bool)
-
-
-def ptz_rotation(pan: float, tilt: float) -> np.ndarray:
-    """ptzRc: rotation of the camera_optical frame (z forward, x right, y down) in the ptz_base frame (x
-    forward, y left, z up) after a pan about z and a tilt (positive up) about the panned y axis; orthonormal
-    by construction (Eq. 8-9, seed 002, with t_b = 0)."""
-    cp, sp = math.cos(pan), math.sin(pan)
-    ct, st = math.cos(-tilt), math.sin(-tilt)
-    Rz = np.array([[cp, -sp, 0], [sp, cp, 0], [0, 0, 1.0]])
-    Ry = np.array([[ct, 0, st], [0, 1.0, 0], [-st, 0, ct]])
-    Ropt = np.array([[0, 0, 1.0], [-1.0, 0, 0], [0, -1.0, 0]])
-    return Rz @ Ry @ Ropt
-
-
-def camera_pose_world(wTb: np.ndarray, pan: float, tilt: float) -> tuple[np.ndarray, np.ndarray]:
-    """(wRc (3, 3), wtc (3,)) of the camera_optical frame for a base pose (3,)."""
-    x, y, th = wTb
-    c, s = math.cos(th), math.sin(th)
-    wRb = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-    wtc = np.array(
-        [x + c * PTZ_MOUNT[0] - s * PTZ_MOUNT[1], y + s * PTZ_MOUNT[0] + c * PTZ_MOUNT[1], PTZ_MOUNT[2]]
-    )
-    return wRb @ ptz_rotation(pan, tilt), wtc
-
-
-def intrinsics(zoom: float, size: tuple[int, int] = IMAGE_SIZE) -> np.ndarray:
-    """K at a zoom factor: f = F0 * zoom * width / 640, principal point near the image centre."""
-    w, h = size
-    f = F0 * zoom * w / 640.0
-    return np.array([[f, 0, w / 2 - 0.5 + 1.3], [0, f, h / 2 - 0.5 - 0.8], [0, 0, 1.0]])
-
-
-def label_corners_world(obj, margin_modules: float = 0.0, n_modules: int = 29) -> np.ndarray:
-    """The four corners (TL, TR, BR, BL as seen facing the label) of the code (plus a margin in modules),
-    (4, 3) in map."""
-    n = np.array([math.cos(obj.label_yaw), math.sin(obj.label_yaw), 0.0])
-    u = np.cross(-n, [0.0, 0.0, 1.0])  # right, for a viewer facing the label
-    v = np.array([0.0, 0.0, -1.0])  # down
-    h = obj.label_size / 2 * (1 + 2 * margin_modules / n_modules)
-    c = np.asarray(obj.position, dtype=np.float64)
-    return np.stack([c - h * u - h * v, c + h * u - h * v, c + h * u + h * v, c - h * u + h * v])
-
-
-def project(K: np.ndarray, wRc: np.ndarray, wtc: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (M, 2) and depths (M,) of world points X (M, 3)."""
-    Xc = (X - wtc) @ wRc  # = wRc^T (X - t)
-    z = Xc[:, 2]
-    uv = (Xc[:, :2] / z[:, None]) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
-    return uv, z
 
 
 def _occluded(world: World, cam_xy: np.ndarray, obj) -> bool:

@@ -29,17 +29,8 @@ import math
 import numpy as np
 
 from holoslam.geometry import wrap
-from holoslam.sim.sensors import (
-    IMAGE_SIZE,
-    Snapshot,
-    camera_pose_world,
-    camera_snapshots,
-    interpolate_poses,
-    intrinsics,
-    project,
-    qr_modules,
-    readable_labels,
-)
+from holoslam.sim.camera import IMAGE_SIZE, camera_pose_world, intrinsics, project, qr_modules
+from holoslam.sim.sensors import Snapshot, camera_snapshots, interpolate_poses, readable_labels
 from holoslam.sim.world import World
 
 __all__ = ["camera_stream", "MAX_BLUR_MODULES", "IDLE_LOOK_M", "frame_blur"]

@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
+from holoslam.sim.camera import IMAGE_SIZE, LABEL_MARGIN_MODULES, label_corners_world, project
 from holoslam.sim.render import CEILING
-from holoslam.sim.sensors import IMAGE_SIZE, LABEL_MARGIN_MODULES, label_corners_world, project
 from holoslam.sim.world import World, raycast
 
 __all__ = ["render_stream_frame", "motion_kernel"]

@@ -72,7 +72,8 @@ def _tf(stamp_ns: int, parent: str, child: str, t: tuple[float, float, float], q
 
 
 def _messages(run) -> list[tuple[int, str, dict]]:
-    from holoslam.sim.sensors import LASER_MOUNT, PTZ_MOUNT, ptz_rotation
+    from holoslam.sim.camera import PTZ_MOUNT, ptz_rotation
+    from holoslam.sim.sensors import LASER_MOUNT
     from holoslam.sim.world import world_to_json
 
     out: list[tuple[int, str, dict]] = []
