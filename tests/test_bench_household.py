@@ -4,14 +4,14 @@ says how many each located (issue 13: 35 -> 32 matched went unreported, and the 
 from __future__ import annotations
 
 import importlib.util
-from pathlib import Path
 
 import pytest
+from repo_paths import REPO
 
 
 @pytest.fixture(scope="module")
 def bench():
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_household_accuracy.py"
+    path = REPO / "benchmarks" / "bench_household_accuracy.py"
     spec = importlib.util.spec_from_file_location("bench_household_accuracy", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

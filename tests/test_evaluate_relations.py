@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from repo_paths import SHARED
 
 from holoslam import geometry as g
 from holoslam.cli import main
@@ -19,7 +20,7 @@ from holoslam.evaluate import ground_truth_errors, relation_errors
 from holoslam.io.relations import Relations, write_relations
 from holoslam.io.trajectory import write_tum
 
-REALDATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
+REALDATA = SHARED / "realdata"
 SCORER = REALDATA / "score_relations.py"
 S = 1_000_000_000  # ns per second
 

@@ -8,8 +8,9 @@ import ast
 from pathlib import Path
 
 import networkx as nx
+from repo_paths import REPO
 
-PACKAGE = Path(__file__).resolve().parents[1] / "holoslam"
+PACKAGE = REPO / "holoslam"
 
 
 def _modules() -> dict[str, Path]:

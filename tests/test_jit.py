@@ -10,6 +10,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from repo_paths import REPO
 
 pytest.importorskip("numba")
 
@@ -18,7 +19,7 @@ def _run(tmp_path: Path, code: str) -> str:
     """Run ``code`` in a fresh interpreter (a new process loads kernels from the on-disk cache) with the
     probe modules in ``tmp_path`` importable; its stdout."""
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}  # the cache next to the probes
-    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).resolve().parents[1]), str(tmp_path)])
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO), str(tmp_path)])
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env, cwd=tmp_path
     )

@@ -11,10 +11,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from repo_paths import REPO
 
 import holoslam
 
-NOTEBOOK_DIR = Path(__file__).resolve().parents[1] / "notebooks"
+NOTEBOOK_DIR = REPO / "notebooks"
 NOTEBOOKS = sorted(NOTEBOOK_DIR.glob("*.ipynb"))
 HEAVY = ("gtsam", "cv2", "mcap", "matplotlib", "networkx", "scipy", "skimage", "yaml", "mcap_ros2")
 

@@ -17,7 +17,7 @@ def test_property_tests_have_no_time_limit():
 def test_tests_do_not_open_repository_files_relative_to_the_working_directory():
     """``read_log("datasets/...")`` works only when pytest runs from the repository root."""
     bad = []
-    for path in sorted(TESTS.glob("*.py")):
+    for path in sorted(TESTS.rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):
             if (
                 isinstance(node, ast.Constant)

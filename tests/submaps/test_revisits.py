@@ -5,17 +5,17 @@ through one place get better, the short ones no worse."""
 
 from __future__ import annotations
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from repo_paths import SHARED
 
 from holoslam import geometry as g
 from holoslam.graph.nodes import solve_nodes
 from holoslam.submaps.revisits import NodeMatches, Nodes, graph_nodes
 
-REALDATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
+REALDATA = SHARED / "realdata"
 
 
 def test_a_keyframe_belongs_to_the_submap_it_was_matched_into():

@@ -6,10 +6,10 @@ from __future__ import annotations
 import base64
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from repo_paths import REPO
 
 from holoslam.errors import ConfigError, IngestError
 from holoslam.io.mcap import (
@@ -24,8 +24,6 @@ from holoslam.io.mcap import (
 )
 from holoslam.io.mcap_write import MSGDEFS, example_records, write_ros2_log
 from holoslam.types import CameraInfo, GroundTruthPose, Heading, Image, Odometry, Scan, TagSighting, Transform
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")

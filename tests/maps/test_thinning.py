@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
+from repo_paths import REPO
 
 from holoslam.errors import MapError
 from holoslam.maps.thinning import (
@@ -208,9 +209,8 @@ def test_compiled_equals_numpy_and_reference_on_the_bare_rule():
 @pytest.mark.slow
 def test_compiled_equals_numpy_on_benchmark_maps():
     import importlib.util
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_thinning.py"
+    path = REPO / "benchmarks" / "bench_thinning.py"
     spec = importlib.util.spec_from_file_location("bench_thinning", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)

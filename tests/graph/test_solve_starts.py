@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from graph_worlds import square_loop
+from repo_paths import SHARED
 
 from holoslam import geometry as geo
 from holoslam.cli import main
@@ -26,7 +27,7 @@ from holoslam.solve import Initialisation, SolveOptions, solve
 
 gtsam = pytest.importorskip("gtsam")
 
-POSEGRAPH = Path(__file__).resolve().parents[1].parent / "shared" / "posegraph"
+POSEGRAPH = SHARED / "posegraph"
 MITB = POSEGRAPH / "MITb.g2o"
 MITB_OPTIMUM, MITB_TRAP = 20.6035, 385.122
 

@@ -5,11 +5,11 @@ compiled kernels against their numpy paths, and the rules on small synthetic flo
 from __future__ import annotations
 
 import importlib.util
-from pathlib import Path
 from unittest import mock
 
 import numpy as np
 import pytest
+from repo_paths import SHARED
 
 from holoslam.evaluate_rooms import gt_room_labels, score_rooms
 from holoslam.maps.grid import OccupancyGrid
@@ -17,7 +17,7 @@ from holoslam.maps.rooms import RoomRules, rooms_of_grid
 from holoslam.maps.topology import topology_from_grid
 
 RES = 0.05
-ROOMS_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "rooms"
+ROOMS_DIR = SHARED / "rooms"
 needs_benchmark = pytest.mark.skipif(
     not (ROOMS_DIR / "office_a_gt_segmentation.png").is_file(),
     reason="../shared/rooms (benchmark maps) absent",

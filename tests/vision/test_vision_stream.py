@@ -7,6 +7,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from repo_paths import SHARED
 
 from holoslam.errors import ConfigError
 from holoslam.sim import SimConfig, simulate_to_file
@@ -227,7 +228,7 @@ def test_quick_look_on_real_photos():
 
     from holoslam.io.images import read_image_file
 
-    root = Path(os.environ.get("HOLOSLAM_QR_PHOTOS", Path(__file__).resolve().parents[1].parent / "shared" / "qr"))
+    root = Path(os.environ.get("HOLOSLAM_QR_PHOTOS", SHARED / "qr"))
     if not root.is_dir():
         pytest.skip(f"no real QR photos at {root}")
     coded = blank = passed = rejected = 0

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from repo_paths import SHARED
 
 from holoslam.errors import IngestError
 from holoslam.io.relations import (
@@ -17,7 +16,7 @@ from holoslam.io.relations import (
     write_relations,
 )
 
-REALDATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
+REALDATA = SHARED / "realdata"
 
 
 def test_stamps_are_exact_nanoseconds_not_float_seconds():

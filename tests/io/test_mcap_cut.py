@@ -7,11 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from repo_paths import SHARED
 
 from holoslam.errors import IngestError
 from holoslam.io.mcap_cut import cut_log
 
-REALDATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
+REALDATA = SHARED / "realdata"
 S = 1_000_000_000
 T0 = 1_700_000_000 * S
 

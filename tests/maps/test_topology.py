@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from repo_paths import SHARED
+from test_thinning import topology
 
 from holoslam.errors import MapError
 from holoslam.maps.grid import OccupancyGrid
@@ -23,7 +25,6 @@ from holoslam.maps.topology import (
     to_graphml_ready,
     topology_from_grid,
 )
-from tests.test_thinning import topology
 
 # Random maps: free space with rectangular obstacles of at least 3 x 3 cells (the documented minimum hole
 # size: a smaller obstacle right at a crossing can sit inside one junction cluster, see topology.py).
@@ -322,7 +323,6 @@ def test_compiled_graph_equals_the_numpy_path_on_rings_and_long_chains():
 
 # ------------------------------------------------------------------------------------------ map cleaning
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 PUBLIC_MAPS = sorted((SHARED / "maps").glob("*.yaml")) + sorted((SHARED / "rooms").glob("*.yaml"))
 
 

@@ -3,12 +3,11 @@ mapped by the front end and solver to a stated relation error against the benchm
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from repo_paths import SHARED
 
-REALDATA = Path(__file__).resolve().parents[1].parent / "shared" / "realdata"
+REALDATA = SHARED / "realdata"
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(not (REALDATA / "aces.mcap").exists(), reason="../shared/realdata is not here"),

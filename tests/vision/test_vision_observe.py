@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from repo_paths import REPO
 
 from holoslam.errors import VisionError
 from holoslam.types import CameraInfo, Image, LogData, TagSighting, Transform
@@ -148,7 +148,7 @@ def test_accept_landmarks_needs_consistent_decodes():
         accept_landmarks(["A"], np.zeros((2, 3)))
 
 
-BUNDLED = Path(__file__).resolve().parents[1] / "datasets" / "household_small.mcap"
+BUNDLED = REPO / "datasets" / "household_small.mcap"
 
 
 @pytest.mark.slow

@@ -8,8 +8,9 @@ import os
 from pathlib import Path
 
 import pytest
+from repo_paths import SHARED
 
-ROOT = Path(os.environ.get("HOLOSLAM_QR_PHOTOS", Path(__file__).resolve().parents[2] / "shared" / "qr"))
+ROOT = Path(os.environ.get("HOLOSLAM_QR_PHOTOS", SHARED / "qr"))
 
 pytestmark = pytest.mark.skipif(not ROOT.is_dir(), reason=f"no real QR photos at {ROOT}")
 

@@ -7,6 +7,7 @@ import networkx as nx
 import numpy as np
 import pytest
 from planning_maps import apartment_free
+from repo_paths import REPO
 
 from holoslam.errors import MapError, PlanningError
 from holoslam.geometry import between, inverse, transform_points
@@ -223,13 +224,12 @@ def test_reference_household():
 
 @pytest.fixture(scope="module")
 def household_run():
-    from pathlib import Path
 
     from holoslam.evaluate import align_se2, truth_at
     from holoslam.io.mcap import read_log
     from holoslam.pipeline import run
 
-    path = Path(__file__).resolve().parents[1] / "datasets" / "household_small.mcap"
+    path = REPO / "datasets" / "household_small.mcap"
     r = run(path)
     log, _ = read_log(path)
     gs, gp = log.ground_truth_arrays()
