@@ -234,15 +234,7 @@ def truth_at(stamps_ns: np.ndarray, gt_stamps_ns: np.ndarray, gt_wTb: np.ndarray
         )
     if np.any(np.diff(t) < 0):
         raise ValueError("truth_at: ground-truth stamps must be sorted in time")
-    tf = (t - t[0]).astype(np.float64)
-    qf = (q - t[0]).astype(np.float64)
-    return np.column_stack(
-        [
-            np.interp(qf, tf, P[:, 0]),
-            np.interp(qf, tf, P[:, 1]),
-            g.wrap(np.interp(qf, tf, np.unwrap(P[:, 2]))),
-        ]
-    )
+    return g.interpolate_poses(t, P, q)
 
 
 # ------------------------------------------------------------------------------------------ relation errors

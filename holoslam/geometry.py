@@ -28,6 +28,7 @@ __all__ = [
     "propagate_compose",
     "propagate_between",
     "adjoint",
+    "interpolate_poses",
 ]
 
 
@@ -127,3 +128,24 @@ def propagate_between(
     Ji = inverse_jacobian(aTb)
     cov_bTa = Ji @ cov_aTb @ Ji.T
     return propagate_compose(bTa, cov_bTa, aTc, cov_aTc)
+
+
+def interpolate_poses(stamps_ns: np.ndarray, poses: np.ndarray, query_ns: np.ndarray) -> np.ndarray:
+    """Poses (N, 3) at sorted int-nanosecond ``stamps_ns`` interpolated at ``query_ns`` (Q,): x, y linear and
+    theta along the unwrapped angle, clamped at the ends; (Q, 3). Raises ValueError for an empty stream."""
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if stamps.size == 0:
+        raise ValueError("interpolate_poses: no poses to interpolate (empty stream)")
+    t0 = stamps[0]
+    qn = np.asarray(query_ns, dtype=np.int64).reshape(-1)
+    if qn.size:  # only the samples around the queries (unwrapping the whole stream per call is the cost)
+        lo = max(int(np.searchsorted(stamps, qn.min(), side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(stamps, qn.max(), side="left")) + 1, stamps.size)
+        stamps, poses = stamps[lo:hi], poses[lo:hi]
+    ts = (stamps - t0).astype(np.float64)
+    q = (qn - t0).astype(np.float64)
+    th = np.unwrap(poses[:, 2])
+    out = np.column_stack([np.interp(q, ts, poses[:, 0]), np.interp(q, ts, poses[:, 1]), np.interp(q, ts, th)])
+    out[:, 2] = wrap(out[:, 2])
+    return out

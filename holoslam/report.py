@@ -529,7 +529,7 @@ def accuracy(log: Any, fe: Any, sol: Any, objects: Sequence[Any], trajectory: An
     if not log.ground_truth:
         return None
     from holoslam.evaluate import trajectory_errors, truth_at
-    from holoslam.submaps.deadreckon import interpolate_poses
+    from holoslam.geometry import interpolate_poses
 
     gs, gp = log.ground_truth_arrays()
     true_a = truth_at(fe.anchor_stamps_ns, gs, gp)

@@ -35,7 +35,7 @@ class RunTrajectory:
 def run_trajectory(log: Any, fe: Any, sol: Any, nodes: Any = None) -> RunTrajectory:
     """The trajectory of a run from its front end ``fe`` (dead reckoning, submaps) and solution ``sol``; with
     ``nodes`` (a ``holoslam.graph.nodes.KeyframeSolve``) the keyframes are the keyframe solve's."""
-    from holoslam.submaps.deadreckon import interpolate_poses
+    from holoslam.geometry import interpolate_poses
 
     odom_stamps, odomTb = log.odometry_arrays()
     scan_stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
@@ -61,7 +61,7 @@ def optimised_trajectory(
     """The base pose at every stamp from optimised reference poses (anchors or keyframes) ``wTa`` at
     ``anchor_stamps_ns``: after reference k (until the next) the pose is wTa_k composed with the dead-reckoned
     motion since it, wTb(t) = wTa_k ∘ (drTa_k^-1 ∘ drTb(t)). Before the first, reference 0 is used backwards."""
-    from holoslam.submaps.deadreckon import interpolate_poses
+    from holoslam.geometry import interpolate_poses
 
     stamps = np.asarray(stamps_ns, dtype=np.int64)
     dr_t = interpolate_poses(dr_stamps_ns, dr_wTb, stamps)

@@ -8,7 +8,9 @@ import math
 
 import numpy as np
 
-__all__ = ["PTZ_MOUNT", "F0", "IMAGE_SIZE", "LABEL_MARGIN_MODULES", "qr_modules", "ptz_rotation",
+from holoslam.vision.camera import OPTICAL_IN_BODY, ptz_rotation
+
+__all__ = ["PTZ_MOUNT", "F0", "IMAGE_SIZE", "LABEL_MARGIN_MODULES", "qr_modules", "optical_rotation",
            "camera_pose_world", "intrinsics", "label_corners_world", "project"]
 
 PTZ_MOUNT = (0.05, 0.0, 1.10)  # bTptz: x, y, z (axes of the base)
@@ -25,16 +27,12 @@ def qr_modules(payload: str) -> np.ndarray:
     return np.array([[bool(v) for v in row] for row in q.matrix], dtype=bool)
 
 
-def ptz_rotation(pan: float, tilt: float) -> np.ndarray:
-    """ptzRc: rotation of the camera_optical frame (z forward, x right, y down) in the ptz_base frame (x
-    forward, y left, z up) after a pan about z and a tilt (positive up) about the panned y axis; orthonormal
-    by construction (Eq. 8-9, seed 002, with t_b = 0)."""
-    cp, sp = math.cos(pan), math.sin(pan)
-    ct, st = math.cos(-tilt), math.sin(-tilt)
-    Rz = np.array([[cp, -sp, 0], [sp, cp, 0], [0, 0, 1.0]])
-    Ry = np.array([[ct, 0, st], [0, 1.0, 0], [-st, 0, ct]])
-    Ropt = np.array([[0, 0, 1.0], [-1.0, 0, 0], [0, -1.0, 0]])
-    return Rz @ Ry @ Ropt
+def optical_rotation(pan: float, tilt_up: float) -> np.ndarray:
+    """ptzRc: the camera_optical frame (z forward, x right, y down) in the ptz_base frame (x forward, y left,
+    z up) of the simulated head, whose tilt is positive *up*: ``holoslam.vision.camera.ptz_rotation`` (the
+    head's body rotation, tilt about +y, i.e. positive down) at -tilt_up, then the optical axes (Eq. 8-9,
+    seed 002, t_b = 0)."""
+    return ptz_rotation(pan, -tilt_up) @ OPTICAL_IN_BODY
 
 
 def camera_pose_world(wTb: np.ndarray, pan: float, tilt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +43,7 @@ def camera_pose_world(wTb: np.ndarray, pan: float, tilt: float) -> tuple[np.ndar
     wtc = np.array(
         [x + c * PTZ_MOUNT[0] - s * PTZ_MOUNT[1], y + s * PTZ_MOUNT[0] + c * PTZ_MOUNT[1], PTZ_MOUNT[2]]
     )
-    return wRb @ ptz_rotation(pan, tilt), wtc
+    return wRb @ optical_rotation(pan, tilt), wtc
 
 
 def intrinsics(zoom: float, size: tuple[int, int] = IMAGE_SIZE) -> np.ndarray:

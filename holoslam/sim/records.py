@@ -33,7 +33,7 @@ def _quat_xyzw(d: dict) -> tuple[float, float, float, float]:
 
 def to_log_data(run, source: str = "simulated household") -> LogData:
     """The records of ``run`` (a ``holoslam.sim.SimulatedRun``), sorted by stamp within each kind."""
-    from holoslam.sim.camera import PTZ_MOUNT, ptz_rotation
+    from holoslam.sim.camera import PTZ_MOUNT, optical_rotation
     from holoslam.sim.sensors import LASER_MOUNT
     from holoslam.sim.world import world_to_json
     from holoslam.sim.writer import quaternion_from_matrix, quaternion_from_yaw
@@ -79,7 +79,7 @@ def to_log_data(run, source: str = "simulated household") -> LogData:
                 "ptz_base",
                 "camera_optical",
                 (0.0, 0.0, 0.0),
-                _quat_xyzw(quaternion_from_matrix(ptz_rotation(snap.pan, snap.tilt))),
+                _quat_xyzw(quaternion_from_matrix(optical_rotation(snap.pan, snap.tilt))),
             )
         )
         images.append(Image(st, "camera_optical", "jpeg", snap.jpeg, cfg.image_width, cfg.image_height))

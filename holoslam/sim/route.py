@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from holoslam.geometry import wrap
-from holoslam.sim.sensors import wrap_angle
 from holoslam.sim.world import World, free_space
 
 __all__ = [
@@ -231,7 +230,7 @@ def household_trajectory(
     ts = np.arange(n) / rate_hz
     th = np.unwrap(P[:, 2])
     out = np.column_stack(
-        [np.interp(ts, T, P[:, 0]), np.interp(ts, T, P[:, 1]), wrap_angle(np.interp(ts, T, th))]
+        [np.interp(ts, T, P[:, 0]), np.interp(ts, T, P[:, 1]), wrap(np.interp(ts, T, th))]
     )
     stamps = t0_ns + np.round(ts * 1e9).astype(np.int64)
     return Trajectory(stamps, out)

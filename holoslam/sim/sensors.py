@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from holoslam.geometry import adjoint, compose, inverse, wrap
+from holoslam.geometry import adjoint, compose, interpolate_poses, inverse, wrap
 from holoslam.sim.camera import (
     F0,
     IMAGE_SIZE,
@@ -74,7 +74,6 @@ __all__ = [
     "compass",
     "laser_scans",
     "camera_snapshots",
-    "interpolate_poses",
     "LASER_MOUNT",
     "ZOOM_MAX",
     "MIN_MODULE_PX",
@@ -142,22 +141,6 @@ class Snapshot:
     blur_px: float = 0.0  # motion blur over the exposure (camera-stream frames, holoslam.sim.stream), px
 
 
-def wrap_angle(theta: np.ndarray) -> np.ndarray:
-    """``holoslam.geometry.wrap`` made strict: floating-point rounding can give exactly +pi; map it to -pi."""
-    w = np.asarray(wrap(np.asarray(theta, dtype=np.float64)))
-    return np.where(w >= np.pi, w - 2.0 * np.pi, w)
-
-
-def interpolate_poses(stamps_ns: np.ndarray, wTb: np.ndarray, at_ns: np.ndarray) -> np.ndarray:
-    """True poses at ``at_ns`` by linear interpolation (angles unwrapped)."""
-    t = (np.asarray(stamps_ns) - stamps_ns[0]).astype(np.float64)
-    q = (np.asarray(at_ns) - stamps_ns[0]).astype(np.float64)
-    th = np.unwrap(wTb[:, 2])
-    return np.column_stack(
-        [np.interp(q, t, wTb[:, 0]), np.interp(q, t, wTb[:, 1]), wrap_angle(np.interp(q, t, th))]
-    )
-
-
 # ----------------------------------------------------------------------------------------------- odometer
 
 
@@ -216,7 +199,7 @@ def odometry(
         cov = Ad @ cov @ Ad.T + q
         P[k + 1] = (x, y, th)
         C[k + 1] = cov
-    P[:, 2] = wrap_angle(P[:, 2])
+    P[:, 2] = wrap(P[:, 2])
     # to the ROS convention: covariance of the numbers (x, y, yaw) in the odom frame
     cos_th, sin_th = np.cos(P[:, 2]), np.sin(P[:, 2])
     J = np.zeros((n + 1, 3, 3))
@@ -268,7 +251,7 @@ def compass(
     at = np.arange(stamps_ns[0] + offset_ns, stamps_ns[-1], period, dtype=np.int64)
     P = interpolate_poses(stamps_ns, wTb, at)
     dist = magnetic_disturbance(world, P[:, :2], disturbance_radius, disturbance_scale)
-    yaw = wrap_angle(P[:, 2] + bias + dist + sigma * rng.standard_normal(len(at)))
+    yaw = wrap(P[:, 2] + bias + dist + sigma * rng.standard_normal(len(at)))
     return CompassStream(at, yaw, P[:, 2], dist, float(sigma))
 
 

@@ -28,9 +28,9 @@ import math
 
 import numpy as np
 
-from holoslam.geometry import wrap
+from holoslam.geometry import interpolate_poses, wrap
 from holoslam.sim.camera import IMAGE_SIZE, camera_pose_world, intrinsics, project, qr_modules
-from holoslam.sim.sensors import Snapshot, camera_snapshots, interpolate_poses, readable_labels
+from holoslam.sim.sensors import Snapshot, camera_snapshots, readable_labels
 from holoslam.sim.world import World
 
 __all__ = ["camera_stream", "MAX_BLUR_MODULES", "IDLE_LOOK_M", "frame_blur"]

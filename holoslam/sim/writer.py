@@ -72,7 +72,7 @@ def _tf(stamp_ns: int, parent: str, child: str, t: tuple[float, float, float], q
 
 
 def _messages(run) -> list[tuple[int, str, dict]]:
-    from holoslam.sim.camera import PTZ_MOUNT, ptz_rotation
+    from holoslam.sim.camera import PTZ_MOUNT, optical_rotation
     from holoslam.sim.sensors import LASER_MOUNT
     from holoslam.sim.world import world_to_json
 
@@ -195,7 +195,7 @@ def _messages(run) -> list[tuple[int, str, dict]]:
                             "ptz_base",
                             "camera_optical",
                             (0.0, 0.0, 0.0),
-                            quaternion_from_matrix(ptz_rotation(s.pan, s.tilt)),
+                            quaternion_from_matrix(optical_rotation(s.pan, s.tilt)),
                         )
                     ]
                 },

@@ -67,7 +67,6 @@ from holoslam.errors import IngestError
 __all__ = [
     "DeadReckoningConfig",
     "DeadReckoning",
-    "interpolate_poses",
     "interpolate_yaw",
     "odometry_increments",
     "integrate",
@@ -145,26 +144,6 @@ def batch_adjoint(T: np.ndarray) -> np.ndarray:
     A[:, 1, 0], A[:, 1, 1], A[:, 1, 2] = s, c, -T[:, 0]
     A[:, 2, 2] = 1.0
     return A
-
-
-def interpolate_poses(stamps_ns: np.ndarray, poses: np.ndarray, query_ns: np.ndarray) -> np.ndarray:
-    """Poses (x, y linear, theta along the unwrapped angle) at ``query_ns``; clamped at the ends."""
-    stamps = np.asarray(stamps_ns, dtype=np.int64)
-    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    if stamps.size == 0:
-        raise IngestError("cannot interpolate poses: the odometry stream is empty; the log needs /odom")
-    t0 = stamps[0]
-    qn = np.asarray(query_ns, dtype=np.int64).reshape(-1)
-    if qn.size:  # only the samples around the queries (unwrapping the whole stream per call is the cost)
-        lo = max(int(np.searchsorted(stamps, qn.min(), side="right")) - 1, 0)
-        hi = min(int(np.searchsorted(stamps, qn.max(), side="left")) + 1, stamps.size)
-        stamps, poses = stamps[lo:hi], poses[lo:hi]
-    ts = (stamps - t0).astype(np.float64)
-    q = (qn - t0).astype(np.float64)
-    th = np.unwrap(poses[:, 2])
-    out = np.column_stack([np.interp(q, ts, poses[:, 0]), np.interp(q, ts, poses[:, 1]), np.interp(q, ts, th)])
-    out[:, 2] = g.wrap(out[:, 2])
-    return out
 
 
 def interpolate_yaw(
@@ -276,7 +255,7 @@ def dead_reckon(
         raise ValueError(f"dead_reckon: end stamp {t1_ns} is before start stamp {t0_ns}; pass them in time order")
     inner = ost[(ost > t0_ns) & (ost < t1_ns)]
     st = np.concatenate([[t0_ns], inner, [t1_ns]]).astype(np.int64) if t1_ns > t0_ns else np.array([t0_ns])
-    samples = interpolate_poses(ost, odomTb, st)
+    samples = g.interpolate_poses(ost, odomTb, st)
     s, dth_o = odometry_increments(samples)
     start = np.zeros(3) if start is None else np.asarray(start, dtype=np.float64).reshape(3)
     cov0 = np.zeros((3, 3)) if cov_start is None else np.asarray(cov_start, dtype=np.float64)

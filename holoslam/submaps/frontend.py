@@ -40,7 +40,8 @@ import numpy as np
 
 from holoslam import geometry as g
 from holoslam.errors import IngestError
-from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interpolate_poses, interpolate_yaw
+from holoslam.geometry import interpolate_poses
+from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interpolate_yaw
 from holoslam.submaps.features import FeatureConfig, ScanFeatures, extract_features, transform_features
 from holoslam.submaps.local_slam import ActiveSubmap, LocalSlam, LocalSlamConfig
 from holoslam.submaps.loops import LoopConfig, LoopSearch

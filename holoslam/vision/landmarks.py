@@ -73,7 +73,7 @@ def view_poses(
     """For each stamp: the anchor index k of the submap active then, the base pose ``aTb`` in that anchor's
     frame (nearest earlier keyframe, scan-matched, composed with the odometry's motion since it) and the
     keyframe's covariance (3, 3). Returns ``(k (V,), aTb (V, 3), cov_aTb (V, 3, 3))``."""
-    from holoslam.submaps.deadreckon import interpolate_poses
+    from holoslam.geometry import interpolate_poses
 
     stamps = np.asarray(stamps_ns, np.int64).reshape(-1)
     anchors = np.array([int(sm.anchor_stamp_ns) for sm in submaps], np.int64)

@@ -11,11 +11,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from holoslam import geometry as g
+from holoslam.geometry import interpolate_poses
 from holoslam.submaps.deadreckon import (
     DeadReckoningConfig,
     dead_reckon,
     integrate,
-    interpolate_poses,
     odometry_increments,
     relative_anchor_pose,
 )

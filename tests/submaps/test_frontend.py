@@ -337,7 +337,7 @@ def test_motion_filter_is_exactly_distance_turn_or_time():
 def test_nodes_are_the_scans_past_the_motion_filter_and_the_others_are_tracked(frontend_run):
     fe, log, obs, t, wTb = frontend_run
     ost, opose = log.odometry_arrays()
-    from holoslam.submaps.deadreckon import interpolate_poses
+    from holoslam.geometry import interpolate_poses
 
     nodes = np.unique(np.concatenate([sm.scan_stamps_ns for sm in fe.submaps]))
     tracked = np.concatenate([sm.track_stamps_ns for sm in fe.submaps])
