@@ -1,4 +1,4 @@
-"""Vision benchmark on rendered label views (holoslam.vision.synth) and on the simulator's household log:
+"""Vision benchmark on rendered label views (holoslam.sim.label_views) and on the simulator's household log:
 decode rate and false decodes per decoder and per condition (module size, tilt, in-plane rotation, motion
 blur, noise, lighting, JPEG, several codes per image), corner error (px), object position error vs range
 (single-view PnP, two-view triangulation), and VGA images per second on one core, with medians and a ratio
@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
+from holoslam.sim.label_views import LabelInView, RenderConditions, look_at_label, render_labels_view
 from holoslam.vision.camera import PinholeCamera, make_transform
 from holoslam.vision.locate import pnp_label, triangulate
 from holoslam.vision.qr import Decoder, Fallback, detect_qr
-from holoslam.vision.synth import LabelInView, RenderConditions, look_at_label, render_labels_view
 
 F = 600.0
 K = np.array([[F, 0, 319.5], [0, F, 239.5], [0, 0, 1]])
@@ -51,7 +51,7 @@ SETUPS = {
 
 def _fits(labs: list[LabelInView], w: int = 640, h: int = 480) -> bool:
     """Every label with its quiet zone fully in the image, and no two labels overlapping."""
-    from holoslam.vision.synth import label_corners_o, project_points
+    from holoslam.sim.label_views import label_corners_o, project_points
 
     boxes = []
     for lab in labs:

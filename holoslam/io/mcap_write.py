@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from holoslam.frames import quaternion_from_yaw
 from holoslam.io.ros2defs import MSG_TYPES, msgdef
 from holoslam.types import (
     CameraInfo,
@@ -54,8 +55,13 @@ def _header(ns: int, frame: str) -> dict[str, Any]:
     return {"stamp": _stamp(ns), "frame_id": frame}
 
 
+def ros_quaternion(q_xyzw: tuple[float, float, float, float]) -> dict[str, float]:
+    """A geometry_msgs/Quaternion message dict of (x, y, z, w)."""
+    return {"x": float(q_xyzw[0]), "y": float(q_xyzw[1]), "z": float(q_xyzw[2]), "w": float(q_xyzw[3])}
+
+
 def _yaw_quat(yaw: float) -> dict[str, float]:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
+    return ros_quaternion(quaternion_from_yaw(yaw))
 
 
 def _cov6(cov3: np.ndarray | None, theta: float = 0.0) -> list[float]:

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from holoslam.frames import quaternion_from_yaw
+
 __all__ = ["ResultsScene", "write_results_mcap"]
 
 
@@ -36,10 +38,6 @@ class ResultsScene:
     edges: Sequence[tuple[str, np.ndarray]] = field(default_factory=tuple)  # (layer name, (E, 2, 2) segments)
 
 
-def _quat_z(theta: float):
-    return 0.0, 0.0, math.sin(theta / 2.0), math.cos(theta / 2.0)
-
-
 def _timestamp(msg_ts, stamp_ns: int) -> None:
     msg_ts.seconds = int(stamp_ns // 1_000_000_000)
     msg_ts.nanos = int(stamp_ns % 1_000_000_000)
@@ -53,7 +51,7 @@ def _poses_msg(poses: np.ndarray, stamp_ns: int):
     for x, y, t in np.asarray(poses, dtype=np.float64).reshape(-1, 3):
         p = msg.poses.add()
         p.position.x, p.position.y, p.position.z = float(x), float(y), 0.0
-        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = _quat_z(float(t))
+        p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = quaternion_from_yaw(float(t))
     return msg
 
 
@@ -132,7 +130,7 @@ def write_results_mcap(scene: ResultsScene, path: str | Path, max_pose_messages:
                 msg.pose.orientation.y,
                 msg.pose.orientation.z,
                 msg.pose.orientation.w,
-            ) = _quat_z(float(t))
+            ) = quaternion_from_yaw(float(t))
             w.write_message("/holoslam/pose", msg, log_time=int(s), publish_time=int(s))
         w.write_message("/holoslam/trajectory", _poses_msg(scene.wTb, t1), log_time=t1, publish_time=t1)
         if scene.dead_reckoning_wTb is not None:

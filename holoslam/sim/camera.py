@@ -19,12 +19,13 @@ IMAGE_SIZE = (640, 480)
 LABEL_MARGIN_MODULES = 2  # white quiet zone printed around the code, in modules
 
 
-def qr_modules(payload: str) -> np.ndarray:
-    """The QR code's dark modules (n, n) bool for ``payload`` (segno, error level M, no quiet zone)."""
+def qr_modules(payload: str, error: str = "m", boost_error: bool = False) -> np.ndarray:
+    """The QR code's dark modules (n, n) bool for ``payload`` (segno, a full-size code at error level
+    ``error``, raised when the version has room for more with ``boost_error``; no quiet zone)."""
     import segno
 
-    q = segno.make_qr(payload, error="m", boost_error=False)
-    return np.array([[bool(v) for v in row] for row in q.matrix], dtype=bool)
+    q = segno.make_qr(payload, error=error, boost_error=boost_error)
+    return np.asarray(q.matrix, dtype=bool)
 
 
 def optical_rotation(pan: float, tilt_up: float) -> np.ndarray:

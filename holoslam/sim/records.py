@@ -27,16 +27,12 @@ from holoslam.types import (
 __all__ = ["to_log_data"]
 
 
-def _quat_xyzw(d: dict) -> tuple[float, float, float, float]:
-    return (d["x"], d["y"], d["z"], d["w"])
-
-
 def to_log_data(run, source: str = "simulated household") -> LogData:
     """The records of ``run`` (a ``holoslam.sim.SimulatedRun``), sorted by stamp within each kind."""
+    from holoslam.frames import quaternion_from_matrix, quaternion_from_yaw
     from holoslam.sim.camera import PTZ_MOUNT, optical_rotation
     from holoslam.sim.sensors import LASER_MOUNT
     from holoslam.sim.world import world_to_json
-    from holoslam.sim.writer import quaternion_from_matrix, quaternion_from_yaw
 
     odo = run.odometry
     c, s = np.cos(odo.odomTb[:, 2]), np.sin(odo.odomTb[:, 2])
@@ -65,8 +61,8 @@ def to_log_data(run, source: str = "simulated household") -> LogData:
     cfg = run.config
     t0 = int(run.stamps_ns[0])
     transforms = [
-        Transform(t0, "base_link", "laser", LASER_MOUNT, _quat_xyzw(quaternion_from_yaw(0.0)), static=True),
-        Transform(t0, "base_link", "ptz_base", PTZ_MOUNT, _quat_xyzw(quaternion_from_yaw(0.0)), static=True),
+        Transform(t0, "base_link", "laser", LASER_MOUNT, quaternion_from_yaw(0.0), static=True),
+        Transform(t0, "base_link", "ptz_base", PTZ_MOUNT, quaternion_from_yaw(0.0), static=True),
     ]
     images: list[Image] = []
     infos: list[CameraInfo] = []
@@ -79,7 +75,7 @@ def to_log_data(run, source: str = "simulated household") -> LogData:
                 "ptz_base",
                 "camera_optical",
                 (0.0, 0.0, 0.0),
-                _quat_xyzw(quaternion_from_matrix(optical_rotation(snap.pan, snap.tilt))),
+                quaternion_from_matrix(optical_rotation(snap.pan, snap.tilt)),
             )
         )
         images.append(Image(st, "camera_optical", "jpeg", snap.jpeg, cfg.image_width, cfg.image_height))

@@ -5,15 +5,16 @@ publish time = header stamp), and the metadata record ``holoslam`` (seed, durati
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import numpy as np
 
 from holoslam.errors import HoloslamError
+from holoslam.frames import quaternion_from_matrix, quaternion_from_yaw
+from holoslam.io.mcap_write import ros_quaternion
 from holoslam.io.ros2defs import msgdef
 
-__all__ = ["write_household_log", "quaternion_from_matrix", "quaternion_from_yaw", "TOPICS"]
+__all__ = ["write_household_log", "TOPICS"]
 
 TOPICS: dict[str, str] = {
     "/tf_static": "tf2_msgs/msg/TFMessage",
@@ -31,29 +32,12 @@ TOPICS: dict[str, str] = {
 _ORDER = {t: i for i, t in enumerate(TOPICS)}
 
 
-def quaternion_from_yaw(yaw: float) -> dict[str, float]:
-    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
+def _yaw_q(yaw: float) -> dict[str, float]:
+    return ros_quaternion(quaternion_from_yaw(yaw))
 
 
-def quaternion_from_matrix(R: np.ndarray) -> dict[str, float]:
-    """(x, y, z, w) of a rotation matrix, w >= 0."""
-    R = np.asarray(R, dtype=np.float64)
-    tr = np.trace(R)
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        w, x, y, z = 0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
-        w, x, y, z = (R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s
-    elif R[1, 1] > R[2, 2]:
-        s = math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
-        w, x, y, z = (R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s
-    else:
-        s = math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
-        w, x, y, z = (R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s
-    if w < 0:
-        w, x, y, z = -w, -x, -y, -z
-    return {"x": float(x), "y": float(y), "z": float(z), "w": float(w)}
+def _matrix_q(R: np.ndarray) -> dict[str, float]:
+    return ros_quaternion(quaternion_from_matrix(R))
 
 
 def _header(stamp_ns: int, frame_id: str) -> dict:
@@ -84,8 +68,8 @@ def _messages(run) -> list[tuple[int, str, dict]]:
             "/tf_static",
             {
                 "transforms": [
-                    _tf(t0, "base_link", "laser", LASER_MOUNT, quaternion_from_yaw(0.0)),
-                    _tf(t0, "base_link", "ptz_base", PTZ_MOUNT, quaternion_from_yaw(0.0)),
+                    _tf(t0, "base_link", "laser", LASER_MOUNT, _yaw_q(0.0)),
+                    _tf(t0, "base_link", "ptz_base", PTZ_MOUNT, _yaw_q(0.0)),
                 ]
             },
         )
@@ -113,7 +97,7 @@ def _messages(run) -> list[tuple[int, str, dict]]:
                     "pose": {
                         "pose": {
                             "position": {"x": float(x), "y": float(y), "z": 0.0},
-                            "orientation": quaternion_from_yaw(float(th)),
+                            "orientation": _yaw_q(float(th)),
                         },
                         "covariance": cov,
                     },
@@ -137,7 +121,7 @@ def _messages(run) -> list[tuple[int, str, dict]]:
                     "header": _header(st, "map"),
                     "pose": {
                         "position": {"x": float(x), "y": float(y), "z": 0.0},
-                        "orientation": quaternion_from_yaw(float(th)),
+                        "orientation": _yaw_q(float(th)),
                     },
                 },
             )
@@ -151,7 +135,7 @@ def _messages(run) -> list[tuple[int, str, dict]]:
                 "/compass",
                 {
                     "header": _header(st, "base_link"),
-                    "orientation": quaternion_from_yaw(float(com.yaw[k])),
+                    "orientation": _yaw_q(float(com.yaw[k])),
                     "orientation_covariance": [big, 0, 0, 0, big, 0, 0, 0, var],
                     "angular_velocity": {"x": 0.0, "y": 0.0, "z": 0.0},
                     "angular_velocity_covariance": [-1.0] + [0.0] * 8,
@@ -195,7 +179,7 @@ def _messages(run) -> list[tuple[int, str, dict]]:
                             "ptz_base",
                             "camera_optical",
                             (0.0, 0.0, 0.0),
-                            quaternion_from_matrix(optical_rotation(s.pan, s.tilt)),
+                            _matrix_q(optical_rotation(s.pan, s.tilt)),
                         )
                     ]
                 },

@@ -9,7 +9,7 @@ Jacobian of the predicted pixels with respect to the estimated parameters (for P
 (rvec, tvec), whose tvec block is the label centre in the camera frame because the label frame's origin is
 the code centre).
 
-Label frame ``o`` (as in ``holoslam.vision.synth``): origin at the code centre, x right along the printed top
+Label frame ``o`` (as in ``holoslam.sim.label_views``): origin at the code centre, x right along the printed top
 edge, y up, z out of the printed face; corners TL, TR, BR, BL at (-s/2, s/2), (s/2, s/2), (s/2, -s/2),
 (-s/2, -s/2): the order ``cv2.SOLVEPNP_IPPE_SQUARE`` expects.
 """

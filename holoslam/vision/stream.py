@@ -14,7 +14,7 @@ cheap steps in front of it, frame by frame in stream order:
    frames a second through the vision stage) and rejected 10 of the 1737 frames the full decode read a label
    in (5.8 per thousand; every object was read in neighbouring frames). The half-size pass is there for
    blurred codes: zxing-cpp's downscale pyramid, which the fast path leaves out, is what read some of the
-   frames the full-size pass rejected (a blur of a few pixels is about one pixel at half size). Rendered labels (``holoslam.vision.synth``, 3-5 px per
+   frames the full-size pass rejected (a blur of a few pixels is about one pixel at half size). Rendered labels (``holoslam.sim.label_views``, 3-5 px per
    module, motion blur up to 1.5 modules, JPEG): every one the full decode read passed. Real photos (zxing's
    black-box sets in ``../shared/qr``, which flatter zxing-cpp): 95 of the 97 with a code passed (the full
    decode reads the same 95), 25 of 25 without a code rejected. A frame that fails is not decoded

@@ -10,6 +10,7 @@ import pytest
 
 from holoslam import geometry
 from holoslam.errors import VisionError
+from holoslam.sim.label_views import label_corners_o, look_at_label, project_points, render_label_view
 from holoslam.vision.camera import PinholeCamera, invert_transform, make_transform, ptz_chain
 from holoslam.vision.locate import (
     base_to_submap,
@@ -19,7 +20,6 @@ from holoslam.vision.locate import (
     triangulate,
 )
 from holoslam.vision.qr import detect_qr
-from holoslam.vision.synth import label_corners_o, look_at_label, project_points, render_label_view
 
 K = np.array([[600.0, 0, 320], [0, 600.0, 240], [0, 0, 1]])
 CAM = PinholeCamera(K, np.zeros(5), 640, 480)

@@ -92,8 +92,8 @@ def test_views_without_parallax_locate_nothing_and_say_why():
 def test_rendered_label_without_size_from_pixels_at_3_m():
     """Decode a sizeless label in two rendered views 0.3 m apart at 3 m (PTZ zoomed to ~5 px per module),
     triangulate the decoded centres: within 5 cm, and the printed size recovered from the images."""
+    from holoslam.sim.label_views import RenderConditions, render_label_view
     from holoslam.vision.qr import detect_qr
-    from holoslam.vision.synth import RenderConditions, render_label_view
 
     payload, side = "HL1;O41;clock;g=top", 0.10
     w_X = np.array([3.0, 0.2, 1.3])

@@ -11,11 +11,11 @@ import pytest
 from repo_paths import REPO
 
 from holoslam.errors import VisionError
+from holoslam.sim.label_views import LabelInView, look_at_label, render_labels_view
 from holoslam.types import CameraInfo, Image, LogData, TagSighting, Transform
 from holoslam.vision.camera import OPTICAL_IN_BODY
 from holoslam.vision.label import foreign_code_id
 from holoslam.vision.observe import accept_landmarks, locate_from_log, observations_from_log
-from holoslam.vision.synth import LabelInView, look_at_label, render_labels_view
 
 K = np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]])
 

@@ -9,6 +9,13 @@ import numpy as np
 import pytest
 
 from holoslam.errors import ImageDecodeError, VisionError
+from holoslam.sim.label_views import (
+    LabelInView,
+    RenderConditions,
+    look_at_label,
+    render_label_view,
+    render_labels_view,
+)
 from holoslam.vision.qr import (
     Decoder,
     Fallback,
@@ -17,13 +24,6 @@ from holoslam.vision.qr import (
     detect_qr,
     detection_to_json,
     orient_and_refine,
-)
-from holoslam.vision.synth import (
-    LabelInView,
-    RenderConditions,
-    look_at_label,
-    render_label_view,
-    render_labels_view,
 )
 
 K = np.array([[700.0, 0, 319.5], [0, 700.0, 239.5], [0, 0, 1]])

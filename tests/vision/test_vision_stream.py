@@ -11,10 +11,10 @@ from repo_paths import SHARED
 
 from holoslam.errors import ConfigError
 from holoslam.sim import SimConfig, simulate_to_file
+from holoslam.sim.label_views import LabelInView, RenderConditions, look_at_label, render_labels_view
 from holoslam.sim.stream_render import motion_kernel
 from holoslam.vision.qr import detect_qr
 from holoslam.vision.stream import StreamSettings, quick_look
-from holoslam.vision.synth import LabelInView, RenderConditions, look_at_label, render_labels_view
 
 DURATION_S = 30.0
 RATE_HZ = 10.0

@@ -20,6 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holoslam.sim.camera import project, qr_modules
+
 __all__ = [
     "LabelInView",
     "RenderConditions",
@@ -42,18 +44,16 @@ def label_corners_o(side_m: float) -> np.ndarray:
 
 
 def qr_module_matrix(payload: str, error: str = "m") -> np.ndarray:
-    """The (N, N) uint8 module matrix (1 = dark) of a full-size QR code (never Micro QR) for ``payload``."""
-    import segno
-
-    q = segno.make(payload, error=error, micro=False)
-    return np.asarray(q.matrix, dtype=np.uint8)
+    """The (N, N) uint8 module matrix (1 = dark) of a full-size QR code (never Micro QR) for ``payload``,
+    the error level raised where the version has room (segno's default)."""
+    return qr_modules(payload, error, boost_error=True).astype(np.uint8)
 
 
 def project_points(K: np.ndarray, cTo: np.ndarray, o_points: np.ndarray) -> np.ndarray:
-    """Pinhole projection (no distortion) of (N, 3) points of frame o into pixels, (N, 2)."""
-    c = o_points @ cTo[:3, :3].T + cTo[:3, 3]
-    uvw = c @ np.asarray(K, dtype=np.float64).T
-    return uvw[:, :2] / uvw[:, 2:3]
+    """Pinhole projection (no distortion) of (N, 3) points of frame o into pixels, (N, 2): ``sim.camera.project``
+    with frame o as the world (the camera at oTc = cTo^-1)."""
+    R, t = cTo[:3, :3], cTo[:3, 3]
+    return project(np.asarray(K, dtype=np.float64), R.T, -R.T @ t, np.asarray(o_points, dtype=np.float64))[0]
 
 
 def look_at_label(
