@@ -26,6 +26,7 @@ import numpy as np
 
 from holoslam import geometry as g
 from holoslam.submaps.probgrid import GridBuilder, GridConfig, ProbGrid
+from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
 from holoslam.submaps.scanmatch import MatchConfig, WidePyramid, match_scan
 
 __all__ = ["LocalSlamConfig", "Node", "ActiveSubmap", "LocalSlam"]
@@ -38,6 +39,7 @@ class LocalSlamConfig:
 
     grid: GridConfig = field(default_factory=GridConfig)
     match: MatchConfig = field(default_factory=MatchConfig)
+    scan_filter: ScanFilterConfig = field(default_factory=ScanFilterConfig)  # the points a scan is matched with
     motion_distance: float = 0.2  # m
     motion_turn_deg: float = 1.0
     motion_time_s: float = 5.0
@@ -153,7 +155,8 @@ class LocalSlam:
             host = self.active[0]
             last = self.nodes[-1]
             pred = self._predict(host, odo)
-            m = (self._match(host, b_pts, pred, alternative=self._laser_predict(host, stamp))
+            m = (self._match(host, adaptive_voxel_filter(b_pts, self.cfg.scan_filter), pred,
+                             alternative=self._laser_predict(host, stamp))
                  if host.count >= self.cfg.min_scans_to_match else None)
             drift = self._drift(travelled - host.travelled0)
             if m is not None and m.ok:
@@ -178,8 +181,8 @@ class LocalSlam:
         if host.count < self.cfg.min_scans_to_match:
             return
         pred = self._predict(host, odo)
-        m = self._match(host, g.transform_points(self.bTs, s_points), pred, self._track_cfg,
-                        self._laser_predict(host, stamp))
+        b_pts = adaptive_voxel_filter(g.transform_points(self.bTs, s_points), self.cfg.scan_filter)
+        m = self._match(host, b_pts, pred, self._track_cfg, self._laser_predict(host, stamp))
         if m.ok:
             host.tracked.append((int(stamp), m.aTb))
             self._fix(host, stamp, m.aTb)
