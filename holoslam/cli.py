@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from holoslam import __version__
+from holoslam.choices import SOLVE_METHODS, SOLVE_STARTS, RobustKernel, TextNoise
 from holoslam.errors import ConfigError, HoloslamError, PlanningError
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
@@ -398,10 +399,10 @@ def _add_solve(sub: Any) -> None:
     s.add_argument("input", type=Path)
     s.add_argument("-o", "--output", required=True, type=Path, help="optimised graph (.g2o)")
     s.add_argument("--tum", type=Path, help="also write the optimised poses as TUM text")
-    s.add_argument("--method", choices=["lm", "isam2"], default="lm")
+    s.add_argument("--method", choices=list(SOLVE_METHODS), default="lm")
     s.add_argument(
         "--init",
-        choices=["auto", "file", "odometry", "lago", "chordal", "incremental"],
+        choices=list(SOLVE_STARTS),
         default=None,
         help="start of the optimisation (default with lm: auto, LM from the chordal start, from the file's guess "
         "only when that solution disagrees with the measurements (the lower kept), and the slow incremental start "
@@ -410,7 +411,7 @@ def _add_solve(sub: Any) -> None:
     )
     s.add_argument(
         "--kernel",
-        choices=["none", "huber", "cauchy", "dcs", "geman_mcclure"],
+        choices=[k.value for k in RobustKernel],
         default="none",
         help="robust kernel on every edge (default none: plain least squares, as gtsam and g2o)",
     )
@@ -422,7 +423,7 @@ def _add_solve(sub: Any) -> None:
     )
     s.add_argument(
         "--noise",
-        choices=["gtsam_auto", "covariance", "information", "toro_information", "sqrt_information"],
+        choices=[n.value for n in TextNoise],
         default="gtsam_auto",
         help="how EDGE2/ODOMETRY/LANDMARK noise numbers read (EDGE_SE2 is always information); "
         "iSAM's own files (victoriaPark.txt, cityTrees10000.txt) carry information",

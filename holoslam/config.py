@@ -21,6 +21,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, TypeVar
 
+from holoslam.choices import Method
 from holoslam.errors import ConfigError, MapError
 from holoslam.maps.settings import HolographicConfig, TopologyConfig
 from holoslam.submaps.frontend import FrontEndConfig
@@ -96,7 +97,10 @@ def _convert(tp: Any, value: Any, where: str) -> Any:
         for m in tp:
             if value == m.value or (isinstance(value, str) and value.lower() == str(m.value).lower()):
                 return m
-        raise ConfigError(f"{where}: {value!r} is not one of {choices}")
+        try:  # an enum's own aliases (its _missing_: "lm" for Method.BATCH)
+            return tp(value)
+        except ValueError:
+            raise ConfigError(f"{where}: {value!r} is not one of {choices}") from None
     if tp is bool:
         if isinstance(value, bool):
             return value
@@ -204,9 +208,7 @@ def load_yaml_config(cls: type[T], path: str | Path) -> T:
 # ------------------------------------------------------------------------------------------- the run tree
 
 
-class SolverMethod(str, Enum):
-    LM = "lm"
-    ISAM2 = "isam2"
+SolverMethod = Method  # the configuration's name for holoslam.choices.Method ("lm" reads as batch)
 
 
 @dataclass(frozen=True)
@@ -214,7 +216,7 @@ class SolverConfig:
     """How the graph is optimised: batch Levenberg-Marquardt or incremental iSAM2 (anchor by anchor),
     outlier rejection (robust kernels + chi2 consistency rounds), marginal covariances of anchors/objects."""
 
-    method: SolverMethod = SolverMethod.LM
+    method: Method = Method.BATCH  # batch (Levenberg-Marquardt; "lm" is read as batch) or isam2
     reject_outliers: bool = True
     chi2_probability: float = 0.9999
     covariances: bool = True

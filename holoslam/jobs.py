@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from holoslam.choices import SOLVE_METHODS, SOLVE_STARTS
 from holoslam.errors import ConfigError, HoloslamError, IngestError
 
 if TYPE_CHECKING:
@@ -153,17 +154,7 @@ def _read_trajectory(path: Path) -> tuple[Any, Any]:
 
 # ------------------------------------------------------------------------------------------- holoslam solve
 
-SOLVE_METHODS: dict[str, str] = {"lm": "batch", "isam2": "isam2"}  # CLI name -> holoslam.solve.Method value
-# CLI name -> holoslam.solve.Initialisation value ("file" is the file's own vertices, the problem's guess)
-SOLVE_STARTS: dict[str, str] = {
-    "file": "problem",
-    "odometry": "odometry",
-    "lago": "lago",
-    "chordal": "chordal",
-    "incremental": "incremental",
-    "auto": "auto",
-}
-_START_NAME = {v: k for k, v in SOLVE_STARTS.items()}
+_START_NAME = {v.value: k for k, v in SOLVE_STARTS.items()}
 
 
 def start_name(initialisation: Any) -> str:

@@ -18,11 +18,10 @@ __all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_
 
 def solve_options(cfg: SolverConfig) -> SolveOptions:
     """The final solve's options from the run configuration's ``solver`` section, with the run's kernels."""
-    from holoslam.config import SolverMethod
-    from holoslam.solve import CovarianceScope, Method, SolveOptions
+    from holoslam.solve import CovarianceScope, SolveOptions
 
     return SolveOptions(
-        method=Method.ISAM2 if cfg.method is SolverMethod.ISAM2 else Method.BATCH,
+        method=cfg.method,
         reject_outliers=cfg.reject_outliers,
         chi2_probability=cfg.chi2_probability,
         covariances=CovarianceScope.ALL if cfg.covariances else CovarianceScope.NONE,

@@ -63,3 +63,14 @@ def test_yaml_file_errors(tmp_path):
         load_yaml_config(Outer, tmp_path / "missing.yaml")
     p.write_text("steps: 7\n")
     assert load_yaml_config(Outer, p).steps == 7
+
+
+def test_solver_method_is_the_solver_enum_and_lm_reads_as_batch():
+    from holoslam.choices import Method
+    from holoslam.config import RunConfig, from_mapping
+
+    assert RunConfig().solver.method is Method.BATCH
+    assert from_mapping(RunConfig, {"solver": {"method": "lm"}}).solver.method is Method.BATCH
+    assert from_mapping(RunConfig, {"solver": {"method": "ISAM2"}}).solver.method is Method.ISAM2
+    with pytest.raises(ConfigError, match=r"config.solver.method: 'gauss' is not one of \['batch', 'isam2'\]"):
+        from_mapping(RunConfig, {"solver": {"method": "gauss"}})

@@ -14,12 +14,12 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
-from enum import Enum
 from itertools import repeat
 from typing import Any
 
 import numpy as np
 
+from holoslam.choices import RobustKernel
 from holoslam.errors import GraphError
 
 __all__ = [
@@ -34,14 +34,6 @@ __all__ = [
     "landmark_factors",
     "bearing_range_from_xy",
 ]
-
-
-class RobustKernel(str, Enum):
-    NONE = "none"
-    HUBER = "huber"
-    CAUCHY = "cauchy"
-    DCS = "dcs"
-    GEMAN_MCCLURE = "geman_mcclure"
 
 
 @dataclass(frozen=True, slots=True)

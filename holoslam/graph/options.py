@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from enum import Enum
 
+from holoslam.choices import Initialisation, Method
 from holoslam.graph.build import FAMILY_CODES, BuildOptions
 from holoslam.graph.problem import MeasurementFamily
 
@@ -34,24 +35,6 @@ REL, HEAD, LMK = (
     for f in (MeasurementFamily.RELATIVE, MeasurementFamily.HEADING, MeasurementFamily.LANDMARK)
 )
 DOF = {REL: 3, HEAD: 1, LMK: 2}  # dimension of one measurement of each family
-
-
-class Method(str, Enum):
-    BATCH = "batch"  # Levenberg-Marquardt over the whole graph
-    ISAM2 = "isam2"  # incremental, anchor by anchor
-
-
-class Initialisation(str, Enum):
-    PROBLEM = "problem"  # the problem's initial_wTa (g2o vertices / dead reckoning)
-    ODOMETRY = "odometry"  # compose the relative measurements in order
-    LAGO = "lago"  # gtsam.lago.initialize on the pose graph (diagonal part of each covariance)
-    CHORDAL = (
-        "chordal"  # chordal relaxation of the rotations, then positions and landmarks by linear least squares
-    )
-    INCREMENTAL = "incremental"  # an iSAM2 pass, each new pose initialised from the current estimate
-    AUTO = (
-        "auto"  # LM from each of SolveOptions.auto_candidates (and the fallback if needed), keep the lowest
-    )
 
 
 class Factorization(str, Enum):

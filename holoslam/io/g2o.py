@@ -35,11 +35,11 @@ from __future__ import annotations
 import warnings
 from collections import defaultdict
 from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 
 import numpy as np
 
+from holoslam.choices import TextNoise
 from holoslam.errors import G2oFormatError
 
 __all__ = [
@@ -50,16 +50,6 @@ __all__ = [
     "parse_g2o",
     "read_g2o_text",
 ]
-
-
-class TextNoise(str, Enum):
-    """How to read the noise numbers of EDGE2 / EDGE / ODOMETRY / LANDMARK lines (see the module docstring)."""
-
-    GTSAM_AUTO = "gtsam_auto"
-    COVARIANCE = "covariance"
-    INFORMATION = "information"
-    TORO_INFORMATION = "toro_information"
-    SQRT_INFORMATION = "sqrt_information"
 
 
 @dataclass(frozen=True, slots=True)
