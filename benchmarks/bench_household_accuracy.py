@@ -131,12 +131,13 @@ def evaluate_run(log, obs, truth_objects, moved_deltas=None):
     # confirmed objects: at least two sightings kept by the solver (a single misread id cannot be detected)
     from collections import Counter
 
+    from holoslam.graph.keys import object_of
     from holoslam.graph.problem import MeasurementFamily
     from holoslam.maps.holographic import CONFIRMING_SIGHTINGS
 
     rej = {r.index for r in sol.rejected if r.family is MeasurementFamily.LANDMARK}
-    kept = Counter(n.split("@")[0] for k, n in enumerate(fe.problem.landmarks.landmark) if k not in rej)
-    conf = [k for k, n in enumerate(sol.landmark_ids) if kept[n.split("@")[0]] >= CONFIRMING_SIGHTINGS]
+    kept = Counter(object_of(n) for k, n in enumerate(fe.problem.landmarks.landmark) if k not in rej)
+    conf = [k for k, n in enumerate(sol.landmark_ids) if kept[object_of(n)] >= CONFIRMING_SIGHTINGS]
     oc = object_errors([sol.landmark_ids[k] for k in conf], sol.w_landmarks[conf], truth, te.T)
     P = fe.problem.landmarks
     if len(P.i):

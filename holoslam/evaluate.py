@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from holoslam import geometry as g
+from holoslam.graph.keys import is_before
 
 if TYPE_CHECKING:
     from holoslam.io.relations import Relations
@@ -185,13 +186,13 @@ def object_errors(
     """Errors of estimated object positions ``est_w`` (M, 2 or 3, world frame of the estimate) named by ``ids``
     against ``truth`` (id -> true position (2,) or (3,)), after mapping by ``T`` (from :func:`align_se2` on the
     anchors). Compared in x, y. ``cov_w`` (M, 2, 2) world-frame position covariances (optional) give the
-    coverage. Ids with an ``@`` (a moved object's earlier position, ``"<id>@before"``) are left out."""
+    coverage. A moved object's earlier position (``holoslam.graph.keys.before_id``) is left out."""
     names = [str(k) for k in ids]
     P = np.asarray(est_w, dtype=np.float64)
     P = P.reshape(len(names), -1) if len(names) else np.zeros((0, 2))
     if P.shape[0] and P.shape[1] < 2:
         raise ValueError(f"object_errors: est_w must be (M, 2) or (M, 3), got {P.shape}")
-    keep = [k for k, n in enumerate(names) if "@" not in n]
+    keep = [k for k, n in enumerate(names) if not is_before(n)]
     Tm = np.asarray(T, dtype=np.float64).reshape(3)
     Pw = g.transform_points(Tm, P[keep, :2]) if keep else np.zeros((0, 2))
     errs: dict[str, float] = {}

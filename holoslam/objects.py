@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from holoslam.errors import HoloslamError
+from holoslam.graph.keys import is_before, object_of
 
 __all__ = ["located_objects", "located_by", "OBJECT_HEIGHT_SIGMA_M"]
 
@@ -31,11 +32,11 @@ def located_objects(problem: Any, solution: Any, seen: Any) -> tuple:
     lm = problem.landmarks
     rejected = {r.index for r in solution.rejected if r.family is MeasurementFamily.LANDMARK}
     kept = Counter(
-        name.split("@")[0] for k, name in enumerate(lm.landmark if lm is not None else ()) if k not in rejected
+        object_of(name) for k, name in enumerate(lm.landmark if lm is not None else ()) if k not in rejected
     )
     objs = []
     for k, oid in enumerate(solution.landmark_ids):
-        if "@" in oid:
+        if is_before(oid):
             continue
         z = _height(lm, oid)
         kind, attrs, text = _label(payload, oid)
@@ -60,8 +61,8 @@ def _height(lm: Any, oid: str) -> float:
     """The median height of the landmark's (and its earlier places') sightings, NaN when none has one."""
     if lm is None or not len(lm.landmark):
         return np.nan
-    base = oid.split("@")[0]
-    sel = np.array([name == oid or name.split("@")[0] == base for name in lm.landmark])
+    base = object_of(oid)
+    sel = np.array([object_of(name) == base for name in lm.landmark])
     zs = lm.z[sel]
     zs = zs[np.isfinite(zs)]
     return float(np.median(zs)) if zs.size else np.nan
@@ -81,7 +82,7 @@ def _label(payload: dict[str, str], oid: str) -> tuple[str, tuple, str]:
     """Kind, attributes and text of the label object ``oid`` was read from."""
     from holoslam.vision.label import FOREIGN_PREFIX, parse_label
 
-    base = oid.split("@")[0]
+    base = object_of(oid)
     try:
         label = parse_label(payload.get(base, ""))
         return label.kind, label.attributes, payload[base]

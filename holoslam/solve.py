@@ -39,7 +39,7 @@ from holoslam.errors import SolverError
 from holoslam.graph.build import BuildOptions, BuiltGraph, build_graph, initial_values
 from holoslam.graph.initialise import chordal, lago
 from holoslam.graph.isam2 import Isam2Session, isam2_estimate, isam2_feed
-from holoslam.graph.keys import MAGNETIC_KEY, anchor_key, landmark_key
+from holoslam.graph.keys import MAGNETIC_KEY, anchor_key, before_id, landmark_key
 from holoslam.graph.options import (
     DOF,
     HEAD,
@@ -354,7 +354,7 @@ class _Rounds:
             self.moved[name] = (before, after)
             before_set = set(before.tolist())
             # the earlier place becomes "<id>@before": the id keeps naming where the object is now
-            s.labels = tuple(f"{name}@before" if k in before_set else lab for k, lab in enumerate(s.labels))
+            s.labels = tuple(before_id(name) if k in before_set else lab for k, lab in enumerate(s.labels))
             s.masks[LMK][cluster] = True
             changed = True
         return changed
@@ -441,7 +441,7 @@ def _solution(
     moved_objects = tuple(
         MovedObject(
             name,
-            w_lm[var_of[f"{name}@before"]] if f"{name}@before" in var_of else np.zeros(2),
+            w_lm[var_of[before_id(name)]] if before_id(name) in var_of else np.zeros(2),
             w_lm[var_of[name]] if name in var_of else np.zeros(2),
             int(lm.i[before].max()),
             int(lm.i[after].min()),

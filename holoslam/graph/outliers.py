@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from holoslam import geometry as geo
+from holoslam.graph.keys import is_before
 from holoslam.graph.options import HEAD, LMK, REL, SolveOptions
 from holoslam.graph.problem import SlamProblem
 
@@ -127,7 +128,7 @@ def detect_moved(
         out_rows.setdefault(labels[k], []).append(k)
     m = max(1, options.min_moved_sightings)
     for name, rows_l in out_rows.items():
-        if len(rows_l) < m or "@" in name or name not in var_of:
+        if len(rows_l) < m or is_before(name) or name not in var_of:
             continue
         rows_in = np.array([k for k in range(len(lm)) if active[k] and labels[k] == name])
         if rows_in.size == 0:

@@ -12,6 +12,7 @@ from graph_worlds import make_world
 from holoslam import geometry as geo
 from holoslam.errors import GraphError
 from holoslam.graph.build import BuildOptions
+from holoslam.graph.keys import before_id
 from holoslam.graph.problem import (
     HeadingMeasurements,
     LandmarkMeasurements,
@@ -125,7 +126,7 @@ def test_moved_object_is_reported_with_both_positions(clean):
     assert np.hypot(*(m.w_position_after - new_w)) < 0.1
     assert m.last_anchor_before < half <= m.first_anchor_after
     assert np.allclose(sol.landmark(name), m.w_position_after)
-    assert f"{name}@before" in sol.landmark_ids
+    assert before_id(name) in sol.landmark_ids
 
 
 def test_compass_bias_and_local_disturbance():

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from holoslam.graph.keys import object_of
 from holoslam.sim import SimConfig
 from holoslam.sim.world import SIZELESS_ORDER, WALL_CODES, reference_household, world_from_json, world_to_json
 from holoslam.vision.label import foreign_code_id, is_label, parse_label
@@ -70,7 +71,7 @@ def test_ten_wall_codes_each_found_once_within_5_cm(tmp_path):
     acc = r.report.accuracy.objects
     found = [o.object_id for o in r.objects if o.object_id.startswith("QR-")]
     assert sorted(found) == sorted(codes)  # each exactly once
-    assert not {m.object_id.split("@")[0] for m in r.moved_objects} & codes
+    assert not {object_of(m.object_id) for m in r.moved_objects} & codes
     errs = np.array([acc.per_object_m[c] for c in codes])
     assert errs.max() <= 0.05, dict(zip(codes, errs, strict=True))
     assert all(o.object_type == "qr_code" for o in r.objects if o.object_id in codes)
