@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from holoslam.frames import quaternion_from_yaw
+from holoslam.io import ros2_messages as m
 from holoslam.io.ros2defs import MSG_TYPES, msgdef
 from holoslam.types import (
     CameraInfo,
@@ -47,23 +48,6 @@ DEFAULT_TOPICS: dict[type, tuple[str, str]] = {
 }
 
 
-def _stamp(ns: int) -> dict[str, int]:
-    return {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000}
-
-
-def _header(ns: int, frame: str) -> dict[str, Any]:
-    return {"stamp": _stamp(ns), "frame_id": frame}
-
-
-def ros_quaternion(q_xyzw: tuple[float, float, float, float]) -> dict[str, float]:
-    """A geometry_msgs/Quaternion message dict of (x, y, z, w)."""
-    return {"x": float(q_xyzw[0]), "y": float(q_xyzw[1]), "z": float(q_xyzw[2]), "w": float(q_xyzw[3])}
-
-
-def _yaw_quat(yaw: float) -> dict[str, float]:
-    return ros_quaternion(quaternion_from_yaw(yaw))
-
-
 def _cov6(cov3: np.ndarray | None, theta: float = 0.0) -> list[float]:
     """The ROS 6x6 pose covariance (parent frame) of a body-frame (x, y, yaw) covariance at heading theta."""
     c = np.zeros((6, 6))
@@ -82,51 +66,19 @@ def ros2_message(rec: Record) -> dict[str, Any]:
     """
     if isinstance(rec, Odometry):
         p = rec.odomTb
-        speed = 0.0 if math.isnan(rec.speed) else rec.speed
-        return {
-            "header": _header(rec.stamp_ns, rec.frame_id),
-            "child_frame_id": rec.child_frame_id,
-            "pose": {
-                "pose": {"position": {"x": p.x, "y": p.y, "z": 0.0}, "orientation": _yaw_quat(p.theta)},
-                "covariance": _cov6(rec.cov_odomTb, p.theta),
-            },
-            "twist": {
-                "twist": {
-                    "linear": {"x": speed, "y": 0.0, "z": 0.0},
-                    "angular": {"x": 0.0, "y": 0.0, "z": 0.0},
-                },
-                "covariance": [0.0] * 36,
-            },
-        }
+        return m.odometry_message(rec.stamp_ns, rec.frame_id, rec.child_frame_id, p.x, p.y,
+                                  quaternion_from_yaw(p.theta), _cov6(rec.cov_odomTb, p.theta),
+                                  speed=0.0 if math.isnan(rec.speed) else rec.speed)
     if isinstance(rec, Heading):
         var = 0.0 if math.isnan(rec.sigma) else rec.sigma**2
-        return {
-            "header": _header(rec.stamp_ns, rec.frame_id),
-            "orientation": _yaw_quat(rec.yaw),
-            "orientation_covariance": [0.0] * 8 + [var],
-            "angular_velocity": {"x": 0.0, "y": 0.0, "z": 0.0},
-            "angular_velocity_covariance": [-1.0] + [0.0] * 8,
-            "linear_acceleration": {"x": 0.0, "y": 0.0, "z": 0.0},
-            "linear_acceleration_covariance": [-1.0] + [0.0] * 8,
-        }
+        return m.imu_orientation_message(rec.stamp_ns, rec.frame_id, quaternion_from_yaw(rec.yaw), [0.0] * 8 + [var])
     if isinstance(rec, Scan):
-        n = rec.ranges.shape[0]
-        return {
-            "header": _header(rec.stamp_ns, rec.frame_id),
-            "angle_min": rec.angle_min,
-            "angle_max": rec.angle_min + rec.angle_increment * (n - 1),
-            "angle_increment": rec.angle_increment,
-            "time_increment": 0.0,
-            "scan_time": 0.0,
-            "range_min": rec.range_min,
-            "range_max": rec.range_max,
-            "ranges": rec.ranges.tolist(),
-            "intensities": [],
-        }
+        return m.scan_message(rec.stamp_ns, rec.frame_id, rec.angle_min, rec.angle_increment, rec.range_min,
+                              rec.range_max, rec.ranges)
     if isinstance(rec, Image):
         if rec.width and rec.height:
             return {
-                "header": _header(rec.stamp_ns, rec.frame_id),
+                "header": m.header(rec.stamp_ns, rec.frame_id),
                 "height": rec.height,
                 "width": rec.width,
                 "encoding": rec.encoding,
@@ -134,50 +86,20 @@ def ros2_message(rec: Record) -> dict[str, Any]:
                 "step": rec.step,
                 "data": rec.data,
             }
-        return {"header": _header(rec.stamp_ns, rec.frame_id), "format": rec.encoding, "data": rec.data}
+        return m.compressed_image_message(rec.stamp_ns, rec.frame_id, rec.encoding, rec.data)
     if isinstance(rec, CameraInfo):
-        P = np.zeros((3, 4))
-        P[:, :3] = rec.K
-        return {
-            "header": _header(rec.stamp_ns, rec.frame_id),
-            "height": rec.height,
-            "width": rec.width,
-            "distortion_model": rec.distortion_model,
-            "d": rec.D.tolist(),
-            "k": rec.K.ravel().tolist(),
-            "r": np.eye(3).ravel().tolist(),
-            "p": P.ravel().tolist(),
-            "binning_x": 0,
-            "binning_y": 0,
-            "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0, "do_rectify": False},
-        }
+        return m.camera_info_message(rec.stamp_ns, rec.frame_id, rec.width, rec.height, rec.K, rec.D,
+                                     rec.distortion_model)
     if isinstance(rec, Transform):
-        t, q = rec.translation, rec.rotation_xyzw
-        return {
-            "transforms": [
-                {
-                    "header": _header(rec.stamp_ns, rec.parent),
-                    "child_frame_id": rec.child,
-                    "transform": {
-                        "translation": {"x": t[0], "y": t[1], "z": t[2]},
-                        "rotation": {"x": q[0], "y": q[1], "z": q[2], "w": q[3]},
-                    },
-                }
-            ]
-        }
+        return m.tf_message([m.transform_stamped(rec.stamp_ns, rec.parent, rec.child, rec.translation,
+                                                 rec.rotation_xyzw)])
     if isinstance(rec, TagSighting):
-        return {
-            "header": _header(rec.stamp_ns, rec.frame_id),
-            "detections": [{"payload": rec.payload, "corners": rec.corners.ravel().tolist()}],
-        }
+        return m.tags_message(rec.stamp_ns, rec.frame_id, [(rec.payload, rec.corners)])
     if isinstance(rec, GroundTruthPose):
         p = rec.wTb
-        return {
-            "header": _header(rec.stamp_ns, rec.frame_id),
-            "pose": {"position": {"x": p.x, "y": p.y, "z": rec.z}, "orientation": _yaw_quat(p.theta)},
-        }
+        return m.pose_stamped_message(rec.stamp_ns, rec.frame_id, p.x, p.y, rec.z, quaternion_from_yaw(p.theta))
     if isinstance(rec, GroundTruthWorld):
-        return {"data": rec.json_text}
+        return m.string_message(rec.json_text)
     raise TypeError(f"no ROS 2 message for {type(rec).__name__}")
 
 
@@ -190,25 +112,17 @@ def write_ros2_log(
     chunk_size: int = 1024 * 1024,
     compression: str = "zstd",
 ) -> Path:
-    """Write ``records`` (in the order given) into a ROS 2 MCAP file with ``mcap_ros2.writer.Writer``.
+    """Write ``records`` (in the order given) into a ROS 2 MCAP file (``ros2_messages.write_ros2_messages``).
 
     Each record type goes to its topic in ``topics`` (``DEFAULT_TOPICS`` otherwise; transforms go to
     ``/tf_static`` or ``/tf`` by their ``static`` flag); a ``(topic, record)`` pair goes to that topic (two
     topics of one type, a rewritten real log's own names). Log time = stamp + ``log_time_offset_ns``.
     """
-    from mcap.writer import CompressionType
-    from mcap_ros2.writer import Writer
-
     table = dict(DEFAULT_TOPICS)
     if topics:
         table.update(topics)
-    path = Path(path)
-    comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[
-        compression
-    ]
-    with open(path, "wb") as f:
-        w = Writer(f, chunk_size=chunk_size, compression=comp)
-        schemas: dict[str, Any] = {}
+
+    def messages() -> Iterable[tuple[int, str, str, dict]]:
         for item in records:
             named, rec = item if isinstance(item, tuple) else (None, item)
             if isinstance(rec, Transform):
@@ -217,18 +131,11 @@ def write_ros2_log(
                 topic, typ = "/camera/image_raw", "sensor_msgs/msg/Image"
             else:
                 topic, typ = table[type(rec)]
-            topic = named or topic
-            if typ not in schemas:
-                schemas[typ] = w.register_msgdef(typ, MSGDEFS[typ])
-            stamp = getattr(rec, "stamp_ns", 0)
-            w.write_message(
-                topic,
-                schemas[typ],
-                ros2_message(rec),
-                log_time=stamp + log_time_offset_ns,
-                publish_time=stamp + log_time_offset_ns,
-            )
-        w.finish()
+            yield getattr(rec, "stamp_ns", 0), named or topic, typ, ros2_message(rec)
+
+    path = Path(path)
+    m.write_ros2_messages(path, messages(), log_time_offset_ns=log_time_offset_ns, chunk_size=chunk_size,
+                          compression=compression)
     return path
 
 
