@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from holoslam.maps.grid import cells_to_world
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -75,8 +77,7 @@ def draw_rooms(ax: Axes, grid: OccupancyGrid, labels: np.ndarray, alpha: float =
 
 
 def _cells_xy(path: np.ndarray, res: float, ox: float, oy: float) -> np.ndarray:
-    p = np.asarray(path, dtype=np.float64).reshape(-1, 2)
-    return np.column_stack([ox + (p[:, 1] + 0.5) * res, oy + (p[:, 0] + 0.5) * res])
+    return cells_to_world(path, ox, oy, res)
 
 
 def draw_topology(ax: Axes, topology, grid: OccupancyGrid, colour: str = "tab:cyan") -> list[Any]:

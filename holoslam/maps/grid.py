@@ -14,7 +14,7 @@ import numpy as np
 
 from holoslam.errors import MapError
 
-__all__ = ["OccupancyGrid", "UNKNOWN"]
+__all__ = ["OccupancyGrid", "UNKNOWN", "world_to_cells", "cells_to_world"]
 
 UNKNOWN = -1
 
@@ -66,20 +66,11 @@ class OccupancyGrid:
 
     def world_to_cell(self, xy: np.ndarray) -> np.ndarray:
         """(N, 2) world points -> (N, 2) int (row, col); cells outside the grid are not clipped."""
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        col = np.floor((xy[:, 0] - self.origin_x) / self.resolution).astype(np.int64)
-        row = np.floor((xy[:, 1] - self.origin_y) / self.resolution).astype(np.int64)
-        return np.column_stack([row, col])
+        return world_to_cells(xy, self.origin_x, self.origin_y, self.resolution)
 
     def cell_to_world(self, rc: np.ndarray) -> np.ndarray:
         """(N, 2) (row, col) -> (N, 2) world (x, y) of the cell centres."""
-        rc = np.asarray(rc, dtype=np.float64).reshape(-1, 2)
-        return np.column_stack(
-            [
-                self.origin_x + (rc[:, 1] + 0.5) * self.resolution,
-                self.origin_y + (rc[:, 0] + 0.5) * self.resolution,
-            ]
-        )
+        return cells_to_world(rc, self.origin_x, self.origin_y, self.resolution)
 
     def contains(self, rc: np.ndarray) -> np.ndarray:
         rc = np.asarray(rc).reshape(-1, 2)
@@ -93,3 +84,18 @@ class OccupancyGrid:
         """A grid whose True cells are free (0) and False cells occupied (100)."""
         occ = np.where(np.asarray(free, dtype=bool), 0, 100).astype(np.int8)
         return cls(occ, resolution, origin_x, origin_y)
+
+
+def world_to_cells(xy: np.ndarray, origin_x: float, origin_y: float, resolution: float) -> np.ndarray:
+    """(N, 2) world points -> (N, 2) int64 (row, col) of the cells holding them, on the lattice whose cell
+    (0, 0) has its lower-left corner at (origin_x, origin_y) (ROS map_server convention); not clipped."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    col = np.floor((xy[:, 0] - origin_x) / resolution).astype(np.int64)
+    row = np.floor((xy[:, 1] - origin_y) / resolution).astype(np.int64)
+    return np.column_stack([row, col])
+
+
+def cells_to_world(rc: np.ndarray, origin_x: float, origin_y: float, resolution: float) -> np.ndarray:
+    """(N, 2) (row, col) -> (N, 2) world (x, y) of the cell centres (``world_to_cells``' lattice)."""
+    rc = np.asarray(rc, dtype=np.float64).reshape(-1, 2)
+    return np.column_stack([origin_x + (rc[:, 1] + 0.5) * resolution, origin_y + (rc[:, 0] + 0.5) * resolution])

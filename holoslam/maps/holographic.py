@@ -60,7 +60,7 @@ import numpy as np
 
 from holoslam.errors import MapError, PlanningError
 from holoslam.geometry import between, inverse, transform_points
-from holoslam.maps.grid import OccupancyGrid
+from holoslam.maps.grid import OccupancyGrid, cells_to_world
 from holoslam.maps.passages import EdgePaths, SkeletonPaths
 from holoslam.maps.rooms import RoomRules, RoomSegmentation, segment_rooms
 
@@ -461,7 +461,7 @@ def _reach(pos, rm: ReachModel, free, clr, lab, safe_lab, rooms, cells, res, ox,
         return []
     rr, cc = np.mgrid[ra:rb, ca:cb]
     rr, cc = rr.ravel(), cc.ravel()
-    sx, sy = ox + (cc + 0.5) * res, oy + (rr + 0.5) * res
+    sx, sy = cells_to_world(np.column_stack([rr, cc]), ox, oy, res).T
     dist = np.hypot(sx - pos[0], sy - pos[1])
     # the object's home region: the region of the free cell nearest to it
     lw = lab[rr, cc]

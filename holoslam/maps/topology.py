@@ -77,6 +77,7 @@ from holoslam.maps._skeleton import (  # noqa: F401  (the numpy path; tests reac
     _trace,
 )
 from holoslam.maps.cleaning import MapCleaning
+from holoslam.maps.grid import cells_to_world
 
 _DEFAULT_CLEANING = MapCleaning()
 
@@ -171,9 +172,9 @@ def skeleton_to_graph(
     kinds, rep, all_u, all_v, rc, starts, length, min_clr = arrays(sk, clr, float(resolution))
 
     node_rc = sk.rc[rep]
-    xs = origin_x + (node_rc[:, 1] + 0.5) * resolution
-    ys = origin_y + (node_rc[:, 0] + 0.5) * resolution
-    submap = _nearest_anchor(np.column_stack([xs, ys]), anchors_wTa)
+    node_xy = cells_to_world(node_rc, origin_x, origin_y, resolution)
+    xs, ys = node_xy[:, 0], node_xy[:, 1]
+    submap = _nearest_anchor(node_xy, anchors_wTa)
     # tens of thousands of small dicts: the cyclic garbage collector would rescan them all repeatedly
     gc_was_on = gc.isenabled()
     gc.disable()

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from holoslam.errors import MapError
-from holoslam.maps.grid import OccupancyGrid
+from holoslam.maps.grid import OccupancyGrid, world_to_cells
 
 __all__ = [
     "TwoLayerGraph",
@@ -459,8 +459,7 @@ class TwoLayerGraph:
     def block_at(self, xy: np.ndarray) -> np.ndarray:
         """Block id of the cell under each world point (N,) (-1 off the grid or outside free blocks)."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        col = np.floor((xy[:, 0] - self.origin_x) / self.resolution).astype(np.int64)
-        row = np.floor((xy[:, 1] - self.origin_y) / self.resolution).astype(np.int64)
+        row, col = world_to_cells(xy, self.origin_x, self.origin_y, self.resolution).T
         h, w = self.shape
         inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
         out = np.full(xy.shape[0], -1, dtype=np.int64)

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from holoslam.maps.grid import cells_to_world, world_to_cells
 from holoslam.vision.label import ObjectLabel, encode_label
 
 __all__ = [
@@ -385,18 +386,12 @@ class FreeSpace:
     robot_radius: float
 
     def cell_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        c = np.floor((xy[:, 0] - self.origin[0]) / self.resolution).astype(int)
-        r = np.floor((xy[:, 1] - self.origin[1]) / self.resolution).astype(int)
+        r, c = world_to_cells(xy, self.origin[0], self.origin[1], self.resolution).T
         return np.clip(r, 0, self.clearance.shape[0] - 1), np.clip(c, 0, self.clearance.shape[1] - 1)
 
     def xy_of(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-        return np.column_stack(
-            [
-                self.origin[0] + (np.asarray(cols) + 0.5) * self.resolution,
-                self.origin[1] + (np.asarray(rows) + 0.5) * self.resolution,
-            ]
-        )
+        rc = np.column_stack([np.ravel(rows), np.ravel(cols)])
+        return cells_to_world(rc, self.origin[0], self.origin[1], self.resolution)
 
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:
         r, c = self.cell_of(xy)
