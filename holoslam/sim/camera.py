@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from holoslam.vision.camera import OPTICAL_IN_BODY, ptz_rotation
+from holoslam.vision.camera import OPTICAL_IN_BODY, pinhole_pixels, ptz_rotation
 
 __all__ = ["PTZ_MOUNT", "F0", "IMAGE_SIZE", "LABEL_MARGIN_MODULES", "qr_modules", "optical_rotation",
            "camera_pose_world", "intrinsics", "label_corners_world", "project"]
@@ -66,8 +66,6 @@ def label_corners_world(obj, margin_modules: float = 0.0, n_modules: int = 29) -
 
 
 def project(K: np.ndarray, wRc: np.ndarray, wtc: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels (M, 2) and depths (M,) of world points X (M, 3)."""
-    Xc = (X - wtc) @ wRc  # = wRc^T (X - t)
-    z = Xc[:, 2]
-    uv = (Xc[:, :2] / z[:, None]) * [K[0, 0], K[1, 1]] + [K[0, 2], K[1, 2]]
-    return uv, z
+    """Pixels (M, 2) and depths (M,) of world points X (M, 3) seen by a camera at (wRc, wtc): the vision
+    layer's pinhole (``holoslam.vision.camera.pinhole_pixels``)."""
+    return pinhole_pixels(K, (X - wtc) @ wRc)  # (X - t) @ wRc = wRc^T (X - t), the points in the optical frame

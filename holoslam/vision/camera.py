@@ -46,6 +46,7 @@ __all__ = [
     "ptz_chain",
     "eq8_rotation",
     "projection_matrix",
+    "pinhole_pixels",
 ]
 
 # The optical frame's axes written in its body-style frame: x_opt = -y_body, y_opt = -z_body, z_opt = x_body.
@@ -155,6 +156,17 @@ def eq8_rotation(pan: float, tilt: float) -> np.ndarray:
     return check_rotation(rot_x(-tilt) @ rot_y(pan), "Eq. 8a rotation")
 
 
+def pinhole_pixels(K: np.ndarray, c_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (N, 2) and depths z (N,) of points (N, 3) in the optical frame through the undistorted pinhole
+    ``K`` (skew included). No checks: a point at or behind the camera (z <= 0) gets a meaningless pixel, which
+    the caller masks by z (a renderer clips with it; ``PinholeCamera.project`` refuses such points)."""
+    p = np.asarray(c_points, dtype=np.float64).reshape(-1, 3)
+    K = np.asarray(K, dtype=np.float64)
+    z = p[:, 2]
+    x, y = p[:, 0] / z, p[:, 1] / z
+    return np.column_stack([x * K[0, 0] + y * K[0, 1] + K[0, 2], y * K[1, 1] + K[1, 2]]), z
+
+
 def projection_matrix(K: np.ndarray, cTx: np.ndarray) -> np.ndarray:
     """Eq. 6: the 3x4 ``[K 0] cTx`` that maps homogeneous points of frame x to homogeneous pixels."""
     return np.asarray(K, np.float64) @ _check_T(cTx, "camera extrinsics (Eq. 6 [R t])")[:3, :]
@@ -213,8 +225,7 @@ class PinholeCamera:
                 f"camera {self.frame_id!r}: {int(np.sum(p[:, 2] <= 0))} point(s) at or behind the camera"
             )
         if not self.has_distortion:
-            uv = p @ self.K.T
-            return uv[:, :2] / uv[:, 2:3]
+            return pinhole_pixels(self.K, p)[0]
         out, _ = cv2.projectPoints(p, np.zeros(3), np.zeros(3), self.K, self.D)
         return out.reshape(-1, 2)
 
