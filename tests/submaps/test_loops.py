@@ -343,3 +343,19 @@ def test_every_loop_that_misses_the_truth_says_so_in_its_covariance(drifting_run
         e = g.between(g.between(truth[a], truth[b]), T)
         assert e @ np.linalg.solve(C, e) < chi2.ppf(0.9999, 3), (a, b, e)
         assert math.hypot(e[0], e[1]) < 0.3, (a, b, e)
+
+
+def test_thinned_search_points_still_close_the_drifted_loop_and_refine_on_every_point(household_place):
+    # LoopConfig.search_voxel_m (off by default): the branch and bound on >= 100 points of 0.1 m voxels, the
+    # refinement on the whole scan; the loop of the 2.5 m drift case is found as accurately
+    segs, grid, wTm, wTn, wTr = household_place
+    ls = LoopSearch(LoopConfig(search_voxel_m=0.1), MatchConfig())
+    ls.add_submap(0, grid)
+    drift = np.array([2.5 * math.cos(1.0), 2.5 * math.sin(1.0), math.radians(10.0)])
+    est = np.zeros((6, 3))
+    est[0], est[5] = wTm, g.compose(drift, wTn)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(25)))
+    found = ls.search(5, g.between(wTn, wTr), np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.full(6, 60.0))
+    assert len(found) == 1
+    e = g.between(g.between(wTm, wTn), found[0].mTn)
+    assert math.hypot(e[0], e[1]) < 0.025 and abs(e[2]) < math.radians(0.3), e
