@@ -40,13 +40,13 @@ def aces_cut(tmp_path_factory):
 
 
 def test_a_real_log_maps_to_a_few_centimetres(aces_cut):
-    """Measured 2026-12-02: 127 relations, 0.035 m / 0.31 deg mean, 0.23 m max (Cartographer on the whole log:
-    0.0375 m / 0.373 deg); bounds about 1.5x the measurement, so a 2x regression fails."""
+    """Measured 2026-12-02 (session 4): 127 relations, 0.036 m / 0.30 deg mean, 0.16 m max (Cartographer on the
+    whole log: 0.0375 m / 0.373 deg); bounds about 1.5x the measurement (max: 1.9x), so a 2x regression fails."""
     _fe, e, _odo = aces_cut
     assert e.n_relations >= 120 and e.n_matched == e.n_relations
     assert e.translation_mean_m < 0.055
     assert e.rotation_mean_deg < 0.45
-    assert e.translation_max_m < 0.4
+    assert e.translation_max_m < 0.3
 
 
 def test_scan_matching_is_no_worse_than_good_wheel_odometry_over_short_spans(aces_cut):
