@@ -230,9 +230,8 @@ class LocalSlam:
         """The base pose in the host's frame predicted from the last node by the odometry increment."""
         last = self.nodes[-1]
         # the last node in the host's frame (it may have been matched into the submap finished just before)
-        prev = last.aTb if last.submap == host.index else g.compose(
-            g.inverse(self._arrival(last.submap, host.index)), last.aTb)
-        assert self._last_odo is not None  # set by the first node, which is not predicted
+        prev = self._in_host(host, last.submap, last.aTb)
+        assert prev is not None and self._last_odo is not None  # the host started at a node; set by the first node
         return g.compose(prev, g.between(self._last_odo, odo))
 
     def close(self) -> None:

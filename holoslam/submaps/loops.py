@@ -33,6 +33,7 @@ import numpy as np
 
 from holoslam import geometry as g
 from holoslam.submaps.probgrid import ProbGrid
+from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
 from holoslam.submaps.scanmatch import MatchConfig, match_scan
 
 __all__ = ["LoopConfig", "LoopCandidate", "LoopSearch"]
@@ -158,11 +159,8 @@ class LoopSearch:
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
         searched = 0
-        search_pts = b_pts
-        if c.search_voxel_m > 0:
-            from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
-
-            search_pts = adaptive_voxel_filter(b_pts, ScanFilterConfig(c.search_voxel_m, c.search_min_points))
+        search_pts = (adaptive_voxel_filter(b_pts, ScanFilterConfig(c.search_voxel_m, c.search_min_points))
+                      if c.search_voxel_m > 0 else b_pts)
         for q in np.argsort(dist, kind="stable").tolist():  # nearest first
             m, d = int(olds_arr[q]), float(dist[q])
             wxy, wth = self.window(float(graph_distance[m]))
