@@ -71,6 +71,46 @@ def test_a_mapping_names_the_base_frame(tmp_path, records):
     assert load_mapping("frames: {base: /base_link}\ntopics: {}\n").base_frame == "base_link"
 
 
+def test_a_mapping_replaces_a_wrong_laser_transform_and_says_what_the_log_had(tmp_path, records):
+    """frames.static (static_transform_publisher's arguments) wins over the log's /tf_static for its child frame;
+    the ingest report keeps what the log said."""
+    from holoslam.submaps.frontend import base_to_laser
+
+    path = write_ros2_log(tmp_path / "tf.mcap", records)
+    text = "frames:\n  static:\n    - {parent: base_link, child: laser, xyz: [-0.04, 0.01, 0.2], rpy_deg: [0, 0, 90]}\n"
+    data, report = read_log(path, mapping=text)
+    np.testing.assert_allclose(base_to_laser(data, data.scans[0].frame_id), [-0.04, 0.01, math.pi / 2], atol=1e-12)
+    assert [t.child for t in data.transforms].count("laser") == 1
+    (note,) = [w for w in report.warnings if "frames.static" in w]
+    assert "x=-0.040" in note and "replaces the log's base_link->laser (x=+0.150" in note
+
+
+def test_a_mapping_supplies_the_laser_transform_a_log_lacks(tmp_path, records):
+    bare = [r for r in records if not (isinstance(r, Transform) and r.child == "laser")]
+    path = write_ros2_log(tmp_path / "bare.mcap", bare)
+    assert read_log(path)[1].missing_transforms  # the laser cannot be placed on the robot
+    data, report = read_log(path, mapping="frames: {static: [{parent: base_link, child: laser, xyz: [0.3, 0, 0]}]}")
+    assert report.missing_transforms == ()
+    assert any("replaces nothing in the log" in w for w in report.warnings)
+
+
+@pytest.mark.parametrize(
+    "text, needle",
+    [
+        ("frames: {static: {parent: a}}\n", "frames.static must be a list"),
+        ("frames: {static: [{parent: a, child: a, xyz: [0, 0, 0]}]}\n", "two different frame names"),
+        ("frames: {static: [{parent: a, child: b, xyz: [0, 0]}]}\n", r"xyz must be three finite numbers in metres"),
+        ("frames: {static: [{parent: a, child: b, xyz: [0, 0, .nan]}]}\n", "three finite numbers"),
+        ("frames: {static: [{parent: a, child: b, xyz: [0, 0, 0], rpy: [0, 0, 0]}]}\n", "optionally rpy_deg"),
+        ("frames: {static: [{parent: a, child: b, xyz: [0, 0, 0]}, {parent: c, child: b, xyz: [0, 0, 0]}]}\n",
+         "already a child"),
+    ],
+)
+def test_mapping_static_transform_nonsense_is_a_config_error(text, needle):
+    with pytest.raises(ConfigError, match=needle):
+        load_mapping(text)
+
+
 @pytest.mark.parametrize(
     "text, needle",
     [

@@ -19,6 +19,8 @@ topics containing ``ground_truth`` and odometry on topics containing ``odom``. A
 
     frames:
       base: base_footprint            # the robot's base frame (default: the odometry's child frame)
+      static:                         # static transforms (static_transform_publisher's arguments) that
+        - {parent: base_link, child: laser, xyz: [0.2, 0, 0.3], rpy_deg: [0, 0, 0]}  # replace the log's
     topics:
       /wheel/odom: ignored            # a role name: odometry heading scan image camera_info tf tf_static tags
       /odom_fused: odometry           #   ground_truth ground_truth_world ignored
@@ -34,7 +36,10 @@ angle_increment range_min range_max``; every role ``stamp frame_id``. Units: ang
 Frames
 ------
 The robot's base frame is the mapping's ``frames: {base: NAME}``, else the odometry's child frame (``base_link``
-when no odometry names one); ``LogData.base_frame`` and ``IngestReport.base_frame`` carry it. A laser whose z
+when no odometry names one); ``LogData.base_frame`` and ``IngestReport.base_frame`` carry it. A mapping's
+``frames.static`` entries (xyz in metres, rpy_deg in degrees, fixed axes as tf2) replace every transform the
+log holds for the same child frame, or supply one it lacks; each replacement is a note in
+``IngestReport.warnings`` with what the log had. A laser whose z
 axis points down in the base frame (mounted upside down) has its scans mirrored into a level frame
 ``<laser>_level`` (``level_scans``): ``read_log`` does it, with a note in ``IngestReport.levelled``.
 

@@ -1,5 +1,5 @@
 """A YAML topic mapping: which role a topic plays, custom fields and units, and the frames it names
-(``frames: {base: NAME}``). See the package docstring for the format."""
+(``frames: {base: NAME, static: [...]}``). See the package docstring for the format."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from typing import Any
 from holoslam.errors import ConfigError
 from holoslam.types import (
     Role,
+    Transform,
 )
 
 _ROLE_NAMES = {r.value: r for r in Role}
@@ -56,6 +57,8 @@ class LogMapping:
     rules: tuple[TopicRule, ...]
     source: str = "<mapping>"
     base_frame: str | None = None  # ``frames: {base: NAME}``; None: the odometry's child frame
+    # ``frames: {static: [...]}``: static transforms that replace the log's for the same child frame
+    static_transforms: tuple[Transform, ...] = ()
 
     def get(self, topic: str) -> TopicRule | None:
         for r in self.rules:
@@ -125,7 +128,7 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
         raise ConfigError(
             f"{name}: unknown key(s) {sorted(map(str, extra))}; the top-level keys are 'topics' and 'frames'"
         )
-    base_frame = _mapping_frames(name, data.get("frames"))
+    base_frame, static = _mapping_frames(name, data.get("frames"))
     topics = data.get("topics") or {}
     if not isinstance(topics, dict):
         raise ConfigError(f"{name}: 'topics' must map topic names to a role or to {{role, fields, units}}")
@@ -135,7 +138,7 @@ def load_mapping(source: str | Path | dict | LogMapping | None) -> LogMapping | 
         )
         for topic, spec in topics.items()
     ]
-    return LogMapping(tuple(rules), name, base_frame)
+    return LogMapping(tuple(rules), name, base_frame, static)
 
 
 def _topic_rule(where: str, topic: Any, spec: Any, line: int) -> TopicRule:
@@ -181,20 +184,66 @@ def _topic_rule(where: str, topic: Any, spec: Any, line: int) -> TopicRule:
     )
 
 
-def _mapping_frames(name: str, frames: Any) -> str | None:
-    """The ``frames:`` section of a mapping -> the base frame it names (None when it names none)."""
+def _mapping_frames(name: str, frames: Any) -> tuple[str | None, tuple[Transform, ...]]:
+    """The ``frames:`` section of a mapping -> (the base frame it names or None, its static transforms)."""
     if frames is None:
-        return None
+        return None, ()
     if not isinstance(frames, dict):
         raise ConfigError(
             f"{name}: 'frames' must map 'base' to a frame name, e.g. 'frames: {{base: base_footprint}}'"
         )
-    bad = set(frames) - {"base"}
+    bad = set(frames) - {"base", "static"}
     if bad:
-        raise ConfigError(f"{name}: unknown key(s) {sorted(map(str, bad))} under 'frames'; allowed: base")
+        raise ConfigError(
+            f"{name}: unknown key(s) {sorted(map(str, bad))} under 'frames'; allowed: base, static"
+        )
+    static = _static_transforms(name, frames.get("static"))
     base = frames.get("base")
     if base is None:
-        return None
+        return None, static
     if not isinstance(base, str) or not base.strip("/ "):
         raise ConfigError(f"{name}: frames.base must be a frame name (like base_footprint), got {base!r}")
-    return base.strip().lstrip("/")
+    return base.strip().lstrip("/"), static
+
+
+_STATIC_EXAMPLE = "e.g. 'frames: {static: [{parent: base_link, child: laser, xyz: [0.2, 0, 0.3], rpy_deg: [0, 0, 0]}]}'"
+
+
+def _numbers(where: str, value: Any, unit: str) -> tuple[float, float, float]:
+    if (not isinstance(value, (list, tuple)) or len(value) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        raise ConfigError(f"{where} must be three finite numbers in {unit}, got {value!r}; {_STATIC_EXAMPLE}")
+    return float(value[0]), float(value[1]), float(value[2])
+
+
+def _static_transforms(name: str, items: Any) -> tuple[Transform, ...]:
+    """``frames.static``: a list of ``{parent, child, xyz (m), rpy_deg (deg, optional)}``, the arguments of ROS's
+    ``static_transform_publisher``; each replaces what the log's /tf_static says about its child frame."""
+    if items is None:
+        return ()
+    if not isinstance(items, list):
+        raise ConfigError(f"{name}: frames.static must be a list of transforms; {_STATIC_EXAMPLE}")
+    out: list[Transform] = []
+    for i, item in enumerate(items):
+        where = f"{name}: frames.static[{i}]"
+        if not isinstance(item, dict) or set(item) - {"parent", "child", "xyz", "rpy_deg"}:
+            raise ConfigError(f"{where} must hold parent, child, xyz and optionally rpy_deg; {_STATIC_EXAMPLE}")
+        parent, child = (str(item.get(k) or "").strip().lstrip("/") for k in ("parent", "child"))
+        if not parent or not child or parent == child:
+            raise ConfigError(f"{where} needs two different frame names 'parent' and 'child'; {_STATIC_EXAMPLE}")
+        if any(t.child == child for t in out):
+            raise ConfigError(f"{where}: frame {child!r} is already a child in frames.static (a frame has one parent)")
+        xyz = _numbers(f"{where}.xyz", item.get("xyz"), "metres")
+        roll, pitch, yaw = (math.radians(v) for v in _numbers(f"{where}.rpy_deg", item.get("rpy_deg", [0, 0, 0]),
+                                                             "degrees"))
+        out.append(Transform(0, parent, child, xyz, _quaternion_rpy(roll, pitch, yaw), static=True))
+    return tuple(out)
+
+
+def _quaternion_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of the fixed-axis roll-pitch-yaw rotation Rz(yaw) Ry(pitch) Rx(roll), as ROS's tf2."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy, cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import math
 import struct
 from array import array
 from collections.abc import Callable, Iterable, Iterator
@@ -104,6 +105,8 @@ class LogReader:
         self._warnings: list[str] = [note] if note else []
         self._files: list[_FileState] = []
         self._edges: dict[str, str] = {}  # child -> parent
+        for t in self.mapping.static_transforms if self.mapping is not None else ():
+            self._edges[t.child] = t.parent  # the mapping's static transforms replace the log's
         self._sensor_frames: dict[str, str] = {}  # frame -> topic
         self._choices = tuple(choices)
         # the robot's base frame: the mapping's frames.base, else the odometry's child frame (see _note_frames)
@@ -480,7 +483,9 @@ def read_log(
                 + "}'"
             )
     key = lambda r: r.stamp_ns  # noqa: E731
-    transforms = tuple(sorted(buckets[Transform], key=key))
+    transforms, notes = _with_mapping_transforms(tuple(sorted(buckets[Transform], key=key)), reader.mapping)
+    if notes:
+        report = replace(report, warnings=report.warnings + notes)
     scans, level_tfs, levelled, tilted = level_scans(
         tuple(sorted(buckets[Scan], key=key)), transforms, report.base_frame
     )
@@ -500,3 +505,29 @@ def read_log(
         base_frame=report.base_frame,
     )
     return data, report
+
+
+def _describe(t: Transform) -> str:
+    from holoslam.frames import quat_to_matrix
+
+    R = quat_to_matrix(np.asarray(t.rotation_xyzw, dtype=np.float64))
+    x, y, z = t.translation
+    return (f"x={x:+.3f} y={y:+.3f} z={z:+.3f} m, yaw {math.degrees(math.atan2(R[1, 0], R[0, 0])):+.1f} deg")
+
+
+def _with_mapping_transforms(
+    transforms: tuple[Transform, ...], mapping: LogMapping | None
+) -> tuple[tuple[Transform, ...], tuple[str, ...]]:
+    """The log's transforms with the mapping's ``frames.static`` in place of every transform of the same child
+    frame, and a note per replacement saying what the log had (nothing is dropped unsaid)."""
+    if mapping is None or not mapping.static_transforms:
+        return transforms, ()
+    ours = {t.child: t for t in mapping.static_transforms}
+    notes = []
+    for child, t in ours.items():
+        theirs = [r for r in transforms if r.child == child]
+        was = (f"the log's {theirs[0].parent}->{child} ({_describe(theirs[0])}"
+               + (f", {len(theirs)} messages" if len(theirs) > 1 else "") + ")") if theirs else "nothing in the log"
+        notes.append(f"{mapping.source}: frames.static sets {t.parent}->{child} to {_describe(t)}; it replaces {was}")
+    kept = tuple(r for r in transforms if r.child not in ours)
+    return tuple(mapping.static_transforms) + kept, tuple(notes)
