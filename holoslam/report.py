@@ -66,6 +66,9 @@ class SubmapSummary:
     keyframes_solved: bool = False
     keyframe_matches: int = 0
     keyframe_matches_tried: int = 0
+    # the laser's position from the point the robot turns about, measured from its motion, against the log's
+    # transform (holoslam.submaps.mounting.Mounting.to_dict); None when the robot turned too little to tell
+    laser_mounting: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True)
@@ -330,7 +333,27 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
         )
     if sm.odometry_noise:
         lines.append(f"  odometry noise: {sm.odometry_noise['source']} ({sm.odometry_noise['reason']})")
+    if sm.laser_mounting:
+        lines.extend(_mounting_text(sm.laser_mounting))
     return lines
+
+
+def _ahead(x: float) -> str:
+    return f"{abs(x):.3f} m {'ahead of' if x >= 0 else 'behind'}"
+
+
+def _mounting_text(m: Mapping[str, Any]) -> list[str]:
+    base, laser = m.get("base_frame", "base_link"), m.get("laser_frame", "laser")
+    line = (f"  laser mounting: the robot's motion ({m['turns']} turning scan pairs) puts {laser} "
+            f"{_ahead(m['laser_x_m'])} the point it turns about (+/- {m['laser_x_std_m']:.3f} m); its "
+            f"transform puts it {_ahead(m['tf_laser_x_m'])} {base}, so {base} is {_ahead(-m['centre_in_base_x_m'])} "
+            "the turning centre")
+    if not m["base_off_centre"]:
+        return [line]
+    return [line, f"    the trajectory is {base}'s, not the turning centre's: if {base} should be the turning centre "
+            "(the midpoint of the drive wheels), put the laser there with a mapping: 'frames: {static: "
+            f"[{{parent: {base}, child: {laser}, xyz: [{m['laser_x_m']:.3f}, Y, Z]}}]}}' (Y, Z as its "
+            "transform; the run configuration's 'mapping:' names the file)"]
 
 
 def _objects_text(o: ObjectSummary) -> list[str]:
@@ -381,8 +404,9 @@ def _count(items: Iterable[str]) -> dict[str, int]:
     return out
 
 
-def submap_summary(fe: Any, revisits: Any = None) -> SubmapSummary:
-    """The front end's summary; ``revisits`` the keyframe stage's ``holoslam.graph.nodes.KeyframeSolve``."""
+def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None) -> SubmapSummary:
+    """The front end's summary; ``revisits`` the keyframe stage's ``holoslam.graph.nodes.KeyframeSolve``,
+    ``mounting`` the laser mounting check (``laser_mounting``) or None."""
     return SubmapSummary(
         count=len(fe.submaps),
         split_reasons=_count(str(sm.reason) for sm in fe.submaps),
@@ -397,7 +421,22 @@ def submap_summary(fe: Any, revisits: Any = None) -> SubmapSummary:
         keyframes_solved=revisits is not None,
         keyframe_matches=0 if revisits is None else len(revisits.matches),
         keyframe_matches_tried=0 if revisits is None else int(revisits.matches.tried),
+        laser_mounting=mounting,
     )
+
+
+def laser_mounting(log: Any, fe: Any, trajectory: Any) -> dict[str, Any] | None:
+    """The laser mounting check of a run (``holoslam.submaps.mounting``) on the optimised poses at the scans,
+    in its JSON form with the frames it is about."""
+    from holoslam.submaps.mounting import laser_ahead_of_turning_centre
+
+    if not log.scans or fe.bTs is None:
+        return None
+    stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
+    m = laser_ahead_of_turning_centre(stamps, trajectory.at_scans(log), np.asarray(fe.bTs))
+    if m is None:
+        return None
+    return {**m.to_dict(), "base_frame": str(log.base_frame), "laser_frame": str(log.scans[0].frame_id)}
 
 
 def factor_counts(p: Any) -> dict[str, int]:
@@ -491,7 +530,7 @@ def build_report(*, log: Any, ingest_report: Any, sightings: Any, fe: Any, sol: 
         inputs_absent=absent_inputs(log),
         ingest=report_to_dict(ingest_report),
         vision=sightings.report,
-        submaps=submap_summary(fe, revisits),
+        submaps=submap_summary(fe, revisits, laser_mounting(log, fe, trajectory)),
         factors=factor_counts(fe.problem),
         solver=solver_summary(sol),
         objects=object_summary(objects, sol, maps.holographic, located_by),

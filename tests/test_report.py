@@ -28,7 +28,10 @@ REPORT = {
                 "observations_before_first_anchor": 0, "nodes": 1916, "scans_localised_between_nodes": 584,
                 "dead_reckoning_inflation": 1.288, "odometry_noise": {"source": "log", "reason": "propagated"},
                 "loop_pairs": 151, "dead_reckoning_slips": 3, "keyframes_solved": True, "keyframe_matches": 2960,
-                "keyframe_matches_tried": 3834},
+                "keyframe_matches_tried": 3834,
+                "laser_mounting": {"laser_x_m": -0.018, "laser_x_std_m": 0.0007, "pairs": 4932, "turns": 2895,
+                                   "tf_laser_x_m": 0.04, "centre_in_base_x_m": 0.058, "base_off_centre": True,
+                                   "base_frame": "base_link", "laser_frame": "laser"}},
     "factors": {"relative_pose/dead_reckoning": 42, "relative_pose/loop": 497, "compass_heading": 42,
                 "object_landmark": 104},
     "solver": {"method": "batch", "iterations": 9, "rounds": 3, "initial_error": 794.4, "final_error": 101.4,
@@ -107,6 +110,11 @@ def test_the_text_form_names_every_stage():
                   "                            objects 0.009 m RMSE (max 0.021 m), 2 matched, missing none",
                   "  timings (s): ingest 0.60, vision 1.20, total 24.00"):
         assert sum(line.startswith(start) for line in lines) == 1, start
+    (mounting,) = [line for line in lines if line.startswith("  laser mounting:")]
+    assert "puts laser 0.018 m behind the point it turns about" in mounting
+    assert "0.040 m ahead of base_link, so base_link is 0.058 m behind the turning centre" in mounting
+    (fix,) = [line for line in lines if "if base_link should be the turning centre" in line]
+    assert "xyz: [-0.018, Y, Z]" in fix
 
 
 def test_a_skipped_vision_stage_says_why():
