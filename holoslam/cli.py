@@ -386,7 +386,7 @@ def _add_simulate(sub: Any) -> None:
                    help="the stream's exposure in ms (default 10), over which the robot's motion blurs a frame")
     s.add_argument("--noise-scale", type=float, default=1.0, help="multiply every sensor noise by this")
     s.add_argument("--profile", default="default",
-                   help="the robot: default, noisy (3x every noise), skid-steer (another odometer); see holoslam.sim.profiles")
+                   help="the robot: default, noisy (3x every noise), skid-steer (another odometer), dense-lidar (1,081 beams at 40 Hz); see holoslam.sim.profiles")
     s.add_argument("--wall-codes", type=int, default=0, help="foreign QR codes on the walls (0-12)")
     s.add_argument("--sizeless-labels", type=int, default=0, help="labels printed without their size (0-8)")
     s.add_argument("--json", action="store_true")

@@ -30,7 +30,8 @@ TV, air conditioner, washing machine, microwave; 3-6 deg) scaled by ``compass_di
 Laser (``laser_scans``), 5 Hz: 181 beams from -90 deg to +90 deg in 1 deg steps, mounted at ``LASER_MOUNT``
 (x 0.12 m ahead of the base centre, 0.30 m high), ranges ray-cast against walls and furniture at the true
 pose plus N(0, laser_sigma^2) (default 0.01 m), rounded to the LMS-200's 1 mm resolution; beams with no
-return within 8 m are +inf.
+return within 8 m are +inf. ``laser_beams``, ``laser_fov_deg`` and ``laser_range_max_m`` of ``SimConfig`` give
+other lasers (the ``dense-lidar`` profile: 1,081 beams over 270 deg at 40 Hz, 30 m).
 
 Camera (``camera_snapshots``): a 640x480 PTZ camera on a mast (``PTZ_MOUNT``, 1.10 m high), focal length
 ``F0`` = 525 px at zoom 1, zoom up to ``ZOOM_MAX`` = 10x, pan +-170 deg, tilt -45..+45 deg. Like an operator
@@ -268,22 +269,26 @@ def laser_scans(
     offset_ns: int = 10_000_000,
     sigma: float = 0.01,
     range_max: float = 8.0,
+    beams: int = 181,
+    fov_deg: float = 180.0,
 ) -> ScanStream:
     period = int(round(1e9 / rate_hz))
     at = np.arange(stamps_ns[0] + offset_ns, stamps_ns[-1], period, dtype=np.int64)
     P = interpolate_poses(stamps_ns, wTb, at)
     wTl = compose(P, np.array([LASER_MOUNT[0], LASER_MOUNT[1], 0.0]))
-    beams = np.radians(np.arange(-90, 91, dtype=np.float64))
+    step_deg = fov_deg / (beams - 1) if fov_deg < 360 else fov_deg / beams  # a full turn does not repeat a beam
+    beam_angles = np.radians(-fov_deg / 2 + step_deg * np.arange(beams, dtype=np.float64))
     segs = world.obstacle_segments()
-    true = np.empty((len(at), len(beams)))
+    true = np.empty((len(at), beams))
     for i in range(0, len(at), 64):
         sl = slice(i, i + 64)
-        true[sl] = raycast(segs, wTl[sl, :2], wTl[sl, 2:3] + beams[None, :], range_max)
+        true[sl] = raycast(segs, wTl[sl, :2], wTl[sl, 2:3] + beam_angles[None, :], range_max)
     noisy = true + sigma * rng.standard_normal(true.shape)
     noisy = np.round(noisy * 1000.0) / 1000.0
     noisy[~np.isfinite(true) | (noisy > range_max)] = np.inf
     return ScanStream(
-        at, noisy.astype(np.float32), true, wTl, float(beams[0]), float(math.radians(1.0)), 0.05, range_max
+        at, noisy.astype(np.float32), true, wTl, float(beam_angles[0]), float(math.radians(step_deg)), 0.05,
+        range_max
     )
 
 

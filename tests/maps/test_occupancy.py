@@ -250,3 +250,23 @@ def test_infinite_range_max_without_clearing_distance_is_reported():
         build_grid(np.zeros((1, 3)), [s])
     g = build_grid(np.zeros((1, 3)), [s], no_return_clear_m=1.0)
     assert g.occupied.sum() == 1
+
+
+def test_casting_in_chunks_gives_the_same_grid_and_names_the_scan_at_fault(monkeypatch):
+    """A long dense log is cast in chunks of whole scans (memory: one chunk's beams, not the log's); the counts
+    are sums, so chunks of 361 beams (one scan each) and of 500 (two scans at a time, the last alone) give the
+    grid cast in one piece, bounds included; a bad scan in a later chunk is named by its index in the log."""
+    from holoslam.maps import occupancy
+
+    poses = np.array([[1.0, 1.0, 0.3], [3.0, 2.0, -1.0], [2.0, 1.5, 2.0]])
+    scans = [scan_at(p, n=361) for p in poses]
+    whole = build_grid(poses, scans, 0.1)
+    for size in (361, 500):
+        monkeypatch.setattr(occupancy, "CHUNK_BEAMS", size)
+        assert len(occupancy._chunks(scans)) == (3 if size == 361 else 2)
+        g = build_grid(poses, scans, 0.1)
+        assert (g.origin_x, g.origin_y, g.shape) == (whole.origin_x, whole.origin_y, whole.shape)
+        np.testing.assert_array_equal(g.occupancy, whole.occupancy)
+    bad = Scan(0, "laser", 0.0, 0.1, 0.05, np.inf, np.array([np.inf, 1.0], np.float32), np.array([False, True]))
+    with pytest.raises(MapError, match=r"scans \[3\] have beams without a return"):
+        build_grid(np.vstack([poses, np.zeros((1, 3))]), [*scans, bad])
