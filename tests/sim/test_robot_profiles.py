@@ -16,7 +16,7 @@ SEEDS = (21, 22)
 DURATION_S = 300.0
 
 
-def _map(profile: str, seed: int, folder) -> dict:
+def _map(profile: str, seed: int, folder, duration_s: float = DURATION_S) -> dict:
     from holoslam.evaluate import trajectory_errors, truth_at
     from holoslam.io.mcap import read_log
     from holoslam.optimise import map_log
@@ -24,7 +24,7 @@ def _map(profile: str, seed: int, folder) -> dict:
     from holoslam.sim.profiles import profile_config
 
     path = folder / f"{profile}_{seed}.mcap"
-    simulate_to_file(path, profile_config(profile, seed=seed, duration_s=DURATION_S, image_rate_hz=0.0))
+    simulate_to_file(path, profile_config(profile, seed=seed, duration_s=duration_s, image_rate_hz=0.0))
     log, _ = read_log(path)
     fe, sol = map_log(log)  # as a run does: loops re-estimated, the run's kernels, the keyframe solve's anchors
     gt_t, gt = log.ground_truth_arrays()
@@ -63,3 +63,19 @@ def test_a_robot_profile_maps_with_the_same_defaults(profile, noise_from, max_rm
     coverage = sum(r["inside"] for r in runs) / sum(r["n"] for r in runs)
     assert rmse < max_rmse and dr >= min_ratio * rmse, (rmse, dr)
     assert 0.90 <= coverage <= 0.99, coverage
+
+
+def test_a_dense_fast_laser_maps_with_the_same_defaults(tmp_path):
+    """The dense-lidar profile (1,081 beams over 270 deg at 40 Hz, 30 m: 40x the default laser's points per
+    second): the same defaults map it. Measured on 60 s, seed 21: anchors 3.4 mm RMSE against dead reckoning's
+    46 mm, 17 of 18 inside their 95 % ellipses, 15 s to map on 2 cores (seed 22: 3.6 / 34 mm)."""
+    from holoslam.io.mcap import read_log
+
+    run = _map("dense-lidar", 21, tmp_path, duration_s=60.0)
+    scan = read_log(tmp_path / "dense-lidar_21.mcap")[0].scans[0]
+    assert scan.ranges.shape == (1081,) and np.degrees(scan.angle_increment) == pytest.approx(0.25)
+    assert scan.range_max == 30.0 and np.degrees(scan.angle_min) == pytest.approx(-135.0)
+    rmse = float(np.sqrt(np.mean(run["err2"])))
+    dr = float(np.sqrt(np.mean(run["dr_err2"])))
+    assert rmse < 0.007 and dr > 10.0 * rmse, (rmse, dr)
+    assert run["inside"] >= 0.8 * run["n"], run
