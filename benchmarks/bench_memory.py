@@ -74,7 +74,9 @@ def run_child(log: Path, times: int) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--log", default="intel", help="a log of the data folder (default intel, 45 min)")
+    ap.add_argument("--log", default="intel",
+                    help="a log of the data folder (default intel, 45 min) or the path of any MCAP log, e.g. a "
+                         "dense laser's: holoslam simulate --profile dense-lidar --duration 120 -o dense.mcap")
     ap.add_argument("--times", type=int, nargs="+", default=[1, 2], help="copies played end to end")
     ap.add_argument("--budget-mb", type=float, default=2000.0, help="peak RSS budget (MB)")
     ap.add_argument("--data", type=Path, default=DATA)
@@ -83,13 +85,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.child:
         child(args.child[0], int(args.child[1]), args.child[2])
         return 0
-    log = args.data / f"{args.log}.mcap"
+    given = Path(args.log)
+    log = given if given.suffix == ".mcap" and given.is_file() else args.data / f"{args.log}.mcap"
     if not log.is_file():
         print(f"bench_memory: no {log} (the shared real logs, see ../shared/realdata/README.md)")
         return 0
     rows = [run_child(log, t) for t in sorted(set(args.times))]
     base = rows[0]
-    print(f"\npeak memory of a whole run on {args.log} played N times end to end (budget {args.budget_mb:.0f} MB)")
+    print(f"\npeak memory of a whole run on {log.stem} played N times end to end (budget {args.budget_mb:.0f} MB)")
     print(f"{'N':>3} {'minutes':>8} {'scans':>7} {'submaps':>8} {'wall s':>7} {'RSS MB':>7} {'MB/min':>7}  budget")
     failed = False
     for r in rows:
