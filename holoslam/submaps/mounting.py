@@ -11,7 +11,7 @@ sideways offset of the laser is not observable this way (a point beside the cent
 heading), so only the position along the robot's x axis is measured.
 
 Measured on the shared real logs (laser at ``a`` from the turning centre; standard error): intel +0.092 ±
-0.002 m and aces +0.055 ± 0.003 m (their tf puts base_link at the laser), fr079 -0.018 ± 0.001 m, where the
+0.001 m and aces +0.055 ± 0.002 m (their tf puts base_link at the laser), fr079 -0.018 ± 0.001 m, where the
 log's tf says the laser is 0.04 m *ahead* of base_link. That log's ground-truth relations agree with the motion,
 not the tf: scored at the turning centre its trajectory errs 0.034 m, at the tf's base_link 0.066 m.
 """
