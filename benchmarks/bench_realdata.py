@@ -161,20 +161,19 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None) -> 
 
 def _laser_poses(log: Path, wTb: np.ndarray) -> np.ndarray:
     """The trajectory moved to the laser's frame (the log's base -> laser transform; the ``laser m`` column)."""
-    from holoslam import geometry as g
     from holoslam.io.mcap import read_log
     from holoslam.submaps.frontend import base_to_laser
 
     data, _ = read_log(log, require=["scan"])
-    bTs = base_to_laser(data, data.scans[0].frame_id)
-    return g.compose(wTb, np.broadcast_to(bTs, wTb.shape))
+    return _moved(wTb, base_to_laser(data, data.scans[0].frame_id))
 
 
-def _moved(wTb: np.ndarray, x: float) -> np.ndarray:
-    """The trajectory of the point ``x`` metres ahead of the base (the ``centre m`` column)."""
+def _moved(wTb: np.ndarray, bTp: np.ndarray | float) -> np.ndarray:
+    """The trajectory of the frame at ``bTp`` in the base (a pose, or x metres ahead: the ``centre m`` column)."""
     from holoslam import geometry as g
 
-    return g.compose(wTb, np.broadcast_to(np.array([x, 0.0, 0.0]), wTb.shape))
+    bTp = np.array([bTp, 0.0, 0.0]) if np.ndim(bTp) == 0 else np.asarray(bTp, dtype=np.float64)
+    return g.compose(wTb, np.broadcast_to(bTp, wTb.shape))
 
 
 def print_table(rows: list[dict]) -> None:

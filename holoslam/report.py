@@ -67,7 +67,7 @@ class SubmapSummary:
     keyframe_matches: int = 0
     keyframe_matches_tried: int = 0
     # the laser's position from the point the robot turns about, measured from its motion, against the log's
-    # transform (holoslam.submaps.mounting.Mounting.to_dict); None when the robot turned too little to tell
+    # transform (holoslam.submaps.mounting.mounting_check); None when the robot turned too little to tell
     laser_mounting: dict[str, Any] | None = None
 
 
@@ -334,26 +334,10 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
     if sm.odometry_noise:
         lines.append(f"  odometry noise: {sm.odometry_noise['source']} ({sm.odometry_noise['reason']})")
     if sm.laser_mounting:
-        lines.extend(_mounting_text(sm.laser_mounting))
+        from holoslam.submaps.mounting import mounting_text
+
+        lines.extend(mounting_text(sm.laser_mounting))
     return lines
-
-
-def _ahead(x: float) -> str:
-    return f"{abs(x):.3f} m {'ahead of' if x >= 0 else 'behind'}"
-
-
-def _mounting_text(m: Mapping[str, Any]) -> list[str]:
-    base, laser = m.get("base_frame", "base_link"), m.get("laser_frame", "laser")
-    line = (f"  laser mounting: the robot's motion ({m['turns']} turning scan pairs) puts {laser} "
-            f"{_ahead(m['laser_x_m'])} the point it turns about (+/- {m['laser_x_std_m']:.3f} m); its "
-            f"transform puts it {_ahead(m['tf_laser_x_m'])} {base}, so {base} is {_ahead(-m['centre_in_base_x_m'])} "
-            "the turning centre")
-    if not m["base_off_centre"]:
-        return [line]
-    return [line, f"    the trajectory is {base}'s, not the turning centre's: if {base} should be the turning centre "
-            "(the midpoint of the drive wheels), put the laser there with a mapping: 'frames: {static: "
-            f"[{{parent: {base}, child: {laser}, xyz: [{m['laser_x_m']:.3f}, Y, Z]}}]}}' (Y, Z as its "
-            "transform; the run configuration's 'mapping:' names the file)"]
 
 
 def _objects_text(o: ObjectSummary) -> list[str]:
@@ -426,17 +410,14 @@ def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None) -> Subma
 
 
 def laser_mounting(log: Any, fe: Any, trajectory: Any) -> dict[str, Any] | None:
-    """The laser mounting check of a run (``holoslam.submaps.mounting``) on the optimised poses at the scans,
-    in its JSON form with the frames it is about."""
-    from holoslam.submaps.mounting import laser_ahead_of_turning_centre
+    """The laser mounting check of a run on the optimised poses at the scans (``holoslam.submaps.mounting``)."""
+    from holoslam.submaps.mounting import mounting_check
 
     if not log.scans or fe.bTs is None:
         return None
     stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
-    m = laser_ahead_of_turning_centre(stamps, trajectory.at_scans(log), np.asarray(fe.bTs))
-    if m is None:
-        return None
-    return {**m.to_dict(), "base_frame": str(log.base_frame), "laser_frame": str(log.scans[0].frame_id)}
+    return mounting_check(stamps, trajectory.at_scans(log), np.asarray(fe.bTs), str(log.base_frame),
+                          str(log.scans[0].frame_id))
 
 
 def factor_counts(p: Any) -> dict[str, int]:

@@ -141,6 +141,11 @@ def build_grid(
         raise MapError(f"need 0.5 < p_hit < 1 and 0 < p_miss < 0.5, got p_hit={p_hit}, p_miss={p_miss}")
     wTs = _checked_poses(wTs, scans)
     chunks = _chunks(scans)
+
+    def beams_of(sl: slice) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return beam_endpoints(wTs[sl], scans[sl], no_return_clear_m, sl.start)
+
+    only = beams_of(chunks[0]) if len(chunks) == 1 else None  # most logs: one chunk, its beams computed once
     if bounds is None:
         sensors = wTs[:, :2]
         if sensors.shape[0] == 0:
@@ -151,7 +156,7 @@ def build_grid(
         lo = np.array([sensors[:, k].min() for k in range(2)])
         hi = np.array([sensors[:, k].max() for k in range(2)])
         for sl in chunks:
-            _, ends, _ = beam_endpoints(wTs[sl], scans[sl], no_return_clear_m, sl.start)
+            ends = (only if only is not None else beams_of(sl))[1]
             if ends.shape[0]:
                 lo = np.minimum(lo, [ends[:, 0].min(), ends[:, 1].min()])
                 hi = np.maximum(hi, [ends[:, 0].max(), ends[:, 1].max()])
@@ -168,7 +173,7 @@ def build_grid(
     hits = np.zeros(h * w, np.int64)
     misses = np.zeros(h * w, np.int64)
     for sl in chunks:
-        origins, ends, hit = beam_endpoints(wTs[sl], scans[sl], no_return_clear_m, sl.start)
+        origins, ends, hit = only if only is not None else beams_of(sl)
         u0 = (origins - lo) / resolution  # cell units: cell (row, col) = (floor(u[1]), floor(u[0]))
         u1 = (ends - lo) / resolution
         ch, cm = _kernel().cast_counts(

@@ -18,13 +18,15 @@ not the tf: scored at the turning centre its trajectory errs 0.034 m, at the tf'
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from holoslam.geometry import compose, wrap
 
-__all__ = ["Mounting", "laser_ahead_of_turning_centre", "MAX_TURN_RAD", "MAX_GAP_NS", "MIN_TURNS", "WARN_M"]
+__all__ = ["Mounting", "laser_ahead_of_turning_centre", "mounting_check", "mounting_text", "MAX_TURN_RAD", "MAX_GAP_NS", "MIN_TURNS", "WARN_M"]
 
 # rad: scan-to-scan motions turning more than this are left out (tan(dtheta / 2) is far from linear and a
 # wrong match more likely); 0.5 rad between two scans is 2.5 rad/s at 5 Hz, faster than indoor robots turn
@@ -109,3 +111,33 @@ def laser_ahead_of_turning_centre(stamps_ns: np.ndarray, wTb: np.ndarray, bTs: n
     k = len(scores)
     std = float(np.sqrt(k / (k - 1) * np.sum(np.square(scores))) / (hw @ w))
     return Mounting(a, std, int(len(w)), turns, float(bTs[0]))
+
+
+def mounting_check(stamps_ns: np.ndarray, wTb: np.ndarray, bTs: np.ndarray, base_frame: str,
+                   laser_frame: str) -> dict[str, Any] | None:
+    """``laser_ahead_of_turning_centre`` in its JSON form (the run report's ``submaps.laser_mounting``) with the
+    frames it is about; None when the robot turned too little to tell."""
+    m = laser_ahead_of_turning_centre(stamps_ns, wTb, bTs)
+    if m is None:
+        return None
+    return {**m.to_dict(), "base_frame": base_frame, "laser_frame": laser_frame}
+
+
+def _ahead(x: float) -> str:
+    return f"{abs(x):.3f} m {'ahead of' if x >= 0 else 'behind'}"
+
+
+def mounting_text(m: Mapping[str, Any]) -> list[str]:
+    """The run report's lines of a mounting check (``mounting_check``'s JSON form): where the laser is, and the
+    mapping line that puts base_link at the turning centre when it is off it."""
+    base, laser = m.get("base_frame", "base_link"), m.get("laser_frame", "laser")
+    line = (f"  laser mounting: the robot's motion ({m['turns']} turning scan pairs) puts {laser} "
+            f"{_ahead(m['laser_x_m'])} the point it turns about (+/- {m['laser_x_std_m']:.3f} m); its "
+            f"transform puts it {_ahead(m['tf_laser_x_m'])} {base}, so {base} is {_ahead(-m['centre_in_base_x_m'])} "
+            "the turning centre")
+    if not m["base_off_centre"]:
+        return [line]
+    return [line, f"    the trajectory is {base}'s, not the turning centre's: if {base} should be the turning centre "
+            "(the midpoint of the drive wheels), put the laser there with a mapping: 'frames: {static: "
+            f"[{{parent: {base}, child: {laser}, xyz: [{m['laser_x_m']:.3f}, Y, Z]}}]}}' (Y, Z as its "
+            "transform; the run configuration's 'mapping:' names the file)"]

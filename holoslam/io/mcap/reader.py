@@ -508,11 +508,10 @@ def read_log(
 
 
 def _describe(t: Transform) -> str:
-    from holoslam.frames import quat_to_matrix
+    from holoslam.frames import yaw_from_quaternion
 
-    R = quat_to_matrix(np.asarray(t.rotation_xyzw, dtype=np.float64))
     x, y, z = t.translation
-    return (f"x={x:+.3f} y={y:+.3f} z={z:+.3f} m, yaw {math.degrees(math.atan2(R[1, 0], R[0, 0])):+.1f} deg")
+    return f"x={x:+.3f} y={y:+.3f} z={z:+.3f} m, yaw {math.degrees(yaw_from_quaternion(*t.rotation_xyzw)):+.1f} deg"
 
 
 def _with_mapping_transforms(
