@@ -297,7 +297,7 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
     from holoslam.jobs import evaluate_trajectory
 
     ev = evaluate_trajectory(
-        a.target, relations=a.relations, truth=a.truth, max_dt_s=a.max_dt, rpe_delta_s=a.rpe_delta
+        a.target, relations=a.relations, truth=a.truth, max_dt_s=a.max_dt, rpe_delta_s=a.rpe_delta, frame=a.frame
     )
     if a.json:
         print(json.dumps(ev.to_dict(), indent=2))
@@ -462,6 +462,8 @@ def _add_evaluate(sub: Any) -> None:
         "--relations", type=Path, help="a .relations file (Freiburg benchmark): relation errors, mean ± std"
     )
     ref.add_argument("--truth", type=Path, help="a TUM ground truth: ATE after SE(2) alignment, and RPE")
+    s.add_argument("--frame", default="base", help="score this frame of the robot, e.g. laser (the Freiburg "
+                   "benchmark's): any frame the run's log fixes to its base by a static transform (default base)")
     s.add_argument(
         "--max-dt",
         type=float,

@@ -92,10 +92,13 @@ def evaluate_trajectory(
     truth: str | Path | None = None,
     max_dt_s: float = 0.05,
     rpe_delta_s: float = 1.0,
+    frame: str = "",
 ) -> Evaluation:
     """Score a run folder's ``trajectory.tum`` (or any TUM file) against a ``.relations`` file (relation
     errors: poses matched to the nearest stamp within ``max_dt_s``) or a TUM ground truth (ATE after SE(2)
-    alignment and RPE over ``rpe_delta_s``). Exactly one of ``relations`` and ``truth``."""
+    alignment and RPE over ``rpe_delta_s``). Exactly one of ``relations`` and ``truth``. ``frame``: score the
+    pose of that frame of the robot instead of the base's (a run folder: its log's static transforms, in
+    report.json; the Freiburg benchmark scores the laser's)."""
     import math
 
     from holoslam.evaluate import ground_truth_errors, relation_errors
@@ -109,6 +112,11 @@ def evaluate_trajectory(
         raise ConfigError(f"the RPE time step must be a finite number of seconds > 0, got {rpe_delta_s}")
     tum = trajectory_path(target)
     stamps, wTb = _read_trajectory(tum)
+    bTf = frame_pose(target, frame)
+    if bTf is not None:
+        from holoslam.geometry import compose
+
+        wTb = compose(wTb, bTf)
     if relations is not None:
         rel = read_relations(relations)
         errors = relation_errors(stamps, wTb, rel, max_dt_ns=int(round(max_dt_s * 1e9)))
@@ -125,6 +133,29 @@ def evaluate_trajectory(
         stamps, wTb, gt_stamps, gt_wTb, rpe_delta_ns=int(round(rpe_delta_s * 1e9))
     )
     return Evaluation(str(tum), str(gt_path), int(len(stamps)), truth=errors_gt)
+
+
+def frame_pose(run: str | Path, frame: str):
+    """The planar pose (x, y, yaw) of ``frame`` in the run's base frame (None for the base itself or ""), from
+    the run folder's report.json (``RunReport.frames``)."""
+    import numpy as np
+
+    from holoslam.io.run_folder import load_run
+
+    if frame in ("", "base"):
+        return None
+    if not Path(run).is_dir():
+        raise ConfigError(f"--frame {frame}: {run} is a TUM file; give the run folder, whose report.json holds the "
+                          "log's frames")
+    frames = (load_run(run, parts=("report",)).report or {}).get("frames") or {}
+    poses = frames.get("poses") or {}
+    if frame == frames.get("base"):
+        return None
+    if frame not in poses:
+        raise ConfigError(f"{Path(run) / 'report.json'}: no frame {frame!r} fixed to the robot's base "
+                          f"{frames.get('base', '?')!r}; its frames: {', '.join(sorted(poses)) or 'none recorded'} "
+                          "(runs before this version did not record them: run the log again)")
+    return np.asarray(poses[frame], dtype=np.float64)
 
 
 def _read_trajectory(path: Path) -> tuple[Any, Any]:

@@ -69,6 +69,10 @@ class SubmapSummary:
     # the laser's position from the point the robot turns about, measured from its motion, against the log's
     # transform (holoslam.submaps.mounting.mounting_check); None when the robot turned too little to tell
     laser_mounting: dict[str, Any] | None = None
+    # the loop search's searches and their outcomes by reason (windowed / global; accepted, no match, ambiguous,
+    # waiting for a consistent second closure...), and the breaks of local SLAM (a gap in the laser: lost)
+    loop_search: dict[str, int] | None = None
+    breaks: int = 0
 
 
 @dataclass(frozen=True)
@@ -207,6 +211,9 @@ class RunReport:
     planning: PlanningSummary
     timings_s: dict[str, float]
     accuracy: Accuracy | None = None
+    # the base frame's name and the planar pose (x m, y m, yaw rad) in it of every frame the log's static
+    # transforms fix to it (the laser, cameras): ``holoslam evaluate --frame`` moves the trajectory there
+    frames: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON form (report.json)."""
@@ -235,6 +242,7 @@ class RunReport:
             planning=_make(PlanningSummary, d["planning"]),
             timings_s=dict(d["timings_s"]),
             accuracy=Accuracy.from_dict(acc) if acc else None,
+            frames=dict(d.get("frames") or {}),
         )
 
     def text(self) -> str:
@@ -326,6 +334,9 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
             f"against the scan matches; {sm.dead_reckoning_slips} slipped segments down-weighted), loop "
             f"closures between {sm.loop_pairs} anchor pairs (each pair's count as one)"
         )
+    if sm.loop_search:
+        lines.append("  loop search: " + ", ".join(f"{k} {v}" for k, v in sm.loop_search.items())
+                     + (f"; {sm.breaks} gaps in the laser began afresh (lost)" if sm.breaks else ""))
     if sm.keyframes_solved:
         lines.append(
             f"  keyframes: solved as poses against the old submaps they revisit, {sm.keyframe_matches} of "
@@ -406,6 +417,8 @@ def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None) -> Subma
         keyframe_matches=0 if revisits is None else len(revisits.matches),
         keyframe_matches_tried=0 if revisits is None else int(revisits.matches.tried),
         laser_mounting=mounting,
+        loop_search=dict(fe.loop_counts) or None,
+        breaks=int(fe.breaks),
     )
 
 
@@ -521,7 +534,25 @@ def build_report(*, log: Any, ingest_report: Any, sightings: Any, fe: Any, sol: 
         planning=PlanningSummary(int(maps.planning.n_blocks), int(maps.planning.n_regions)),
         timings_s=timings,
         accuracy=accuracy(log, fe, sol, objects, trajectory, codes_truth),
+        frames=static_frames(log),
     )
+
+
+def static_frames(log: Any) -> dict[str, Any]:
+    """{"base": name, "poses": {frame: [x, y, yaw]}}: every frame the log's static transforms tie to the base,
+    in the base frame (``RunReport.frames``)."""
+    from holoslam.frames import TransformLookupError, TransformTree
+
+    tree = TransformTree(tuple(t for t in log.transforms if t.static))
+    base = str(log.base_frame)
+    stamp = int(log.scans[0].stamp_ns) if log.scans else 0
+    poses: dict[str, list[float]] = {}
+    for child in sorted({t.child for t in log.transforms if t.static} - {base}):
+        try:
+            poses[child] = [round(float(v), 9) for v in tree.planar(base, child, stamp)]
+        except TransformLookupError:
+            continue  # a static frame not below the base (a map frame, another robot's): not the robot's
+    return {"base": base, "poses": poses}
 
 
 # ------------------------------------------------------------------------------------------------- accuracy

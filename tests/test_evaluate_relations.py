@@ -297,3 +297,27 @@ def test_a_run_of_a_real_log_cut_has_a_pose_at_every_relation_stamp(tmp_path, ca
 
     stamps, _ = read_tum(out / "trajectory.tum")
     assert np.all(np.diff(stamps) > 0)
+
+
+def test_evaluate_scores_the_laser_frame_of_a_run_folder(tmp_path, capsys):
+    # the robot turns on the spot; its laser sits 0.5 m ahead of the base: the relations (the laser's motion, as
+    # the Freiburg benchmark records it) are met exactly at the laser and missed by the lever arm at the base
+    stamps = np.arange(1, 5, dtype=np.int64) * S
+    wTb = np.array([[0.0, 0.0, t] for t in (0.0, 0.5, 1.0, 1.5)])
+    bTl = np.array([0.5, 0.0, 0.0])
+    wTl = g.compose(wTb, bTl)
+    rel = Relations(t1_ns=stamps[:-1], t2_ns=stamps[1:], T=g.between(wTl[:-1], wTl[1:]))
+    run = tmp_path / "run"
+    run.mkdir()
+    write_tum(run / "trajectory.tum", stamps, wTb)
+    (run / "report.json").write_text(json.dumps({"frames": {"base": "base_link", "poses": {"laser": bTl.tolist()}}}))
+    write_relations(tmp_path / "r.relations", rel)
+    assert main(["evaluate", str(run), "--relations", str(tmp_path / "r.relations"), "--json"]) == 0
+    base = json.loads(capsys.readouterr().out)["relation_errors"]["translation_m"]["mean"]
+    assert base == pytest.approx(2 * 0.5 * math.sin(0.25), rel=1e-6)  # the chord the laser swings through
+    assert main(["evaluate", str(run), "--relations", str(tmp_path / "r.relations"), "--frame", "laser",
+                 "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["relation_errors"]["translation_m"]["mean"] < 1e-9
+    assert main(["evaluate", str(run), "--relations", str(tmp_path / "r.relations"), "--frame", "camera"]) == 2
+    err = capsys.readouterr().err
+    assert "no frame 'camera'" in err and "laser" in err and err.count("\n") == 1

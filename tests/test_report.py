@@ -31,7 +31,9 @@ REPORT = {
                 "keyframe_matches_tried": 3834,
                 "laser_mounting": {"laser_x_m": -0.018, "laser_x_std_m": 0.0007, "pairs": 4932, "turns": 2895,
                                    "tf_laser_x_m": 0.04, "centre_in_base_x_m": 0.058, "base_off_centre": True,
-                                   "base_frame": "base_link", "laser_frame": "laser"}},
+                                   "base_frame": "base_link", "laser_frame": "laser"},
+                "loop_search": {"global searches": 12, "global: accepted (consistent)": 2, "windowed searches": 1585},
+                "breaks": 1},
     "factors": {"relative_pose/dead_reckoning": 42, "relative_pose/loop": 497, "compass_heading": 42,
                 "object_landmark": 104},
     "solver": {"method": "batch", "iterations": 9, "rounds": 3, "initial_error": 794.4, "final_error": 101.4,
@@ -57,6 +59,7 @@ REPORT = {
         "objects": {"rmse_m": 0.0088, "max_m": 0.021, "matched": 2, "missing": [], "unexpected": [],
                     "coverage95": 0.914, "per_object_m": {"O01": 0.005, "O22": 0.011}},
     },
+    "frames": {"base": "base_link", "poses": {"laser": [0.04, 0.0, 0.0]}},
 }
 
 

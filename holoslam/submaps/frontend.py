@@ -32,6 +32,7 @@ Steps (seed 002 §2, SPEC §4 and §8), each a named function or class:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
@@ -75,6 +76,13 @@ class FrontEndConfig:
     # features H (Eq. 13) from every k-th node of a submap: consecutive nodes (0.2 m apart) see the same walls,
     # and extracting them from every node was a sixth of the front end's time on real logs
     feature_every_nodes: int = 5
+    # the odometry across a break of local SLAM (``LocalSlamConfig.lost_gap_s``: the robot may have been carried):
+    # kept as the link's mean, with this much more uncertainty (1 sigma): far more than any loop closure's
+    # (centimetres), so that one overrides it, and no more, since beside centimetre scan matches a weaker link leaves
+    # the marginal covariances numerically indeterminate (aces kidnapped in its middle: 100 m fails, 30 m / 180 deg
+    # and 10 m / 57 deg are solved). The loop search does not rely on it: a window across a break covers everything
+    lost_sigma_m: float = 10.0
+    lost_sigma_deg: float = 57.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,6 +104,8 @@ class FrontEnd:
     odometry_noise: OdometryNoise | None = None  # the dead-reckoning noise model used: the log's or the defaults
     loop_groups: int = 0  # anchor pairs joined by loop closures (each pair's closures count as one, _Graph)
     dead_reckoning_slips: int = 0  # dead-reckoning segments down-weighted for disagreeing with their scan match
+    loop_counts: dict[str, int] = field(default_factory=dict)  # the loop search's outcomes by reason
+    breaks: int = 0  # local SLAM started afresh after a gap in the laser (``LocalSlamConfig.lost_gap_s``)
 
 
 def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "") -> np.ndarray:
@@ -166,6 +176,7 @@ class _Graph:
         self.travel: list[float] = [0.0]  # odometer path length at each anchor
         self._dist: tuple[int, int, np.ndarray] | None = None
         self._infl: tuple[int, float] | None = None
+        self._rel: tuple[int, int, np.ndarray] | None = None
 
     def graph_distance(self, n: int) -> np.ndarray:
         """Shortest path length from every anchor to anchor n: chain edges weigh the distance travelled
@@ -178,11 +189,52 @@ class _Graph:
             N = len(self.est)
             ii, jj = np.array(self.i, np.int64), np.array(self.j, np.int64)
             trav = np.array(self.travel)
-            loop = np.array([k == "loop" for k in self.kind], bool)
-            w = np.where(loop, 1e-6, np.abs(trav[jj] - trav[ii]) + 1e-6)
+            kinds = np.array(self.kind, dtype=object)
+            # a break (kind "lost") is as long as the building is large: a window across it covers everything
+            w = np.where(kinds == "loop", 1e-6, np.where(kinds == "lost", 1e6, np.abs(trav[jj] - trav[ii]) + 1e-6))
             A = coo_matrix((w, (ii, jj)), shape=(N, N)).tocsr()
             self._dist = (*key, dijkstra(A, directed=False, indices=n))
         return self._dist[2]
+
+    def relative_covariances(self, n: int) -> np.ndarray:
+        """(N, 3, 3): the covariance of anchor n relative to each anchor m (right perturbation, n's frame) along
+        the most certain path between them (Dijkstra over the relative poses, the parallel ones fused by their
+        information), propagated at the current estimates. One path ignores the others, so this is an upper
+        bound of the marginal covariance of mTn where the graph has loops. Cached until the graph grows."""
+        key = (n, len(self.i))
+        if self._rel is not None and self._rel[:2] == key:
+            return self._rel[2]
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import dijkstra
+
+        N = len(self.est)
+        meas = self.measurements()
+        info: dict[tuple[int, int], np.ndarray] = {}
+        for i, j, C in zip(meas.i.tolist(), meas.j.tolist(), meas.cov_iTj, strict=True):
+            info[(i, j)] = info.get((i, j), np.zeros((3, 3))) + np.linalg.inv(C)
+        pairs = list(info)
+        covs = {e: np.linalg.inv(info[e]) for e in pairs}
+        w = [math.sqrt(covs[e][0, 0] + covs[e][1, 1]) + 5.0 * math.sqrt(covs[e][2, 2]) + 1e-9 for e in pairs]
+        A = coo_matrix((w, ([e[0] for e in pairs], [e[1] for e in pairs])), shape=(N, N)).tocsr()
+        dist, pred = dijkstra(A, directed=False, indices=n, return_predecessors=True)
+        est = np.array(self.est)
+        out = np.full((N, 3, 3), np.nan)
+        out[n] = 0.0
+        for m in np.argsort(dist, kind="stable")[1:].tolist():
+            p = int(pred[m])
+            if p < 0:
+                break
+            # mTn = mTp ∘ pTn: cov(mTn) = Ad(nTp) cov(mTp) Ad(nTp)^T + cov(pTn)
+            C = covs[(m, p)] if (m, p) in covs else covs[(p, m)]
+            if (m, p) not in covs:  # the edge measures pTm (covariance at m): mTp = its inverse, at p
+                J = g.adjoint(g.between(est[p], est[m]))
+                C = J @ C @ J.T
+            Ad = g.adjoint(g.between(est[n], est[p]))
+            out[m] = Ad @ C @ Ad.T + out[p]
+        unreached = ~np.isfinite(out[:, 0, 0])
+        out[unreached] = np.diag([1e12, 1e12, np.pi ** 2])
+        self._rel = (*key, out)
+        return out
 
     def add(self, i: int, j: int, T, cov, kind: str) -> None:
         self.i.append(i)
@@ -291,7 +343,8 @@ def build_problem(
     problem, skipped, drop = _problem(run, closed, anchors, graph, observations, cfg)  # steps 4-6
     return FrontEnd(tuple(closed), problem, run.dr_stamps_ns, run.dr_wTb, anchors, run.bTs, skipped,
                     loops.tried, tuple(sorted(drop)), graph.dead_reckoning_inflation(), run.noise,
-                    len(graph.loop_groups()), len(graph.dead_reckoning_slips()))
+                    len(graph.loop_groups()), len(graph.dead_reckoning_slips()), dict(sorted(loops.counts.items())),
+                    sum(k == "lost" for k in graph.kind))
 
 
 @dataclass(frozen=True, eq=False)
@@ -362,7 +415,8 @@ def _local_slam(
     loops = LoopSearch(cfg.loops, cfg.local.match)
     graph = _Graph(run.dr_wTb[0])
     closed: list[Submap] = []
-    n_arrivals, last_t, n_nodes = 0, int(run.scans[0].stamp_ns), 0
+    n_arrivals, n_breaks, last_t, n_nodes = 0, 0, int(run.scans[0].stamp_ns), 0
+    lost = np.diag([cfg.lost_sigma_m ** 2] * 2 + [np.radians(cfg.lost_sigma_deg) ** 2])
     every = max(1, -(-len(run.scans) // 50))
     for k, scan in enumerate(run.scans):
         if progress is not None and k % every == 0:
@@ -381,20 +435,28 @@ def _local_slam(
                         scan.points(), np.where(scan.valid, scan.ranges, np.inf).astype(np.float64),
                         scan.angles, float(travelled[k]))
         last_t, n_nodes = t, n_nodes + 1
-        for m, n, mTn, cov_mTn in slam.arrivals[n_arrivals:]:
+        new = sorted([(n, m, mTn, cov) for m, n, mTn, cov in slam.arrivals[n_arrivals:]]
+                     + [(n, m, None, None) for m, n in slam.breaks[n_breaks:]], key=lambda e: e[0])
+        for n, m, mTn, cov_mTn in new:
             dr = dead_reckon(ost, opose, slam.anchor_stamps[m], slam.anchor_stamps[n], **run.hargs)
-            graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
-            graph.add(m, n, mTn, cov_mTn, "scan_match")
-            graph.est.append(g.compose(graph.est[m], mTn))
+            if mTn is None:  # a break: the odometry alone, as uncertain as the building is large
+                graph.add(m, n, dr.end, dr.cov_aTb_end + lost, "lost")
+                graph.est.append(g.compose(graph.est[m], dr.end))
+            else:
+                graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
+                graph.add(m, n, mTn, cov_mTn, "scan_match")
+                graph.est.append(g.compose(graph.est[m], mTn))
             graph.travel.append(float(travelled[k]))
-        n_arrivals = len(slam.arrivals)
+        n_arrivals, n_breaks = len(slam.arrivals), len(slam.breaks)
         for sm in slam.pop_finished():  # the growing grids are dropped here: only the cropped ones are kept
             closed.append(_submap_record(sm, cfg, "scans"))
             if isinstance(closed[-1].grid, ProbGrid):  # a finished submap's grid (None without build_grids)
                 loops.add_submap(sm.index, closed[-1].grid)
         if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
-                                 graph.graph_distance(node.submap), float(travelled[k]))
+                                 graph.graph_distance(node.submap), float(travelled[k]),
+                                 graph.relative_covariances(node.submap), np.array(graph.travel),
+                                 _bundle(slam, node, cfg.loops.global_bundle_m))
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found:
@@ -403,6 +465,20 @@ def _local_slam(
     closed.extend(_submap_record(sm, cfg, "scans") for sm in slam.pop_finished())
     closed.sort(key=lambda sm: sm.index)
     return closed, graph, loops
+
+
+def _bundle(slam: LocalSlam, node, length_m: float) -> np.ndarray:
+    """The points of ``node`` and of the nodes of its submap within ``length_m`` of path behind it, in the
+    node's base frame (local SLAM's poses: accurate to centimetres over a few metres)."""
+    host = next((sm for sm in slam.active if sm.index == node.submap), None)
+    if host is None or not host.aTb:
+        return node.b_points
+    poses = np.array(host.aTb)
+    step = np.hypot(*np.diff(poses[::-1, :2], axis=0).T)
+    keep = int(np.searchsorted(np.cumsum(step), length_m, side="right")) + 1
+    bTa = g.inverse(node.aTb)
+    parts = [g.transform_points(g.compose(bTa, poses[-1 - q]), host.b_points[-1 - q]) for q in range(keep)]
+    return np.vstack(parts)
 
 
 def _problem(

@@ -54,6 +54,13 @@ class LocalSlamConfig:
     track_angular_window_deg: float = 5.0  # localise the scans between nodes too (a matched pose at every scan stamp)
     map_drift_per_m: float = 0.005  # m of map error per m travelled inside a submap (1 sigma)
     map_drift_deg_per_m: float = 0.05  # deg per m
+    # s; a node whose scan follows the last node's by more than this starts afresh ("lost"): the active submaps are
+    # finished and a new one is anchored at it, tied to the old ones by the odometry alone with the lost
+    # covariance (``FrontEndConfig.lost_sigma_m``), so that only a loop closure can place it. The laser fell silent
+    # (a driver restart) or the robot was carried: either way its map of the place it comes back to must not be
+    # glued to the old one by a prediction nothing checked. 10 s is twice the motion filter's time (a standing
+    # robot's laser yields a node every motion_time_s) and 7x the slowest real laser period met (1.4 Hz)
+    lost_gap_s: float = 10.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +136,7 @@ class LocalSlam:
         self._track_cfg = replace(cfg.match, angular_window_deg=cfg.track_angular_window_deg)
         self._pyramid = WidePyramid()  # the wide search's pyramid of the host's grid, while it is unchanged
         self.arrivals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (m, n, mTn, cov) of new anchors
+        self.breaks: list[tuple[int, int]] = []  # (m, n): submap n started afresh after m (``lost_gap_s``)
         # the laser's own motion: the last matched pose (host frame, host index, stamp) and the body-frame
         # velocity between the last two (m/s, m/s, rad/s), the alternative to a wheel odometry that is wrong
         self._last_fix: tuple[int, int, np.ndarray] | None = None
@@ -148,6 +156,8 @@ class LocalSlam:
         insert it. ``odo`` is the odometry pose at the stamp and ``cov_odo_step`` the covariance of the odometry
         increment since the last node, asked for only when the match is not trusted."""
         b_pts = g.transform_points(self.bTs, s_points)
+        if self.active and self.nodes and stamp - self._last_stamp > self.cfg.lost_gap_s * 1e9:
+            self._lose()
         if not self.active:
             self._start(stamp, travelled)
             node = Node(int(stamp), self.active[0].index, np.zeros(3), np.zeros((3, 3)), b_pts, 1.0, True)
@@ -264,6 +274,13 @@ class LocalSlam:
         if reg.ok and np.hypot(*(reg.aTb[:2] - aTb[:2])) < self.cfg.grid.resolution:
             return reg.aTb
         return aTb
+
+    def _lose(self) -> None:
+        """Finish the active submaps; the next node starts a new one, tied to them only by a break."""
+        last = self.active[-1].index
+        self.close()
+        self.breaks.append((last, self.next_index))
+        self._last_fix, self._twist = None, np.zeros(3)
 
     def pop_finished(self) -> list[ActiveSubmap]:
         """The submaps finished since the last call (the caller keeps what it needs of them)."""

@@ -26,12 +26,13 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from holoslam import geometry as g
+from holoslam.submaps.loop_consistency import ConsistencyConfig, LoopConsistency
 from holoslam.submaps.probgrid import ProbGrid
 from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
 from holoslam.submaps.scanmatch import MatchConfig, match_scan
@@ -42,13 +43,19 @@ __all__ = ["LoopConfig", "LoopCandidate", "LoopSearch"]
 @dataclass(frozen=True, slots=True)
 class LoopConfig:
     every_nodes: int = 3  # search from every k-th node (Cartographer samples 30 % of pairs)
-    max_constraint_distance: float = 15.0  # m between the node and an old submap's anchor
+    max_constraint_distance: float = 15.0  # m between the node and an old submap's anchor (windowed searches)
     base_window_xy: float = 1.0  # m, window half-width right after a closure
     window_rate: float = 0.05  # m of window per m travelled since the last closure
-    max_window_xy: float = 7.0  # m
+    # m and deg: the largest window searched at the map's resolution, whose match is accepted on its own
+    # (Cartographer's +-7 m, +-30 deg). A wider window (the drift since the last closure, or ``window_sigmas`` of
+    # the node's covariance relative to the old submap, says the estimate may be further off) has no cap: it is
+    # searched by the global search (``global_search``: the whole submap if need be, every heading) and its match
+    # must agree with another (``consistency``)
+    max_window_xy: float = 7.0
     base_window_deg: float = 10.0
     window_deg_rate: float = 1.0  # deg per m travelled since the last closure
     max_window_deg: float = 30.0
+    window_sigmas: float = 3.0  # the window covers this many sigmas of the node's pose relative to the old submap
     min_score: float = 0.55
     min_score_wide: float = 0.6
     wide_window_xy: float = 3.0  # m
@@ -88,6 +95,28 @@ class LoopConfig:
     ambiguity_exclude_xy: float = 0.15
     ambiguity_exclude_deg: float = 2.0  # deg, half-width of the box in angle (measured with the 0.15 m above)
     ambiguity_peaks: int = 1  # second peaks sought, each outside the boxes of the ones before ("span")
+    # The global search (``global_search``) for windows beyond max_window_xy / max_window_deg. Coarse grid: 4x the
+    # map's 5 cm (measured on aces' submaps: 20-70 ms per whole submap and every heading instead of 0.3-1.2 s)
+    global_resolution_m: float = 0.2
+    global_max_range_m: float = 15.0  # m, points the coarse search uses (the fine steps use every point)
+    # mean probability of the node's bundle (``global_bundle_m``) on the coarse grid. Measured on aces (first 900 s,
+    # the 15 nodes of its windowed closures searched over whole submaps at every heading): the right submap's best
+    # scores 0.535-0.60 (10-90 %) and lies at the right pose every time; two wrong submaps' best 0.31-0.36. A
+    # single scan does not separate them (right 0.64-0.77, wrong 0.49-0.61): hence the bundle
+    global_coarse_min_score: float = 0.45
+    # the node's own scan at the map's resolution within global_check_xy / _deg of the coarse best: right 0.58-0.73,
+    # wrong 0.40-0.51 in the same measurement; a windowed closure's min_score
+    global_min_score: float = 0.55
+    global_per_node: int = 2  # global searches per searching node, the least recently searched submaps first
+    global_check_xy: float = 1.0  # m, the fine window around the coarse best (5 coarse cells)
+    global_check_deg: float = 5.0  # deg (a few coarse angular steps)
+    global_ambiguity_peaks: int = 3  # second peaks of a global match: kept with their spread ("span")
+    # m of the robot's path behind the node whose scans (in the node's frame, by local SLAM's poses) the global
+    # search matches together with the node's: one 180-beam scan fits many places of a building, a few metres of
+    # them few; thinned by the adaptive voxel filter to voxels up to bundle_voxel_m, at least 300 points
+    global_bundle_m: float = 4.0
+    global_bundle_voxel_m: float = 0.15
+    consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,6 +127,7 @@ class LoopCandidate:
     cov_mTn: np.ndarray
     score: float
     window_xy: float
+    travelled: float = math.nan  # m, the odometer at the node (closures of nearby nodes cannot vouch for each other)
 
 
 class LoopSearch:
@@ -118,6 +148,10 @@ class LoopSearch:
         self.pairs: dict[tuple[int, int], int] = {}
         self.last_wide: dict[int, float] = {}
         self.tried = 0
+        self.pre_coarse: OrderedDict[int, object] = OrderedDict()  # coarse grids of the global search
+        self.last_global: dict[int, float] = {}  # odometer reading at each old submap's last global search
+        self.consistency = LoopConsistency(cfg.consistency)
+        self.counts: dict[str, int] = {}  # searches and their outcomes, by reason (the run report's loop section)
         self.ambiguous = 0  # matches with a second peak (rejected or widened, ``LoopConfig.ambiguity``)
         # (old, new, best bnb.Match, its second peaks) of every branch-and-bound match checked, for diagnostics
         self.peaks: list[tuple[int, int, object, list]] = []
@@ -137,19 +171,38 @@ class LoopSearch:
             self.pre.popitem(last=False)
         return self.pre[m]
 
-    def window(self, graph_distance_m: float) -> tuple[float, float]:
-        """Search window half-widths (m, rad) for a pair this far apart in the graph."""
+    def window(self, graph_distance_m: float, cov_mTr: np.ndarray | None = None,
+               mTr: np.ndarray | None = None) -> tuple[float, float, float]:
+        """Search window half-widths (x m, y m, rad) in the old submap's frame for a node this far from it in the
+        graph (the drift since the last closure) and, when given, with this covariance of its pose ``mTr`` there:
+        the larger of the two, uncapped (module docstring)."""
         c = self.cfg
-        xy = min(c.max_window_xy, c.base_window_xy + c.window_rate * graph_distance_m)
-        deg = min(c.max_window_deg, c.base_window_deg + c.window_deg_rate * graph_distance_m)
-        return xy, math.radians(deg)
+        xy = c.base_window_xy + c.window_rate * graph_distance_m
+        wx = wy = xy
+        th = math.radians(c.base_window_deg + c.window_deg_rate * graph_distance_m)
+        if cov_mTr is not None and mTr is not None:
+            R = g.rot2(float(mTr[2]))
+            S = R @ np.asarray(cov_mTr)[:2, :2] @ R.T
+            k = c.window_sigmas
+            wx, wy = max(wx, k * math.sqrt(max(S[0, 0], 0.0))), max(wy, k * math.sqrt(max(S[1, 1], 0.0)))
+            th = max(th, k * math.sqrt(max(float(cov_mTr[2, 2]), 0.0)))
+        return wx, wy, min(th, math.pi)
+
+    def _is_global(self, wx: float, wy: float, wth: float) -> bool:
+        return max(wx, wy) > self.cfg.max_window_xy or wth > math.radians(self.cfg.max_window_deg) + 1e-12
 
     def search(self, n: int, nTr: np.ndarray, cov_nTr: np.ndarray, b_pts: np.ndarray, est_wTa: np.ndarray,
-               graph_distance: np.ndarray, travelled: float = 0.0) -> list[LoopCandidate]:
+               graph_distance: np.ndarray, travelled: float = 0.0, rel_cov: np.ndarray | None = None,
+               travel: np.ndarray | None = None, bundle: np.ndarray | None = None) -> list[LoopCandidate]:
         """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps;
         ``graph_distance[m]`` is the graph path length from m to n (see the module docstring); ``travelled``
         the odometer reading, which spaces wide searches of one old submap ``wide_search_spacing`` apart (a
-        wide window costs ~10 ms; one every couple of metres finds a revisit as surely as one per node)."""
+        wide window costs ~10 ms; one every couple of metres finds a revisit as surely as one per node).
+        ``rel_cov[m]`` (optional): the covariance of anchor n relative to anchor m (n's frame), which widens the
+        window to ``window_sigmas`` of it; ``travel[m]`` the odometer at each anchor (the consistency test's
+        drift allowance); ``bundle`` the points of the node and those behind it (``global_bundle_m``, node frame)
+        that the global search matches. Closures of windowed searches are returned at once; those of global ones
+        when another agrees (``loop_consistency``)."""
         c = self.cfg
         wTr = g.compose(est_wTa[n], nTr)
         olds = [m for m in self.grids if m < n - c.skip_recent and self.pairs.get((m, n), 0) < c.max_per_pair]
@@ -158,12 +211,21 @@ class LoopSearch:
         olds_arr = np.array(olds)
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
+        globals_: list[tuple[int, np.ndarray, float, float, float]] = []
         searched = 0
         search_pts = (adaptive_voxel_filter(b_pts, ScanFilterConfig(c.search_voxel_m, c.search_min_points))
                       if c.search_voxel_m > 0 else b_pts)
+        A = g.adjoint(g.inverse(nTr))
         for q in np.argsort(dist, kind="stable").tolist():  # nearest first
             m, d = int(olds_arr[q]), float(dist[q])
-            wxy, wth = self.window(float(graph_distance[m]))
+            seed = g.between(est_wTa[m], wTr)
+            cov_mTr = None if rel_cov is None else A @ rel_cov[m] @ A.T + cov_nTr
+            wx, wy, wth = self.window(float(graph_distance[m]), cov_mTr, seed)
+            if self._is_global(wx, wy, wth):  # beyond the caps: the global search too, within its budget
+                globals_.append((m, seed, wx, wy, wth))
+            wx, wy = min(wx, c.max_window_xy), min(wy, c.max_window_xy)
+            wth = min(wth, math.radians(c.max_window_deg))
+            wxy = max(wx, wy)
             if d > c.max_constraint_distance + wxy:
                 continue
             if wxy <= c.wide_window_xy and searched >= c.max_searches_per_node:
@@ -173,37 +235,134 @@ class LoopSearch:
                 continue
             if wide:
                 self.last_wide[m] = travelled
-            min_score = c.min_score_wide if wide else c.min_score
-            seed = g.between(est_wTa[m], wTr)
-            self.tried += 1
             searched += not wide
-            win = _Window(self._precomputed(m), search_pts, seed, wxy, wth)
-            hit = win.best(min_score, c.ambiguity_margin if c.ambiguity != "off" else -1.0)
-            if hit is None:
-                continue
-            peaks = []
-            if c.ambiguity != "off":  # before the refinement: an ambiguous match is not worth refining
-                peaks = win.second_peaks(hit, c.ambiguity_margin, c.ambiguity_exclude_xy,
-                                         math.radians(c.ambiguity_exclude_deg), c.ambiguity_peaks,
-                                         first=c.ambiguity == "reject")
-                self.peaks.append((m, n, hit, peaks))
-                if peaks:
-                    self.ambiguous += 1
-                    if c.ambiguity == "reject":
-                        continue
-            gr = self.grids[m]
-            ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, hit.aTb, self.refine_cfg)
-            if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * gr.resolution:
-                continue
-            cov_aTb = ref.cov_aTb
-            if peaks:
-                cov_aTb = spanning_covariance(ref.aTb, cov_aTb, [p.aTb for p in peaks])
-            from holoslam.submaps.deadreckon import relative_anchor_pose
-
-            mTn, cov_mTn = relative_anchor_pose(ref.aTb, cov_aTb, nTr, cov_nTr)
-            found.append(LoopCandidate(m, n, mTn, cov_mTn, ref.score, wxy))
-            self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
+            cand = self._windowed(m, n, nTr, cov_nTr, b_pts, search_pts, seed, (wx, wy), wth, wide)
+            if cand is not None:
+                found.append(cand)
+        if globals_ and travel is not None:
+            g_pts = b_pts if bundle is None else adaptive_voxel_filter(
+                bundle, ScanFilterConfig(c.global_bundle_voxel_m, 300))
+            found.extend(self._global_round(n, nTr, cov_nTr, b_pts, g_pts, globals_, est_wTa, travel, travelled))
         return found
+
+    def _count(self, reason: str) -> None:
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+
+    def _windowed(self, m: int, n: int, nTr, cov_nTr, b_pts, search_pts, seed, wxy, wth: float,
+                  wide: bool) -> LoopCandidate | None:
+        """One windowed search (at most max_window_xy / max_window_deg), accepted on its own."""
+        c = self.cfg
+        min_score = c.min_score_wide if wide else c.min_score
+        self.tried += 1
+        self._count("windowed searches")
+        win = _Window(self._precomputed(m), search_pts, seed, wxy, wth)
+        hit = win.best(min_score, c.ambiguity_margin if c.ambiguity != "off" else -1.0)
+        if hit is None:
+            self._count("windowed: no match above the score")
+            return None
+        peaks = []
+        if c.ambiguity != "off":  # before the refinement: an ambiguous match is not worth refining
+            peaks = win.second_peaks(hit, c.ambiguity_margin, c.ambiguity_exclude_xy,
+                                     math.radians(c.ambiguity_exclude_deg), c.ambiguity_peaks,
+                                     first=c.ambiguity == "reject")
+            self.peaks.append((m, n, hit, peaks))
+            if peaks:
+                self.ambiguous += 1
+                if c.ambiguity == "reject":
+                    self._count("windowed: ambiguous (a second peak)")
+                    return None
+        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, min_score, float(np.max(wxy)))
+        self._count("windowed: accepted" if cand is not None else "windowed: refinement failed")
+        if cand is not None:
+            self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
+        return cand
+
+    def _refined(self, m: int, n: int, nTr, cov_nTr, b_pts, hit, peaks, min_score: float,
+                 window_xy: float) -> LoopCandidate | None:
+        """The branch-and-bound pose refined against m's grid, with the peaks' spread in its covariance."""
+        from holoslam.submaps.deadreckon import relative_anchor_pose
+
+        gr = self.grids[m]
+        ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, hit.aTb, self.refine_cfg)
+        if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * gr.resolution:
+            return None
+        cov_aTb = ref.cov_aTb
+        if peaks:
+            cov_aTb = spanning_covariance(ref.aTb, cov_aTb, [p.aTb for p in peaks])
+        mTn, cov_mTn = relative_anchor_pose(ref.aTb, cov_aTb, nTr, cov_nTr)
+        return LoopCandidate(m, n, mTn, cov_mTn, ref.score, window_xy)
+
+    def _coarse(self, m: int):
+        """m's grid max-pooled to ``global_resolution_m``, precomputed (cached like ``_precomputed``)."""
+        from holoslam.submaps import bnb
+        from holoslam.submaps.global_search import pool_grid
+
+        if m in self.pre_coarse:
+            self.pre_coarse.move_to_end(m)
+            return self.pre_coarse[m]
+        gr = self.grids[m]
+        f = max(1, int(round(self.cfg.global_resolution_m / gr.resolution)))
+        self.pre_coarse[m] = bnb.precompute(pool_grid(gr.prob, f), self.cfg.depth, origin=gr.origin,
+                                            res=gr.resolution * f)
+        if len(self.pre_coarse) > self.cfg.precomputed_cache:
+            self.pre_coarse.popitem(last=False)
+        return self.pre_coarse[m]
+
+    def _global_round(self, n: int, nTr, cov_nTr, b_pts, g_pts, targets, est_wTa, travel, travelled: float):
+        """Global searches of this node: ``global_per_node`` of the ``targets`` (m, seed, wx, wy, wth), the
+        least recently searched first; their closures go through the consistency test."""
+        c = self.cfg
+        targets = [t for t in targets if travelled - self.last_global.get(t[0], -np.inf) >= c.wide_search_spacing]
+        targets.sort(key=lambda t: self.last_global.get(t[0], -np.inf))
+        out: list[LoopCandidate] = []
+        for m, seed, wx, wy, wth in targets[: c.global_per_node]:
+            self.last_global[m] = travelled
+            cand = self._global(m, n, nTr, cov_nTr, b_pts, g_pts, seed, wx, wy, wth)
+            if cand is None:
+                continue
+            cand = replace(cand, travelled=travelled)
+            accepted = self.consistency.offer(cand, est_wTa, travel)
+            self._count("global: accepted (consistent)" if accepted else "global: waiting for agreement")
+            for a in accepted:
+                if a is not cand:
+                    self._count("global: accepted later (consistent)")
+                self.pairs[(a.old, a.new)] = self.pairs.get((a.old, a.new), 0) + 1
+            out.extend(accepted)
+        return out
+
+    def _global(self, m: int, n: int, nTr, cov_nTr, b_pts, g_pts, seed, wx: float, wy: float,
+                wth: float) -> LoopCandidate | None:
+        """One global search (``global_search``): coarse over the window clipped to m's grid, fine around the
+        coarse best, second peaks kept in the covariance, refinement."""
+        from holoslam.submaps.global_search import clip_window, coarse_match
+
+        c = self.cfg
+        pre = self._coarse(m)
+        clipped = clip_window(seed, wx, wy, pre.origin, pre.shape, pre.res)
+        if clipped is None:
+            self._count("global: window off the submap")
+            return None
+        self.tried += 1
+        self._count("global searches")
+        centre, cx, cy = clipped
+        coarse = coarse_match(pre, g_pts, centre, cx, cy, wth, c.global_coarse_min_score, c.global_max_range_m)
+        if coarse is None:
+            self._count("global: no match above the score")
+            return None
+        win = _Window(self._precomputed(m), b_pts, coarse.aTb, c.global_check_xy, math.radians(c.global_check_deg))
+        hit = win.best(c.global_min_score, c.ambiguity_margin)
+        if hit is None:
+            self._count("global: fine match below the score")
+            return None
+        peaks = win.second_peaks(hit, c.ambiguity_margin, c.ambiguity_exclude_xy,
+                                 math.radians(c.ambiguity_exclude_deg), c.global_ambiguity_peaks)
+        if peaks:
+            self.ambiguous += 1
+            self._count("global: ambiguous, kept with the peaks' spread")
+        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, c.global_min_score, max(wx, wy))
+        if cand is None:
+            self._count("global: refinement failed")
+        return cand
 
 
 class _Window:

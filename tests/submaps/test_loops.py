@@ -65,13 +65,19 @@ def _search(household_place, drift_m: float, graph_distance_m: float):
     return ls, found, g.between(wTm, wTn)
 
 
-def test_window_grows_with_the_graph_distance_and_is_capped():
+def test_window_grows_with_the_graph_distance_and_the_covariance_without_a_cap():
     ls = LoopSearch(LoopConfig(), MatchConfig())
-    xy, th = ls.window(0.0)
-    assert xy == pytest.approx(1.0) and th == pytest.approx(math.radians(10.0))
-    xy, th = ls.window(40.0)  # 5 cm and 1 deg per metre of graph path
-    assert xy == pytest.approx(3.0) and th == pytest.approx(math.radians(30.0))  # the angle is capped at 30 deg
-    assert ls.window(1000.0) == pytest.approx((7.0, math.radians(30.0)))
+    wx, wy, th = ls.window(0.0)
+    assert wx == wy == pytest.approx(1.0) and th == pytest.approx(math.radians(10.0))
+    wx, wy, th = ls.window(40.0)  # 5 cm and 1 deg per metre of graph path
+    assert wx == pytest.approx(3.0) and th == pytest.approx(math.radians(50.0))
+    assert ls._is_global(wx, wy, th)  # beyond +-30 deg: the global search takes it
+    wx, wy, th = ls.window(1000.0)
+    assert wx == pytest.approx(51.0) and th == pytest.approx(math.pi)  # no cap but a whole turn
+    # 3 sigma of the node's covariance in the old submap's frame: 4 m along x of the node, which faces +y there
+    wx, wy, th = ls.window(0.0, np.diag([4.0 / 3, 0.1, 0.001]) ** 2 * np.array([1, 1, 1]) ** 0,
+                           np.array([0.0, 0.0, math.pi / 2]))
+    assert wy == pytest.approx(4.0 / 3 * 3, rel=1e-6) and wx == pytest.approx(1.0)
 
 
 @pytest.mark.parametrize("drift_m", [1.0, 2.5, 4.0])

@@ -1,0 +1,99 @@
+"""Harder logs derived from a real one: fewer scans, fewer beams, shorter ranges, and a kidnapped robot.
+
+Real scans beat any simulator, so the hard cases of the loop search (a sparse, slow laser on a large building;
+a robot carried away with its wheels turning; a session started where the map does not know it) are made from the
+shared real logs by taking information away, never by inventing any. Each function takes a
+:class:`holoslam.types.LogData` and returns a new one; nothing else of the log changes, so every stamp of the
+original's ground truth (``.relations``) still names the same scan.
+
+- :func:`decimate_scans`: keep scans at most ``rate_hz``, the first of each period (the Freiburg hospital log's
+  laser runs at 1.4 Hz where intel's runs at 5 Hz);
+- :func:`drop_beams`: keep every k-th beam of every scan (180 beams over 180 degrees -> 90);
+- :func:`cap_ranges`: returns beyond ``max_range_m`` become no-returns (a cheaper laser);
+- :func:`kidnap`: from stamp ``at_ns`` on, the odometry (and the odometry frame's transforms) is moved by a
+  rigid transform the mapper is not told about, and the scans of the ``gap_s`` after it are removed, so the
+  two parts of the log share no scan that would let the local matcher bridge them: only a global search can.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from holoslam import geometry as g
+from holoslam.types import LogData, Odometry, Pose2, Scan
+
+__all__ = ["decimate_scans", "drop_beams", "cap_ranges", "kidnap"]
+
+
+def decimate_scans(log: LogData, rate_hz: float) -> LogData:
+    """The log with scans at most ``rate_hz``: a scan is kept when at least 1/rate_hz has passed since the last
+    kept one (the first is kept)."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"decimate_scans: rate_hz must be a finite number > 0, got {rate_hz}")
+    period = int(round(1e9 / rate_hz))
+    kept: list[Scan] = []
+    for s in log.scans:
+        if not kept or s.stamp_ns - kept[-1].stamp_ns >= period:
+            kept.append(s)
+    return replace(log, scans=tuple(kept))
+
+
+def drop_beams(log: LogData, keep_every: int) -> LogData:
+    """The log with every ``keep_every``-th beam of each scan (the first beam kept; the angular step grows
+    by that factor)."""
+    if keep_every < 1:
+        raise ValueError(f"drop_beams: keep_every must be >= 1, got {keep_every}")
+    scans = tuple(replace(s, ranges=s.ranges[::keep_every], valid=s.valid[::keep_every],
+                          angle_increment=s.angle_increment * keep_every) for s in log.scans)
+    return replace(log, scans=scans)
+
+
+def cap_ranges(log: LogData, max_range_m: float) -> LogData:
+    """The log with every return beyond ``max_range_m`` made a no-return (its beam invalid)."""
+    if not (math.isfinite(max_range_m) and max_range_m > 0):
+        raise ValueError(f"cap_ranges: max_range_m must be a finite number > 0, got {max_range_m}")
+    scans = tuple(replace(s, valid=s.valid & (s.ranges <= max_range_m), range_max=min(s.range_max, max_range_m))
+                  for s in log.scans)
+    return replace(log, scans=scans)
+
+
+def kidnap(log: LogData, at_ns: int, jump: np.ndarray, gap_s: float = 30.0) -> LogData:
+    """The log with the robot kidnapped at ``at_ns``: every odometry pose from then on is ``jump`` ∘ odomTb
+    (``jump`` = (x, y, theta) in the odometry frame: the odometer believes the robot was carried by it), the
+    dynamic transforms from the odometry frame likewise, and the scans in [at_ns, at_ns + gap_s) removed. The
+    compass is left as it is (it measures the true heading). Ground truth, images and tags are unchanged."""
+    jump = np.asarray(jump, np.float64).reshape(3)
+    if not np.all(np.isfinite(jump)):
+        raise ValueError(f"kidnap: jump must be finite (x, y, theta), got {jump}")
+    if not (math.isfinite(gap_s) and gap_s >= 0):
+        raise ValueError(f"kidnap: gap_s must be a finite number >= 0, got {gap_s}")
+    odo: list[Odometry] = []
+    for o in log.odometry:
+        if o.stamp_ns >= at_ns:
+            x, y, th = g.compose(jump, o.odomTb.as_array())
+            cov = o.cov_odomTb
+            if cov is not None:  # the covariance is in the odometry frame's axes: rotate it with the jump
+                R = np.eye(3)
+                R[:2, :2] = [[math.cos(jump[2]), -math.sin(jump[2])], [math.sin(jump[2]), math.cos(jump[2])]]
+                cov = R @ cov @ R.T
+            o = replace(o, odomTb=Pose2(float(x), float(y), float(th)), cov_odomTb=cov)
+        odo.append(o)
+    odom_frames = {o.frame_id for o in log.odometry}
+    transforms = tuple(_moved_transform(t, jump) if (not t.static and t.parent in odom_frames
+                                                     and t.stamp_ns >= at_ns) else t for t in log.transforms)
+    gap_end = at_ns + int(round(gap_s * 1e9))
+    scans = tuple(s for s in log.scans if not at_ns <= s.stamp_ns < gap_end)
+    return replace(log, odometry=tuple(odo), transforms=transforms, scans=scans)
+
+
+def _moved_transform(t, jump: np.ndarray):
+    """A planar jump ∘ parentTchild for a 3D transform (z and the tilt kept)."""
+    c, s = math.cos(jump[2]), math.sin(jump[2])
+    x, y, z = t.translation
+    qx, qy, qz, qw = t.rotation_xyzw
+    hc, hs = math.cos(jump[2] / 2), math.sin(jump[2] / 2)  # q_jump = (0, 0, hs, hc); q' = q_jump * q
+    q = (hc * qx - hs * qy, hc * qy + hs * qx, hc * qz + hs * qw, hc * qw - hs * qz)
+    return replace(t, translation=(jump[0] + c * x - s * y, jump[1] + s * x + c * y, z), rotation_xyzw=q)

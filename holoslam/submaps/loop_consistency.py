@@ -1,0 +1,101 @@
+"""Consistency among loop closures: a closure found by a wide or global search joins the graph only when another
+closure from elsewhere agrees with it.
+
+A wide search (metres of window, any heading) has many chances to put a scan where it fits but does not belong:
+the same corridor further along, the twin room on the other floor wing. One such closure looks as good as a right
+one. Two right closures between the same two parts of the map, though, must move the new part by the *same*
+rigid correction, and two wrong ones almost never do (Mangelson et al., "Pairwise Consistent Measurement Set
+Maximization", ICRA 2018; Olson's single-cluster graph partitioning and Latif's RRR rest on the same idea).
+
+A closure c = (m, n, mTn) says where anchor n lies once the old map's anchor m is taken as right: its world
+correction is Delta_c = est(m) ∘ mTn ∘ est(n)^-1, the rigid motion that takes the current estimate of the new
+part onto the old one. Closures c1, c2 agree when Delta_c1 and Delta_c2 move anchor n2 to the same pose within
+their covariances plus the drift the map may have between them: ``sigma_m + rate * d`` (m) and ``sigma_deg +
+deg_rate * d`` (deg), d the distance the robot travelled between n1 and n2 plus between m1 and m2 (local SLAM's
+drift over that much travel; the map is rigid below it). The squared Mahalanobis distance of the difference must
+stay under the chi-square(3) gate. A closure is accepted when at least ``min_agreeing`` - 1 others agree with it;
+those are accepted with it. The others wait (``pending``), at most ``max_pending``, the oldest forgotten first.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from holoslam import geometry as g
+
+__all__ = ["ConsistencyConfig", "LoopConsistency", "agreement"]
+
+
+@dataclass(frozen=True, slots=True)
+class ConsistencyConfig:
+    """Settings of the agreement test. The drift allowance is local SLAM's own drift: a few per cent of the
+    distance travelled on real logs (relations 5-30 s apart on the Freiburg hospital log: 0.12 m mean over
+    ~10 m; ``LocalSlamConfig.map_drift_per_m`` 0.5 % at 1 sigma inside one submap); the gate is chi-square(3)
+    at 99.9 %."""
+
+    min_agreeing: int = 2  # closures, this one included, that must agree before any of them is accepted
+    # m of travel between the nodes of two closures that may vouch for each other: nodes closer than this see the
+    # same walls, and a place that aliases one of them aliases the other alike (two nodes 0.6 m apart of one aces
+    # submap both put it 30 m from where it is, identically)
+    min_separation_m: float = 4.0
+    sigma_m: float = 0.2  # m, floor of the allowance (two 5 cm grids' lattices and their refinements)
+    sigma_deg: float = 1.0  # deg
+    rate: float = 0.02  # m of allowance per m travelled between the closures' anchors
+    deg_rate: float = 0.05  # deg per m travelled
+    gate: float = 16.27  # chi-square(3) 99.9 %
+    max_pending: int = 200  # closures waiting for agreement; older ones are forgotten
+
+
+def _correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:
+    """Delta = wTm ∘ mTn ∘ wTn^-1: the world motion that puts the estimate of n where the closure says it is."""
+    return g.compose(g.compose(wTm, mTn), g.inverse(wTn))
+
+
+def agreement(c1, c2, est_wTa: np.ndarray, travel: np.ndarray, cfg: ConsistencyConfig) -> float:
+    """The squared Mahalanobis distance between what closures ``c1`` and ``c2`` (``LoopCandidate``-like: old,
+    new, mTn, cov_mTn, travelled: the odometer at the node) say of anchor c2.new (module docstring); infinite for
+    closures from nodes nearer than ``min_separation_m``."""
+    if abs(c1.travelled - c2.travelled) < cfg.min_separation_m:
+        return math.inf
+    d1 = _correction(est_wTa[c1.old], c1.mTn, est_wTa[c1.new])
+    d2 = _correction(est_wTa[c2.old], c2.mTn, est_wTa[c2.new])
+    wTn = est_wTa[c2.new]
+    e = g.between(g.compose(d1, wTn), g.compose(d2, wTn))
+    e[2] = g.wrap(e[2])
+    dist = abs(travel[c1.new] - travel[c2.new]) + abs(travel[c1.old] - travel[c2.old])
+    s_xy = cfg.sigma_m + cfg.rate * dist
+    s_th = math.radians(cfg.sigma_deg + cfg.deg_rate * dist)
+    # both closures' covariances are of anchor n in its own frame; c1's is moved to c2's anchor
+    n1Tn2 = g.between(est_wTa[c1.new], wTn)
+    A = g.adjoint(g.inverse(n1Tn2))
+    cov = A @ np.asarray(c1.cov_mTn) @ A.T + np.asarray(c2.cov_mTn) + np.diag([s_xy ** 2, s_xy ** 2, s_th ** 2])
+    return float(e @ np.linalg.solve(cov, e))
+
+
+class LoopConsistency:
+    """The closures of wide searches waiting for another that agrees (module docstring)."""
+
+    def __init__(self, cfg: ConsistencyConfig | None = None) -> None:
+        self.cfg = cfg or ConsistencyConfig()
+        self.pending: list = []
+        self.accepted: list = []  # wide closures accepted so far (a new one may agree with these too)
+
+    def offer(self, c, est_wTa: np.ndarray, travel: np.ndarray) -> list:
+        """The closures to accept now: ``c`` and those that agree with it, when there are enough; else ``c``
+        waits and nothing is accepted."""
+        est_wTa, travel = np.asarray(est_wTa), np.asarray(travel)
+        agree_pending = [p for p in self.pending if agreement(p, c, est_wTa, travel, self.cfg) <= self.cfg.gate]
+        agree_accepted = [a for a in self.accepted if agreement(a, c, est_wTa, travel, self.cfg) <= self.cfg.gate]
+        if 1 + len(agree_pending) + len(agree_accepted) >= self.cfg.min_agreeing:
+            chosen = {id(p) for p in agree_pending}
+            self.pending = [p for p in self.pending if id(p) not in chosen]
+            out = [*agree_pending, c]
+            self.accepted.extend(out)
+            return out
+        self.pending.append(c)
+        if len(self.pending) > self.cfg.max_pending:
+            self.pending.pop(0)
+        return []

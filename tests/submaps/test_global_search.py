@@ -1,0 +1,59 @@
+"""The global loop search's pieces: the max-pooled grid bounds the fine one, the window is clipped to the submap,
+and a scan is found anywhere in a whole submap at any heading (holoslam.submaps.global_search)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from holoslam import geometry as g
+from holoslam.submaps import bnb
+from holoslam.submaps.global_search import clip_window, coarse_match, pool_grid
+
+
+def test_pooled_grid_is_the_block_maximum_with_the_same_origin():
+    rng = np.random.default_rng(0)
+    p = rng.uniform(0.1, 0.9, (9, 7)).astype(np.float32)
+    q = pool_grid(p, 4)
+    assert q.shape == (3, 2)
+    for r in range(3):
+        for c in range(2):
+            assert q[r, c] == p[4 * r:4 * r + 4, 4 * c:4 * c + 4].max()
+    assert pool_grid(p, 1) is p or np.array_equal(pool_grid(p, 1), p)
+
+
+def test_window_clipped_to_the_grid_or_none_when_it_misses():
+    centre, wx, wy = clip_window(np.array([1.0, 1.0, 0.3]), 50.0, 50.0, (-2.0, -1.0), (40, 100), 0.1)
+    # the grid spans x in [-2, 8], y in [-1, 3]: the whole grid
+    assert centre == pytest.approx([3.0, 1.0, 0.3]) and (wx, wy) == pytest.approx((5.0, 2.0))
+    assert clip_window(np.array([20.0, 0.0, 0.0]), 5.0, 5.0, (-2.0, -1.0), (40, 100), 0.1) is None
+
+
+def _room(res: float = 0.05):
+    """An L-shaped room's walls on a 12 x 8 m grid (no symmetry: one pose fits)."""
+    H, W = int(8 / res), int(12 / res)
+    p = np.full((H, W), 0.1, np.float32)
+    p[int(1 / res), int(1 / res):int(11 / res)] = 0.9
+    p[int(7 / res), int(1 / res):int(6 / res)] = 0.9
+    p[int(4 / res), int(6 / res):int(11 / res)] = 0.9
+    p[int(1 / res):int(7 / res), int(1 / res)] = 0.9
+    p[int(4 / res):int(7 / res), int(6 / res)] = 0.9
+    p[int(1 / res):int(4 / res), int(11 / res)] = 0.9
+    return p
+
+
+def test_a_scan_is_found_anywhere_in_the_whole_submap_at_any_heading():
+    res = 0.05
+    prob = _room(res)
+    occ = np.argwhere(prob > 0.5)
+    wall = np.column_stack([(occ[:, 1] + 0.5) * res, (occ[:, 0] + 0.5) * res])
+    aTb = np.array([4.0, 3.0, math.radians(137.0)])
+    b_pts = g.transform_points(g.inverse(aTb), wall[::3])
+    pre = bnb.precompute(pool_grid(prob, 4), 7, origin=(0.0, 0.0), res=4 * res)
+    centre, wx, wy = clip_window(np.array([0.0, 0.0, 0.0]), 100.0, 100.0, (0.0, 0.0), pre.shape, pre.res)
+    hit = coarse_match(pre, b_pts, centre, wx, wy, math.pi, 0.6, 15.0)
+    assert hit is not None
+    assert np.hypot(*(hit.aTb[:2] - aTb[:2])) < 2 * 4 * res
+    assert abs(g.wrap(hit.aTb[2] - aTb[2])) < math.radians(2.0)

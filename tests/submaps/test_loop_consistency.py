@@ -1,0 +1,68 @@
+"""Consistency among loop closures: two right closures move the new part of the map by one rigid correction,
+an alias does not (holoslam.submaps.loop_consistency)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from holoslam import geometry as g
+from holoslam.submaps.loop_consistency import ConsistencyConfig, LoopConsistency, agreement
+
+
+@dataclass(frozen=True)
+class Closure:
+    old: int
+    new: int
+    mTn: np.ndarray
+    cov_mTn: np.ndarray
+    travelled: float
+
+
+# truth: anchors 0, 1 (old corridor) and 2, 3 (the new part, 6 m of travel apart); the estimate of the new part
+# has drifted by a rigid 20 m / 25 deg, as after a long loop
+TRUE = np.array([[0.0, 0.0, 0.0], [8.0, 0.0, 0.0], [1.0, 3.0, math.pi], [7.0, 3.0, math.pi]])
+DRIFT = np.array([20.0, -5.0, math.radians(25.0)])
+EST = np.vstack([TRUE[:2], g.compose(np.broadcast_to(DRIFT, (2, 3)), TRUE[2:])])
+TRAVEL = np.array([0.0, 8.0, 300.0, 306.0])
+COV = np.diag([0.05, 0.05, 0.01]) ** 2
+
+
+def closure(old: int, new: int, travelled: float, error=(0.0, 0.0, 0.0)) -> Closure:
+    return Closure(old, new, g.compose(g.between(TRUE[old], TRUE[new]), np.asarray(error, float)), COV, travelled)
+
+
+def test_two_right_closures_from_distant_nodes_agree_and_an_alias_does_not():
+    cfg = ConsistencyConfig()
+    right_a, right_b = closure(0, 2, 300.0), closure(1, 3, 306.0)
+    alias = closure(1, 3, 306.0, error=(3.0, 0.0, 0.0))  # the same corridor 3 m further along
+    assert agreement(right_a, right_b, EST, TRAVEL, cfg) < 1.0
+    # 14 m of travel between them allow 0.48 m (1 sigma): 3 m is 6 sigma
+    assert agreement(right_a, alias, EST, TRAVEL, cfg) > 2 * cfg.gate
+
+
+def test_closures_of_nearby_nodes_cannot_vouch_for_each_other():
+    # two nodes 1 m apart see the same walls: an alias of one is an alias of the other
+    cfg = ConsistencyConfig()
+    assert math.isinf(agreement(closure(0, 2, 300.0), closure(1, 2, 301.0), EST, TRAVEL, cfg))
+
+
+def test_the_allowance_grows_with_the_travel_between_the_closures():
+    cfg = ConsistencyConfig()
+    off = (2.5, 0.0, 0.0)  # 2.5 m of drift between the two: too much for 14 m of travel, fine for 68 m
+    near = agreement(closure(0, 2, 300.0), closure(1, 3, 306.0, off), EST, TRAVEL, cfg)
+    far_travel = TRAVEL.copy()
+    far_travel[3] = 360.0
+    far = agreement(closure(0, 2, 300.0), closure(1, 3, 360.0, off), EST, far_travel, cfg)
+    assert near > cfg.gate > far
+
+
+def test_a_closure_waits_until_another_agrees_and_aliases_never_join():
+    pool = LoopConsistency()
+    assert pool.offer(closure(0, 2, 300.0), EST, TRAVEL) == []
+    assert pool.offer(closure(1, 3, 306.0, error=(3.0, 0.0, 0.0)), EST, TRAVEL) == []  # alias: waits
+    accepted = pool.offer(closure(1, 3, 306.5), EST, TRAVEL)
+    assert {(c.old, c.new, c.travelled) for c in accepted} == {(0, 2, 300.0), (1, 3, 306.5)}
+    assert len(pool.pending) == 1 and pool.pending[0].mTn[0] != accepted[0].mTn[0]
