@@ -57,3 +57,40 @@ def test_a_scan_is_found_anywhere_in_the_whole_submap_at_any_heading():
     assert hit is not None
     assert np.hypot(*(hit.aTb[:2] - aTb[:2])) < 2 * 4 * res
     assert abs(g.wrap(hit.aTb[2] - aTb[2])) < math.radians(2.0)
+
+
+def test_a_corridor_match_keeps_its_uncertainty_along_the_corridor():
+    """A corridor's scan fixes the position across it and the heading, not the position along it: the global
+    search's match is kept (not rejected) with a covariance whose spread lies along the corridor."""
+    from holoslam.submaps.loops import LoopConfig, LoopSearch
+    from holoslam.submaps.probgrid import ProbGrid
+    from holoslam.submaps.scanmatch import MatchConfig
+
+    res = 0.05
+    # a 40 m corridor 2 m wide along x: a wall at y = 1, a row of cupboards (0.5 m every 1 m) at y = 3, so that
+    # a scan tells the corridor's two directions apart but not where along it it was taken (to 1 m)
+    H, W = int(4 / res), int(40 / res)
+    prob = np.full((H, W), 0.1, np.float32)
+    prob[int(1 / res), :] = 0.9
+    dashed = (np.arange(W) * res) % 1.0 < 0.5
+    prob[int(3 / res), dashed] = 0.9
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls.add_submap(0, ProbGrid(prob, (0.0, 0.0), res))
+    xs = np.arange(0.0, 40.0, 0.05)
+    xd = xs[(xs % 1.0) < 0.5]
+    wall = np.vstack([np.column_stack([xs, np.full_like(xs, 1.025)]), np.column_stack([xd, np.full_like(xd, 3.025)])])
+    mTr = np.array([20.0, 2.0, 0.2])
+    near = wall[np.hypot(*(wall - mTr[:2]).T) < 6.0]  # what a laser at the node sees: 6 m of either wall
+    b_pts = g.transform_points(g.inverse(mTr), near)
+    cand = ls._global(0, 5, np.zeros(3), np.diag([1e-6, 1e-6, 1e-8]), b_pts, b_pts, np.array([15.0, 2.5, 0.0]),
+                      30.0, 30.0, math.pi)
+    assert cand is not None, ls.counts
+    assert ls.counts.get("global: ambiguous, kept with the peaks' spread") == 1
+    # across the corridor and in heading the match is right and sure; along it, it is as unsure as it is wrong
+    mTn = cand.mTn  # nTr = identity: the node is the anchor
+    assert abs(mTn[1] - 2.0) < 0.1 and abs(g.wrap(mTn[2] - 0.2)) < math.radians(1.0)
+    R = g.rot2(mTn[2])
+    cov_m = R @ cand.cov_mTn[:2, :2] @ R.T  # in the submap's (the corridor's) axes
+    # measured: 0.82 m along (the cupboards' 1 m period, peaks within the +-1 m fine window), 0.014 m across
+    assert math.sqrt(cov_m[0, 0]) > 20 * math.sqrt(cov_m[1, 1])
+    assert 0.4 < math.sqrt(cov_m[0, 0]) < 1.6

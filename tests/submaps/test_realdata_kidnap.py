@@ -1,0 +1,78 @@
+"""A kidnapped robot on real scans: 300 s of the Freiburg fr079 log (../shared/realdata, not in the repository)
+whose odometry jumps by 30 m and 90 degrees in its middle, with the 30 s of scans after the jump removed
+(``holoslam.derive.kidnap``). Local SLAM starts afresh after the gap, and only the global loop search can put the
+second part back onto the first: it must, as well as the uncut log maps it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from repo_paths import SHARED
+
+REALDATA = SHARED / "realdata"
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.skipif(not (REALDATA / "fr079.mcap").exists(), reason="../shared/realdata is not here"),
+]
+START_S, DURATION_S = 70.0, 300.0  # the 300 s of fr079 richest in revisits (90 relations span > 120 s)
+
+
+def _mapped(log):
+    from holoslam.optimise import reestimate_anchors, run_build_options
+    from holoslam.solve import SolveOptions, solve
+    from holoslam.submaps.frontend import build_problem
+    from holoslam.trajectory import keyframe_poses, optimised_trajectory
+
+    fe = build_problem(log, optimize=reestimate_anchors)
+    sol = solve(fe.problem, SolveOptions(build=run_build_options()))
+    stamps = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
+    ost, opose = log.odometry_arrays()
+    ks, wTk = keyframe_poses(fe.submaps, sol.wTa)
+    return fe, stamps, optimised_trajectory(stamps, ost, opose, ks, wTk)
+
+
+@pytest.fixture(scope="module")
+def fr079_kidnapped(tmp_path_factory):
+    from holoslam import derive
+    from holoslam.evaluate import relation_errors
+    from holoslam.io.mcap import read_log
+    from holoslam.io.mcap_cut import cut_log
+    from holoslam.io.relations import cut_relations, read_relations
+    from holoslam.submaps.frontend import base_to_laser
+
+    path = tmp_path_factory.mktemp("fr079") / "cut.mcap"
+    cut_log(REALDATA / "fr079.mcap", path, START_S, DURATION_S)
+    log, _ = read_log(path, require=["odometry", "scan"])
+    at = int(log.scans[len(log.scans) // 2].stamp_ns)
+    kidnapped = derive.kidnap(log, at, np.array([30.0, 0.0, math.pi / 2]), 30.0)
+    rel = cut_relations(read_relations(REALDATA / "fr079.relations"), int(log.scans[0].stamp_ns),
+                        int(log.scans[-1].stamp_ns) + 1)
+    bTl = base_to_laser(log, log.scans[0].frame_id)
+    from holoslam import geometry as g
+
+    out = {}
+    for name, lg in (("plain", log), ("kidnapped", kidnapped)):
+        fe, stamps, wTb = _mapped(lg)
+        out[name] = (fe, relation_errors(stamps, g.compose(wTb, np.broadcast_to(bTl, wTb.shape)), rel))
+    across = (rel.t1_ns < at) != (rel.t2_ns < at)
+    return out, across
+
+
+def test_the_two_parts_of_a_kidnapped_log_are_joined(fr079_kidnapped):
+    out, across = fr079_kidnapped
+    fe, e = out["kidnapped"]
+    assert fe.breaks == 1
+    assert fe.loop_counts.get("global: accepted (consistent)", 0) >= 1
+    matched = across & e.matched
+    assert matched.sum() >= 40
+    assert np.nanmax(e.translation_m[matched]) < 0.3
+
+
+def test_a_kidnapped_log_maps_as_well_as_the_uncut_one(fr079_kidnapped):
+    out, _ = fr079_kidnapped
+    plain, kidnapped = out["plain"][1], out["kidnapped"][1]
+    print("plain", plain.to_text(), "kidnapped", kidnapped.to_text())
+    assert kidnapped.translation_mean_m < 1.5 * plain.translation_mean_m
+    assert kidnapped.rotation_mean_deg < 1.5 * plain.rotation_mean_deg
