@@ -65,7 +65,10 @@ def revisit_nodes(fe: Any, sol: Any, cfg: Any, progress: Any = None) -> Keyframe
     nodes = graph_nodes(fe.submaps)
     if not len(nodes):
         return None
-    matches = match_nodes(fe.submaps, nodes, sol.wTa, cfg.revisits, cfg.local.match, progress)
+    from dataclasses import replace
+
+    rcfg = replace(cfg.revisits, min_score=cfg.revisits.min_score * fe.score_scale)  # a sparse laser's scores
+    matches = match_nodes(fe.submaps, nodes, sol.wTa, rcfg, cfg.local.match, progress)
     return KeyframeSolve(nodes, matches, solve_nodes(nodes, matches, sol.wTa, sol.cov_wTa, cfg.revisits))
 
 

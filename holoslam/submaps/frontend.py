@@ -106,6 +106,7 @@ class FrontEnd:
     dead_reckoning_slips: int = 0  # dead-reckoning segments down-weighted for disagreeing with their scan match
     loop_counts: dict[str, int] = field(default_factory=dict)  # the loop search's outcomes by reason
     breaks: int = 0  # local SLAM started afresh after a gap in the laser (``LocalSlamConfig.lost_gap_s``)
+    score_scale: float = 1.0  # the loop search's threshold scale at the end (``LoopConfig.score_reference``)
 
 
 def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "") -> np.ndarray:
@@ -343,8 +344,10 @@ def build_problem(
     problem, skipped, drop = _problem(run, closed, anchors, graph, observations, cfg)  # steps 4-6
     return FrontEnd(tuple(closed), problem, run.dr_stamps_ns, run.dr_wTb, anchors, run.bTs, skipped,
                     loops.tried, tuple(sorted(drop)), graph.dead_reckoning_inflation(), run.noise,
-                    len(graph.loop_groups()), len(graph.dead_reckoning_slips()), dict(sorted(loops.counts.items())),
-                    sum(k == "lost" for k in graph.kind))
+                    len(graph.loop_groups()), len(graph.dead_reckoning_slips()),
+                    {**dict(sorted(loops.counts.items())),
+                     **{f"{k} search ms": int(1000 * v) for k, v in loops.seconds.items()}},
+                    sum(k == "lost" for k in graph.kind), loops.scale)
 
 
 @dataclass(frozen=True, eq=False)
@@ -453,6 +456,8 @@ def _local_slam(
             if isinstance(closed[-1].grid, ProbGrid):  # a finished submap's grid (None without build_grids)
                 loops.add_submap(sm.index, closed[-1].grid)
         if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
+            usual = slam.usual_score()
+            loops.scale = 1.0 if usual is None else min(1.0, usual / cfg.loops.score_reference)
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
                                  graph.graph_distance(node.submap), float(travelled[k]),
                                  graph.relative_covariances(node.submap), np.array(graph.travel),

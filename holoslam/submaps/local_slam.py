@@ -244,6 +244,10 @@ class LocalSlam:
         assert prev is not None and self._last_odo is not None  # the host started at a node; set by the first node
         return g.compose(prev, g.between(self._last_odo, odo))
 
+    def usual_score(self) -> float | None:
+        """The median score of the last 200 trusted matches (None before 20): how full this laser fills the grids."""
+        return float(np.median(self._scores)) if len(self._scores) >= 20 else None
+
     def close(self) -> None:
         """Finish every active submap (end of the log)."""
         while self.active:

@@ -25,6 +25,7 @@ ambiguity test's were measured on the real logs (``LoopConfig``).
 from __future__ import annotations
 
 import math
+import time
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -108,6 +109,7 @@ class LoopConfig:
     # wrong 0.40-0.51 in the same measurement; a windowed closure's min_score
     global_min_score: float = 0.55
     global_per_node: int = 2  # global searches per searching node, the least recently searched submaps first
+    global_every_m: float = 3.0  # m travelled between two nodes that run global searches (each costs 20-70 ms)
     global_check_xy: float = 1.0  # m, the fine window around the coarse best (5 coarse cells)
     global_check_deg: float = 5.0  # deg (a few coarse angular steps)
     global_ambiguity_peaks: int = 3  # second peaks of a global match: kept with their spread ("span")
@@ -117,6 +119,13 @@ class LoopConfig:
     global_bundle_m: float = 4.0
     global_bundle_voxel_m: float = 0.15
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
+    # Every score threshold above (and the ambiguity margin, and the keyframe stage's) was measured on lasers whose
+    # scans match into their own submaps at a median score of 0.67-0.75 (aces 0.666, intel 0.729, fr079 0.745;
+    # 300 s of each). A sparser laser fills the grids' cells less: the same logs decimated to 1.4 Hz with every
+    # second beam match at 0.505-0.562, below the loops' 0.55, and aces then closed 8 loops of 550 searches. The
+    # thresholds are scaled by min(1, median / score_reference): unchanged on the full-rate logs, 0.78-0.86 of
+    # themselves on the sparse ones
+    score_reference: float = 0.65
 
 
 @dataclass(frozen=True, slots=True)
@@ -150,8 +159,11 @@ class LoopSearch:
         self.tried = 0
         self.pre_coarse: OrderedDict[int, object] = OrderedDict()  # coarse grids of the global search
         self.last_global: dict[int, float] = {}  # odometer reading at each old submap's last global search
+        self.last_global_round = -math.inf  # odometer reading at the last node that ran global searches
         self.consistency = LoopConsistency(cfg.consistency)
         self.counts: dict[str, int] = {}  # searches and their outcomes, by reason (the run report's loop section)
+        self.seconds = {"windowed": 0.0, "global": 0.0}  # wall seconds spent in each kind of search
+        self.scale = 1.0  # of every score threshold: the local matches' usual score / score_reference, at most 1
         self.ambiguous = 0  # matches with a second peak (rejected or widened, ``LoopConfig.ambiguity``)
         # (old, new, best bnb.Match, its second peaks) of every branch-and-bound match checked, for diagnostics
         self.peaks: list[tuple[int, int, object, list]] = []
@@ -236,10 +248,13 @@ class LoopSearch:
             if wide:
                 self.last_wide[m] = travelled
             searched += not wide
+            t0 = time.perf_counter()
             cand = self._windowed(m, n, nTr, cov_nTr, b_pts, search_pts, seed, (wx, wy), wth, wide)
+            self.seconds["windowed"] += time.perf_counter() - t0
             if cand is not None:
                 found.append(cand)
-        if globals_ and travel is not None:
+        if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
+            self.last_global_round = travelled
             g_pts = b_pts if bundle is None else adaptive_voxel_filter(
                 bundle, ScanFilterConfig(c.global_bundle_voxel_m, 300))
             found.extend(self._global_round(n, nTr, cov_nTr, b_pts, g_pts, globals_, est_wTa, travel, travelled))
@@ -252,17 +267,18 @@ class LoopSearch:
                   wide: bool) -> LoopCandidate | None:
         """One windowed search (at most max_window_xy / max_window_deg), accepted on its own."""
         c = self.cfg
-        min_score = c.min_score_wide if wide else c.min_score
+        min_score = (c.min_score_wide if wide else c.min_score) * self.scale
+        margin = c.ambiguity_margin * self.scale
         self.tried += 1
         self._count("windowed searches")
         win = _Window(self._precomputed(m), search_pts, seed, wxy, wth)
-        hit = win.best(min_score, c.ambiguity_margin if c.ambiguity != "off" else -1.0)
+        hit = win.best(min_score, margin if c.ambiguity != "off" else -1.0)
         if hit is None:
             self._count("windowed: no match above the score")
             return None
         peaks = []
         if c.ambiguity != "off":  # before the refinement: an ambiguous match is not worth refining
-            peaks = win.second_peaks(hit, c.ambiguity_margin, c.ambiguity_exclude_xy,
+            peaks = win.second_peaks(hit, margin, c.ambiguity_exclude_xy,
                                      math.radians(c.ambiguity_exclude_deg), c.ambiguity_peaks,
                                      first=c.ambiguity == "reject")
             self.peaks.append((m, n, hit, peaks))
@@ -317,7 +333,9 @@ class LoopSearch:
         out: list[LoopCandidate] = []
         for m, seed, wx, wy, wth in targets[: c.global_per_node]:
             self.last_global[m] = travelled
+            t0 = time.perf_counter()
             cand = self._global(m, n, nTr, cov_nTr, b_pts, g_pts, seed, wx, wy, wth)
+            self.seconds["global"] += time.perf_counter() - t0
             if cand is None:
                 continue
             cand = replace(cand, travelled=travelled)
@@ -345,21 +363,23 @@ class LoopSearch:
         self.tried += 1
         self._count("global searches")
         centre, cx, cy = clipped
-        coarse = coarse_match(pre, g_pts, centre, cx, cy, wth, c.global_coarse_min_score, c.global_max_range_m)
+        coarse = coarse_match(pre, g_pts, centre, cx, cy, wth, c.global_coarse_min_score * self.scale,
+                              c.global_max_range_m)
         if coarse is None:
             self._count("global: no match above the score")
             return None
         win = _Window(self._precomputed(m), b_pts, coarse.aTb, c.global_check_xy, math.radians(c.global_check_deg))
-        hit = win.best(c.global_min_score, c.ambiguity_margin)
+        min_score, margin = c.global_min_score * self.scale, c.ambiguity_margin * self.scale
+        hit = win.best(min_score, margin)
         if hit is None:
             self._count("global: fine match below the score")
             return None
-        peaks = win.second_peaks(hit, c.ambiguity_margin, c.ambiguity_exclude_xy,
+        peaks = win.second_peaks(hit, margin, c.ambiguity_exclude_xy,
                                  math.radians(c.ambiguity_exclude_deg), c.global_ambiguity_peaks)
         if peaks:
             self.ambiguous += 1
             self._count("global: ambiguous, kept with the peaks' spread")
-        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, c.global_min_score, max(wx, wy))
+        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, min_score, max(wx, wy))
         if cand is None:
             self._count("global: refinement failed")
         return cand
