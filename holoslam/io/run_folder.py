@@ -46,6 +46,7 @@ RUN_FILES = (
     "holographic.graphml",
     "holographic.json",
     "planning.json",
+    "planning_layer1.npz",
     "report.json",
     "report.txt",
 )
