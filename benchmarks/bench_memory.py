@@ -1,6 +1,6 @@
 """Peak memory and run time of a long ``holoslam run``: a shared real log played several times end to end.
 
-    .venv/bin/python benchmarks/bench_memory.py [--log intel] [--times 1 2] [--budget-mb 2000]
+    .venv/bin/python benchmarks/bench_memory.py [--log intel] [--times 1 2] [--budget-mb 2000] [--write]
 
 The issue's budget: a log of 80 minutes maps in under 2 GB. The shared logs are shorter (intel: 45 min), so the
 log is played ``N`` times in a row in memory: the copies' stamps follow each other, and each copy's odometry
@@ -9,7 +9,9 @@ sees as a jump of metres and the loop search closes). Each row runs in a child p
 ``--child``) doing what ``holoslam run`` does on the read log (``holoslam.pipeline.run_data``, default
 settings, nothing written); the parent reads the child's peak resident set from ``os.wait4``'s rusage and its
 wall time. Columns: minutes of log, scans, submaps, wall s, peak RSS MB, RSS per log minute above the 1-copy
-row, and whether the peak is within the budget. Exit status 1 when a row exceeds it.
+row, and whether the peak is within the budget. Exit status 1 when a row exceeds it. With ``--write`` the child also writes the run folder (every file of ``holoslam run``, pictures
+and results MCAP included), so the peak is that of the whole run; each row then lists the stages' times and the
+files' sizes.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ def repeated(log, times: int):
     return dataclasses.replace(log, odometry=tuple(odo), scans=tuple(scans))
 
 
-def child(log_path: str, times: int, out: str) -> None:
+def child(log_path: str, times: int, out: str, write: bool) -> None:
     from holoslam.io.mcap import read_log
     from holoslam.pipeline import run_data
 
@@ -53,14 +55,24 @@ def child(log_path: str, times: int, out: str) -> None:
     log = repeated(log, times)
     result = run_data(log, ingest)
     minutes = (log.scans[-1].stamp_ns - log.scans[0].stamp_ns) / 60e9
-    Path(out).write_text(json.dumps({"minutes": minutes, "scans": len(log.scans),
-                                     "submaps": len(result.frontend.submaps)}))
+    row = {"minutes": minutes, "scans": len(log.scans), "submaps": len(result.frontend.submaps),
+           "stages_s": {k: round(v, 2) for k, v in result.report.timings_s.items()}}
+    if write:  # the run folder as holoslam run writes it (pictures and results MCAP included)
+        from holoslam.io.run_folder import write_run
+
+        folder = Path(out).parent / "run"
+        t0 = time.perf_counter()
+        write_run(result, folder)
+        row["write_s"] = time.perf_counter() - t0
+        row["files_mb"] = {p.name: round(p.stat().st_size / 2**20, 2) for p in sorted(folder.iterdir())}
+    Path(out).write_text(json.dumps(row))
 
 
-def run_child(log: Path, times: int) -> dict:
+def run_child(log: Path, times: int, write: bool = False) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "child.json"
-        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(log), str(times), str(out)]
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(log), str(times), str(out),
+               "1" if write else "0"]
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd)
         _, status, usage = os.wait4(proc.pid, 0)
@@ -80,17 +92,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--times", type=int, nargs="+", default=[1, 2], help="copies played end to end")
     ap.add_argument("--budget-mb", type=float, default=2000.0, help="peak RSS budget (MB)")
     ap.add_argument("--data", type=Path, default=DATA)
-    ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    ap.add_argument("--write", action="store_true",
+                    help="also write the run folder (every file holoslam run writes) inside the measured process")
+    ap.add_argument("--child", nargs=4, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
-        child(args.child[0], int(args.child[1]), args.child[2])
+        child(args.child[0], int(args.child[1]), args.child[2], args.child[3] == "1")
         return 0
     given = Path(args.log)
     log = given if given.suffix == ".mcap" and given.is_file() else args.data / f"{args.log}.mcap"
     if not log.is_file():
         print(f"bench_memory: no {log} (the shared real logs, see ../shared/realdata/README.md)")
         return 0
-    rows = [run_child(log, t) for t in sorted(set(args.times))]
+    rows = [run_child(log, t, args.write) for t in sorted(set(args.times))]
     base = rows[0]
     print(f"\npeak memory of a whole run on {log.stem} played N times end to end (budget {args.budget_mb:.0f} MB)")
     print(f"{'N':>3} {'minutes':>8} {'scans':>7} {'submaps':>8} {'wall s':>7} {'RSS MB':>7} {'MB/min':>7}  budget")
@@ -102,6 +116,10 @@ def main(argv: list[str] | None = None) -> int:
         failed |= not ok
         print(f"{r['times']:>3} {r['minutes']:>8.1f} {r['scans']:>7} {r['submaps']:>8} {r['wall_s']:>7.1f} "
               f"{r['rss_mb']:>7.0f} {grow:>7.1f}  {'within' if ok else 'OVER'}")
+        print("    stages (s):", ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
+              + (f", writing the folder {r['write_s']:.1f}" if "write_s" in r else ""))
+        if "files_mb" in r:
+            print("    files (MB):", ", ".join(f"{k} {v}" for k, v in r["files_mb"].items()))
     return 1 if failed else 0
 
 

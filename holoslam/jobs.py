@@ -501,6 +501,7 @@ def map_topology(
     from holoslam.maps.cleaning import CleaningReport
     from holoslam.maps.holographic import ReachModel, build_holographic
     from holoslam.maps.passages import EdgePaths
+    from holoslam.maps.polyline import compact_paths
     from holoslam.maps.rooms import rooms_of_grid
     from holoslam.maps.settings import HolographicConfig, TopologyConfig
     from holoslam.maps.topology import cycle_rank, to_graphml_ready, topology_from_settings
@@ -513,9 +514,9 @@ def map_topology(
             raise ConfigError(f"folder {Path(target).parent} does not exist; create it first")
     grid = read_grid(map_yaml)
     t0 = time.perf_counter()
-    G = topology_from_settings(grid, tc)
+    G = topology_from_settings(grid, tc, robot_radius_m=None if robot is None else robot.radius_m)
     t_topology = time.perf_counter() - t0
-    ready = to_graphml_ready(G)
+    ready = to_graphml_ready(compact_paths(G))  # paths simplified to the map's resolution, as a run writes them
     files = [str(write_graphml(ready, out)), str(write_node_link_json(ready, out.with_suffix(".json")))]
     rep = CleaningReport(**{k[len("cleaned_") :]: v for k, v in G.graph.items() if k.startswith("cleaned_")})
     c = tc.cleaning
@@ -555,7 +556,7 @@ def map_topology(
     places: dict[str, int] = {}
     for _n, place in H.nodes(data="place"):
         places[place] = places.get(place, 0) + 1
-    files += [str(p) for p in write_graph_files(H, out.parent, out.stem + "_holographic")]
+    files += [str(p) for p in write_graph_files(compact_paths(H), out.parent, out.stem + "_holographic")]
     if rooms_png is not None:
         files.append(str(write_label_png(rooms.labels, rooms_png)))
     if png is not None:

@@ -39,7 +39,7 @@ def build_maps(log: Any, fe: Any, sol: Any, traj: RunTrajectory, objects: tuple,
     with clock.stage("occupancy grid"):
         grid = occupancy_grid(log, fe.bTs, traj, cfg)
     with clock.stage("topology (thinning)"):
-        topology = topology_from_settings(grid, cfg.topology, anchors_wTa=sol.wTa)
+        topology = topology_from_settings(grid, cfg.topology, anchors_wTa=sol.wTa, robot_radius_m=cfg.robot.radius_m)
     with clock.stage("holographic graph"):
         holo, rooms = holographic_graph(grid, topology, fe.submaps, sol.wTa, objects, cfg)
     with clock.stage("planning graph"):

@@ -124,6 +124,10 @@ class MapSummary:
 class GraphSize:
     nodes: int
     edges: int
+    # dead-end branches (spurs) pruned from the topology: those that do not leave their junction's free disc
+    # by this depth (m, the robot's diameter: TopologyConfig.spur_robot_diameters) or are otherwise too short
+    spurs_pruned: int = 0
+    spur_depth_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -268,7 +272,9 @@ class RunReport:
         m = self.map
         lines.append(
             f"  map: {m.shape[1]} x {m.shape[0]} cells at {m.resolution_m} m; topology "
-            f"{self.topology.nodes} nodes / {self.topology.edges} edges; planning "
+            f"{self.topology.nodes} nodes / {self.topology.edges} edges ({self.topology.spurs_pruned} dead-end "
+            f"branches pruned: less than {self.topology.spur_depth_m:.2f} m beyond their junction's clearance); "
+            "planning "
             f"{self.planning.layer1_blocks} blocks / {self.planning.layer2_regions} regions"
         )
         if self.accuracy is not None:
@@ -529,7 +535,9 @@ def build_report(*, log: Any, ingest_report: Any, sightings: Any, fe: Any, sol: 
         solver=solver_summary(sol),
         objects=object_summary(objects, sol, maps.holographic, located_by),
         map=map_summary(maps.grid),
-        topology=GraphSize(maps.topology.number_of_nodes(), maps.topology.number_of_edges()),
+        topology=GraphSize(maps.topology.number_of_nodes(), maps.topology.number_of_edges(),
+                           int(maps.topology.graph.get("spurs_pruned", 0)),
+                           round(float(maps.topology.graph.get("spur_beyond_clearance_m", 0.0)), 3)),
         holographic=holographic_summary(maps.holographic),
         planning=PlanningSummary(int(maps.planning.n_blocks), int(maps.planning.n_regions)),
         timings_s=timings,

@@ -47,13 +47,52 @@ def _extent(grid: OccupancyGrid) -> tuple[float, float, float, float]:
     )
 
 
+#: An image drawn on axes is pooled to at most this many pixels per display pixel of the axes (two: a map
+#: picture stays as sharp as its figure can show at up to twice the figure's dpi); a 7,000 x 5,000-cell
+#: floor would otherwise be resampled by matplotlib in float RGBA at full size (1.1 GB per layer, issue 26).
+IMAGE_PIXELS_PER_DISPLAY_PIXEL = 2.0
+
+
+def _stride(ax: Axes, shape: tuple[int, int]) -> int:
+    """Cells per drawn pixel: 1 unless the grid has more cells than ``IMAGE_PIXELS_PER_DISPLAY_PIXEL`` times
+    the axes' display pixels along a side."""
+    bb = ax.get_window_extent()
+    px = max(float(bb.width), float(bb.height), 1.0) * IMAGE_PIXELS_PER_DISPLAY_PIXEL
+    return max(1, int(max(shape) // px))
+
+
+def _pooled(img: np.ndarray, f: int, fill: int, how: str) -> np.ndarray:
+    """(H, W) -> (ceil(H / f), ceil(W / f)) blocks of f x f cells (padded with ``fill``), each the block's
+    minimum (``min``: walls stay visible at any scale) or its first cell (``first``: labels)."""
+    if f == 1:
+        return img
+    h, w = img.shape
+    if how == "first":
+        return img[::f, ::f]
+    pad = np.full((-(-h // f) * f, -(-w // f) * f), fill, dtype=img.dtype)
+    pad[:h, :w] = img
+    return pad.reshape(pad.shape[0] // f, f, pad.shape[1] // f, f).min(axis=(1, 3))
+
+
+def _pooled_extent(grid: OccupancyGrid, f: int) -> tuple[float, float, float, float]:
+    h, w = grid.shape
+    if f == 1:
+        return _extent(grid)
+    hh, ww = -(-h // f) * f, -(-w // f) * f
+    return (grid.origin_x, grid.origin_x + ww * grid.resolution, grid.origin_y, grid.origin_y + hh * grid.resolution)
+
+
 def draw_grid(ax: Axes, grid: OccupancyGrid) -> list[Any]:
-    """The occupancy grid: free white, occupied black, unknown grey (row 0 at the bottom)."""
-    img = np.full(grid.shape, 0.6)
-    img[grid.free] = 1.0
-    img[grid.occupied] = 0.0
+    """The occupancy grid: free white, occupied black, unknown grey (row 0 at the bottom). A grid larger than the
+    axes can show is pooled first (``IMAGE_PIXELS_PER_DISPLAY_PIXEL``; a block with an obstacle is drawn black)."""
+    occ = grid.occupancy
+    code = np.full(grid.shape, 153, dtype=np.uint8)  # unknown: 0.6 grey
+    code[(occ >= 0) & (occ <= grid.free_thresh * 100.0)] = 255
+    code[occ >= grid.occupied_thresh * 100.0] = 0
+    f = _stride(ax, grid.shape)
+    img = _pooled(code, f, 153, "min").astype(np.float32) / np.float32(255.0)
     im = ax.imshow(
-        img, origin="lower", extent=_extent(grid), cmap="gray", vmin=0, vmax=1, interpolation="nearest"
+        img, origin="lower", extent=_pooled_extent(grid, f), cmap="gray", vmin=0, vmax=1, interpolation="nearest"
     )
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
@@ -63,16 +102,17 @@ def draw_grid(ax: Axes, grid: OccupancyGrid) -> list[Any]:
 
 def draw_rooms(ax: Axes, grid: OccupancyGrid, labels: np.ndarray, alpha: float = 0.45) -> list[Any]:
     """A room label image ((H, W), 0 = none, grid row order) as translucent colours over the map, one colour per
-    room id (a fixed palette cycled by id, so neighbours rarely share one)."""
+    room id (a fixed palette cycled by id, so neighbours rarely share one); pooled as the grid is."""
     from matplotlib import colormaps
 
-    lab = np.asarray(labels)
-    pal = colormaps["tab20"](np.arange(20))
-    rgba = np.zeros(lab.shape + (4,))
+    f = _stride(ax, grid.shape)
+    lab = _pooled(np.asarray(labels), f, 0, "first")
+    pal = colormaps["tab20"](np.arange(20)).astype(np.float32)
+    rgba = np.zeros(lab.shape + (4,), dtype=np.float32)
     on = lab > 0
     rgba[on] = pal[(lab[on] * 7) % 20]
     rgba[on, 3] = alpha
-    im = ax.imshow(rgba, origin="lower", extent=_extent(grid), interpolation="nearest", zorder=1)
+    im = ax.imshow(rgba, origin="lower", extent=_pooled_extent(grid, f), interpolation="nearest", zorder=1)
     return [im]
 
 
@@ -98,10 +138,19 @@ def draw_topology(ax: Axes, topology, grid: OccupancyGrid, colour: str = "tab:cy
     return arts
 
 
-def draw_holographic(ax: Axes, G, labels: bool = True) -> list[Any]:
+#: Node names are written beside the nodes of a holographic graph of at most this many nodes (a household's
+#: dozens); on a building's thousands they would cover the map and cost seconds of text layout.
+LABELS_MAX_NODES = 300
+
+
+def draw_holographic(ax: Axes, G, labels: bool | None = None) -> list[Any]:
     """The holographic graph: passages along their waypoints, environment nodes by place, objects as
-    stars (hollow when unreachable, red-edged when seen only once), object edges as dashed lines to their places."""
+    stars (hollow when unreachable, red-edged when seen only once), object edges as dashed lines to their places.
+    ``labels``: the node names beside the nodes (None: when the graph has at most ``LABELS_MAX_NODES``)."""
     from matplotlib.collections import LineCollection
+
+    if labels is None:
+        labels = G.number_of_nodes() <= LABELS_MAX_NODES
 
     arts: list[Any] = []
     passages, links = [], []
@@ -129,7 +178,8 @@ def draw_holographic(ax: Axes, G, labels: bool = True) -> list[Any]:
         ]
         if nodes:
             xy = np.array([(d["x"], d["y"]) for _n, d in nodes])
-            arts.append(ax.scatter(xy[:, 0], xy[:, 1], s=40, c=c, label=place, zorder=4, edgecolors="k"))
+            size = 40 if G.number_of_nodes() <= LABELS_MAX_NODES else 12
+            arts.append(ax.scatter(xy[:, 0], xy[:, 1], s=size, c=c, label=place, zorder=4, edgecolors="k"))
             if labels:
                 for n, d in nodes:
                     arts.append(

@@ -45,7 +45,7 @@ REPORT = {
                                "O22": {"source": "images", "method": "pnp"}}},
     "map": {"shape": [232, 214], "resolution_m": 0.05, "origin": [-3.6, -5.35], "free_cells": 28474,
             "occupied_cells": 2460},
-    "topology": {"nodes": 48, "edges": 50},
+    "topology": {"nodes": 48, "edges": 50, "spurs_pruned": 12, "spur_depth_m": 0.52},
     "holographic": {"environment_nodes": 26, "places": {"room": 7, "doorway": 6, "dead_end": 13}, "object_nodes": 2,
                     "object_edges": 1, "objects_with_edge": 1, "edges": 59, "connected": True},
     "planning": {"layer1_blocks": 2692, "layer2_regions": 228},
@@ -108,7 +108,8 @@ def test_the_text_form_names_every_stage():
                   "  factors: relative_pose/dead_reckoning 42", "  solver: batch, 9 iterations in 3 rounds, error 794.4",
                   "  objects: 2; moved: ['O01']; without a reach edge: ['O22']; unconfirmed (seen once): none",
                   "  objects located from: images by pnp 2", "  holographic graph: 26 environment nodes (room 7",
-                  "  map: 214 x 232 cells at 0.05 m; topology 48 nodes / 50 edges; planning 2692 blocks",
+                  "  map: 214 x 232 cells at 0.05 m; topology 48 nodes / 50 edges (12 dead-end branches pruned: "
+                  "less than 0.52 m beyond their junction's clearance); planning 2692 blocks",
                   "  accuracy vs ground truth: anchors 0.008 m RMSE (dead reckoning 0.089 m)",
                   "                            objects 0.009 m RMSE (max 0.021 m), 2 matched, missing none",
                   "  timings (s): ingest 0.60, vision 1.20, total 24.00"):

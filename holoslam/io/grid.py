@@ -194,6 +194,16 @@ def grid_to_image(grid: OccupancyGrid, mode: str = "trinary", negate: bool = Fal
 def image_to_grid(img: np.ndarray, meta: MapMetadata) -> OccupancyGrid:
     """map_server image (first row = top) + metadata -> OccupancyGrid."""
     img = np.asarray(img)
+    if img.ndim == 2 and img.dtype == np.uint8:  # each of the 256 grey values converted once, then looked up
+        lut = image_to_grid(np.arange(256, dtype=np.float64)[None, :], meta).occupancy[0]
+        return OccupancyGrid(
+            lut[img[::-1]],
+            meta.resolution,
+            meta.origin[0],
+            meta.origin[1],
+            occupied_thresh=meta.occupied_thresh,
+            free_thresh=meta.free_thresh,
+        )
     if img.ndim == 3:
         img = img[..., :3].astype(np.float64).mean(axis=2)  # map_server averages the colour channels
     v = np.asarray(img, dtype=np.float64)[::-1]
@@ -287,9 +297,10 @@ def grid_picture(grid: OccupancyGrid, scale: int = 1) -> np.ndarray:
     shades of grey for probabilities in between."""
     if scale < 1:
         raise MapError(f"picture scale must be >= 1, got {scale}")
-    o = grid.occupancy.astype(np.float64)
-    img = np.where(o < 0, 160.0, 255.0 - o * 2.55)
-    img = np.rint(img).astype(np.uint8)[::-1]
+    # the grey of each of the 256 int8 values, looked up (no float copy of the map)
+    v = np.arange(256, dtype=np.uint8).view(np.int8).astype(np.float64)
+    lut = np.rint(np.where(v < 0, 160.0, 255.0 - v * 2.55)).astype(np.uint8)
+    img = lut[grid.occupancy.view(np.uint8)][::-1]
     if scale > 1:
         img = np.repeat(np.repeat(img, scale, axis=0), scale, axis=1)
     return np.ascontiguousarray(img)

@@ -8,11 +8,12 @@ Files (all under the folder the caller names; nothing is written elsewhere)::
     objects.csv             objects: id, type, x, y, z, the 2x2 xy covariance (world frame), payload, sightings
     graph.g2o               the pose graph (anchors, relative-pose edges, object points and sightings)
     map.pgm + map.yaml      occupancy grid (ROS map_server), map.png picture
-    topology.graphml/.json  thinning topology
-    holographic.graphml/.json  holographic graph (kind = environment | object; objects keyed by id)
+    topology.graphml/.json  thinning topology (edge paths simplified to the map's resolution)
+    holographic.graphml/.json  holographic graph (kind = environment | object; objects keyed by id; passages
+                            simplified to the map's resolution)
     rooms.png               room label image: 16-bit PNG the map's size (rows as map.pgm), 0 = not a room,
                             k = the room node room:<k> (its room_id) of the holographic graph
-    planning.json           two-layer planning graph
+    planning.json           two-layer planning graph (layer 2; layer 1's blocks in planning_layer1.npz)
     report.json, report.txt the run report
     results.mcap            Foxglove view of the results
     trajectory.png, map_topology.png, holographic.png, planning.png   pictures
@@ -45,6 +46,7 @@ RUN_FILES = (
     "holographic.graphml",
     "holographic.json",
     "planning.json",
+    "planning_layer1.npz",
     "report.json",
     "report.txt",
 )
@@ -201,9 +203,10 @@ def write_run(
     from holoslam.io.g2o_write import write_g2o
     from holoslam.io.graphs import write_graph_files
     from holoslam.io.grid import write_grid, write_grid_png, write_label_png
-    from holoslam.io.planning import write_planning
+    from holoslam.io.planning import layer1_file, write_planning
     from holoslam.io.results_mcap import write_results_mcap
     from holoslam.io.trajectory import write_tum
+    from holoslam.maps.polyline import compact_paths
     from holoslam.maps.topology import to_graphml_ready
 
     out = prepare_output_folder(out_dir)
@@ -219,11 +222,13 @@ def write_run(
     written.append(write_grid(result.grid, out / "map.yaml"))
     written.append(out / "map.yaml")
     written.append(write_grid_png(result.grid, out / "map.png"))
-    written += list(write_graph_files(to_graphml_ready(result.topology), out, "topology"))
-    written += list(write_graph_files(result.holographic, out, "holographic"))
+    # paths and passages simplified to the map's resolution (holoslam.maps.polyline)
+    written += list(write_graph_files(to_graphml_ready(compact_paths(result.topology)), out, "topology"))
+    written += list(write_graph_files(compact_paths(result.holographic), out, "holographic"))
     if getattr(result, "rooms", None) is not None:
         written.append(write_label_png(result.rooms.labels, out / "rooms.png"))
     written.append(write_planning(result.planning, out / "planning.json"))
+    written.append(layer1_file(out / "planning.json"))  # layer 1's blocks, beside it
     (out / "report.json").write_text(dumps(result.report.to_dict(), indent=2))  # strict JSON: NaN/inf -> null
     (out / "report.txt").write_text(result.report.text() + "\n")
     written += [out / "report.json", out / "report.txt"]

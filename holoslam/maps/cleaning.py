@@ -95,8 +95,9 @@ class CleaningReport:
 
 
 def _islands(free: np.ndarray):
-    """(labels (H, W) of the 4-connected non-free components, 0 on free cells and on the components that
-    touch the map's edge; their areas in cells (index = label, 0 for those); number of labels)."""
+    """(labels (H, W) of the 4-connected non-free components (a view into cv2's padded label image; free cells
+    have label 0), their areas in cells (index = label; 0 for label 0 and for the component that touches the
+    map's edge, which is no island); number of labels)."""
     import cv2
 
     pad = cv2.copyMakeBorder((~free).view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=1)
@@ -104,21 +105,20 @@ def _islands(free: np.ndarray):
     outer = int(lab[0, 0])  # the frame's component: every non-free cell connected to the map's edge
     area = st[:, cv2.CC_STAT_AREA].astype(np.int64)
     area[0] = area[outer] = 0
-    lab = lab[1:-1, 1:-1]
-    lab = np.where(lab == outer, 0, lab)
-    return lab, area, n
+    return lab[1:-1, 1:-1], area, n
 
 
 def _regions_touched(
     cells: np.ndarray, owner: np.ndarray, region_lab: np.ndarray, n_owner: int
 ) -> np.ndarray:
     """(n_owner,) number of distinct free regions (labels > 0 of ``region_lab``) 8-adjacent to the cells
-    (flat indices) of each owner (the island each cell belongs to)."""
+    (flat indices) of each owner (the island each cell belongs to). The cells are islands' cells, which never
+    lie on the map's edge (a non-free cell there belongs to the edge's component), so every neighbour is
+    inside the map."""
     h, w = region_lab.shape
-    lab_p = np.pad(region_lab, 1)
-    r, c = cells // w + 1, cells % w + 1
+    r, c = cells // w, cells % w
     reg = np.concatenate(
-        [lab_p[r + dr, c + dc] for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc]
+        [region_lab[r + dr, c + dc] for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc]
     ).astype(np.int64)
     own = np.tile(owner.astype(np.int64), 8)
     sel = reg > 0
@@ -161,7 +161,7 @@ def clean_free(grid, cleaning: MapCleaning | None = None, free: np.ndarray | Non
         fill |= unknown_only
     if fill.any():
         cells = np.flatnonzero(fill[ilab])
-        owner = ilab.ravel()[cells]
+        owner = ilab[cells // ilab.shape[1], cells % ilab.shape[1]]  # (ilab is a view: no flat copy)
         fill &= _regions_touched(cells, owner, lab, n_i) <= 1
         cells = cells[fill[owner]]
         free = free.copy()

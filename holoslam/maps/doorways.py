@@ -323,8 +323,9 @@ class _Regions:
 
         m = (nav & (cover == 0).reshape(nav.shape)).astype(np.uint8)
         n, lab = cv2.connectedComponents(m, connectivity=4)
-        self.lab = lab.reshape(-1).astype(np.int64)
         cap = n + extra + 1
+        # int32 labels (cv2's own; ids stay below cap) unless the ids could outgrow them
+        self.lab = lab.reshape(-1) if cap < 2**31 else lab.reshape(-1).astype(np.int64)
         self.parent = np.arange(cap, dtype=np.int64)
         self.area = np.zeros(cap)
         self.area[:n] = np.bincount(self.lab, minlength=n)
@@ -417,7 +418,8 @@ def segment_regions(
         cut_cells.append(_segment_cells(segs, h, w))
         walks.extend(_side_walks(rc, d, int(clr[rc[0], rc[1]] / res) + 8, free))
     n_cuts = len(cands)
-    cover = np.zeros(h * w, dtype=np.int32)
+    # how many cuts cover each cell: at most one per cut (a cut's cells are distinct)
+    cover = np.zeros(h * w, dtype=np.uint16 if n_cuts < 2**16 else np.int32)
     for cc in cut_cells:
         cover[cc] += 1
     total = int(sum(cc.shape[0] for cc in cut_cells))

@@ -299,12 +299,14 @@ def _one_per_opening(cands, lines, clr, free, res: float, keys) -> list[int]:
 # ---------------------------------------------------------------------------------------------- segmentation
 
 
-def _grow(labels: np.ndarray, free: np.ndarray) -> np.ndarray:
+def _grow(labels: np.ndarray, free: np.ndarray, *, in_place: bool = False) -> np.ndarray:
     """Every free cell without a label gets the label of the nearest labelled cell along 4-connected free
-    cells (the larger among equally near ones); cells no label reaches stay 0."""
+    cells (the larger among equally near ones); cells no label reaches stay 0. ``in_place``: ``labels`` (a
+    contiguous int32 array the caller gives away) is grown itself, not a copy."""
     from holoslam.maps.passages import kernels
 
-    out = np.ascontiguousarray(labels, dtype=np.int32).copy()
+    own = in_place and labels.dtype == np.int32 and labels.flags.c_contiguous and labels.flags.writeable
+    out = labels if own else np.ascontiguousarray(labels, dtype=np.int32).copy()
     fast = kernels()
     if fast is not None:
         fast.grow_labels(out.reshape(-1), np.ascontiguousarray(free).reshape(-1), out.shape[1])
@@ -398,7 +400,7 @@ def _rooms(seg, cands, kind, lines, free, clr, res: float, r: RoomRules) -> Room
     n = int(is_room.sum())
     room_id = np.zeros(seg.n_labels, dtype=np.int32)
     room_id[is_room] = np.arange(1, n + 1, dtype=np.int32)
-    labels = _grow(room_id[seg.labels], free)
+    labels = _grow(room_id[seg.labels], free, in_place=True)
     _mx, last, count = _label_stats(labels, clr, n + 1)
     room_cells = np.column_stack(np.unravel_index(last[1:], labels.shape)).astype(np.int64).reshape(-1, 2)
     kinds = dict(zip([(int(c[0][0]), int(c[0][1])) for c in cands], kind.tolist(), strict=True))

@@ -25,7 +25,10 @@ tiled 4000 x 4000 household map most of the remaining time is building the netwo
 
 Spur pruning (documented length): an edge with an endpoint node at one end and a junction at the other is
 a spur; it is removed when its length is below ``max(prune_spur_m, spur_clearance_factor * clearance of its
-junction)`` (a branch that does not leave the junction's free disc is thinning noise from a wall corner).
+junction, clearance + spur_beyond_clearance_m)`` (a branch that does not leave the junction's free disc is
+thinning noise from a wall corner; one that leaves it by less than the robot's diameter, ``topology_from_settings``'
+``spur_robot_diameters``, is a notch in a wall the robot's body does not fit into, not an alcove or a doorway).
+The graph records how many spurs were removed (``spurs_pruned``) and the depth used (``spur_beyond_clearance_m``).
 Pruning repeats until nothing changes, a junction left with two edges is merged away (its two edges joined),
 and the last edge of a component is never removed. Pruning removes only leaves, so the number of components
 and of independent cycles does not change.
@@ -149,6 +152,7 @@ def skeleton_to_graph(
     anchors_wTa: np.ndarray | None = None,
     prune_spur_m: float = 0.0,
     spur_clearance_factor: float = 0.0,
+    spur_beyond_clearance_m: float = 0.0,
 ) -> nx.MultiGraph:
     """Topology graph of an 8-connected skeleton (module docstring). ``clearance`` is an (H, W) metres map
     (``clearance_map``); without it clearances are NaN. Cell (row, col) has its centre at
@@ -204,8 +208,10 @@ def skeleton_to_graph(
         if gc_was_on:
             gc.enable()
     G.graph.update(resolution=float(resolution), origin_x=float(origin_x), origin_y=float(origin_y))
-    if prune_spur_m > 0 or spur_clearance_factor > 0:
-        prune_spurs(G, prune_spur_m, spur_clearance_factor)
+    pruned = 0
+    if prune_spur_m > 0 or spur_clearance_factor > 0 or spur_beyond_clearance_m > 0:
+        pruned = prune_spurs(G, prune_spur_m, spur_clearance_factor, spur_beyond_clearance_m)
+    G.graph.update(spurs_pruned=int(pruned), spur_beyond_clearance_m=float(spur_beyond_clearance_m))
     return G
 
 
@@ -304,7 +310,8 @@ def _nearest_anchor(xy: np.ndarray, anchors_wTa: np.ndarray | None) -> np.ndarra
     return np.argmin(d2, axis=1).astype(np.int64)
 
 
-def prune_spurs(G: nx.MultiGraph, prune_spur_m: float, spur_clearance_factor: float = 0.0) -> int:
+def prune_spurs(G: nx.MultiGraph, prune_spur_m: float, spur_clearance_factor: float = 0.0,
+                spur_beyond_clearance_m: float = 0.0) -> int:
     """Remove short spurs in place (module docstring); returns how many edges were removed."""
     removed = 0
     changed = True
@@ -317,7 +324,8 @@ def prune_spurs(G: nx.MultiGraph, prune_spur_m: float, spur_clearance_factor: fl
             if other == leaf or G.degree(other) <= 1:
                 continue  # the last edge of its component
             clr = G.nodes[other].get("clearance", np.nan)
-            limit = max(prune_spur_m, spur_clearance_factor * (0.0 if np.isnan(clr) else clr))
+            c = 0.0 if np.isnan(clr) else clr
+            limit = max(prune_spur_m, spur_clearance_factor * c, c + spur_beyond_clearance_m)
             if data["length"] >= limit:
                 continue
             G.remove_node(leaf)
@@ -371,13 +379,20 @@ def cycle_rank(G: nx.Graph) -> int:
     return G.number_of_edges() - G.number_of_nodes() + nx.number_connected_components(G)
 
 
-def topology_from_settings(grid: OccupancyGrid, settings, anchors_wTa: np.ndarray | None = None) -> nx.MultiGraph:
+def topology_from_settings(grid: OccupancyGrid, settings, anchors_wTa: np.ndarray | None = None,
+                           robot_radius_m: float | None = None) -> nx.MultiGraph:
     """:func:`topology_from_grid` with the run configuration's topology section
-    (:class:`holoslam.maps.settings.TopologyConfig`): the one place its fields become the call's options."""
+    (:class:`holoslam.maps.settings.TopologyConfig`): the one place its fields become the call's options.
+    ``robot_radius_m`` (default: ``RobotConfig``'s) sets the depth of ``spur_robot_diameters``."""
+    if robot_radius_m is None:
+        from holoslam.config import RobotConfig
+
+        robot_radius_m = RobotConfig().radius_m
     return topology_from_grid(
         grid,
         anchors_wTa=anchors_wTa,
         prune_spur_m=settings.prune_spur_m,
+        spur_beyond_clearance_m=settings.spur_robot_diameters * 2.0 * float(robot_radius_m),
         spur_clearance_factor=settings.spur_clearance_factor,
         erode_cells=settings.erode_cells,
         close_cells=settings.close_cells,
@@ -391,6 +406,7 @@ def topology_from_grid(
     anchors_wTa: np.ndarray | None = None,
     prune_spur_m: float = 0.3,
     spur_clearance_factor: float = 1.5,
+    spur_beyond_clearance_m: float = 0.0,
     erode_cells: int = 0,
     close_cells: int = 0,
     cleaning: MapCleaning | None = _DEFAULT_CLEANING,
@@ -424,6 +440,7 @@ def topology_from_grid(
         anchors_wTa=anchors_wTa,
         prune_spur_m=prune_spur_m,
         spur_clearance_factor=spur_clearance_factor,
+        spur_beyond_clearance_m=spur_beyond_clearance_m,
     )
     G.graph.update(close_cells=int(close_cells), erode_cells=int(erode_cells))
     if cleaning is not None:

@@ -191,13 +191,17 @@ def test_planning_json_queries_and_errors(tmp_path):
     assert np.array_equal(plan_path(tl, s, g).waypoints, plan_path(back, s, g).waypoints)
     d = json.loads((tmp_path / "planning.json").read_text())
     assert d["grid"]["min_block_m"] == pytest.approx(0.05)
-    assert len(d["layer1"]["cells"]) == tl.n_blocks and len(d["layer2"]["blocks"]) == tl.n_regions
+    assert d["version"] == 2 and d["layer1"]["count"] == tl.n_blocks and len(d["layer2"]["cells"]) == tl.n_regions
+    assert (tmp_path / "planning_layer1.npz").is_file()
     d["format"] = "other"
     (tmp_path / "bad.json").write_text(json.dumps(d))
     with pytest.raises(MapError, match="bad.json"):
         read_planning(tmp_path / "bad.json")
     d["format"] = "holoslam-planning"
-    d["layer1"]["cells"] = [[0, 0, 10**6, 1]]
+    d["grid"]["shape"] = [1, 1]  # the blocks now lie outside the grid
     (tmp_path / "bad2.json").write_text(json.dumps(d))
-    with pytest.raises(MapError):
+    with pytest.raises(MapError, match="outside the grid"):
         read_planning(tmp_path / "bad2.json")
+    (tmp_path / "planning_layer1.npz").unlink()
+    with pytest.raises(MapError, match="layer-1 array file"):
+        read_planning(tmp_path / "planning.json")
