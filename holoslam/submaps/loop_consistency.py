@@ -13,8 +13,8 @@ part onto the old one. Closures c1, c2 agree when Delta_c1 and Delta_c2 move anc
 their covariances plus the drift the map may have between them: ``sigma_m + rate * d`` (m) and ``sigma_deg +
 deg_rate * d`` (deg), d the distance the robot travelled between n1 and n2 plus between m1 and m2 (local SLAM's
 drift over that much travel; the map is rigid below it). The squared Mahalanobis distance of the difference must
-stay under the chi-square(3) gate. A closure is accepted when at least ``min_agreeing`` - 1 others agree with it;
-those are accepted with it. The others wait (``pending``), at most ``max_pending``, the oldest forgotten first.
+stay under the chi-square(3) gate. A closure is accepted when it and ``min_agreeing`` - 1 others all agree with one
+another (a clique, as in pairwise consistency maximisation); those are accepted with it. The others wait (``pending``), at most ``max_pending``, the oldest forgotten first.
 """
 
 from __future__ import annotations
@@ -36,7 +36,10 @@ class ConsistencyConfig:
     ~10 m; ``LocalSlamConfig.map_drift_per_m`` 0.5 % at 1 sigma inside one submap); the gate is chi-square(3)
     at 99.9 %."""
 
-    min_agreeing: int = 2  # closures, this one included, that must agree before any of them is accepted
+    # closures, this one included, that must all agree with one another before any of them is accepted. Two are not
+    # enough: on aces kidnapped in its middle, two wrong closures from nodes 4+ m apart agreed and joined the parts
+    # 54 m off, while three found the right join (Cartographer's own test of joining trajectories asks 3 too)
+    min_agreeing: int = 3
     # m of travel between the nodes of two closures that may vouch for each other: nodes closer than this see the
     # same walls, and a place that aliases one of them aliases the other alike (two nodes 0.6 m apart of one aces
     # submap both put it 30 m from where it is, identically)
@@ -84,15 +87,24 @@ class LoopConsistency:
         self.accepted: list = []  # wide closures accepted so far (a new one may agree with these too)
 
     def offer(self, c, est_wTa: np.ndarray, travel: np.ndarray) -> list:
-        """The closures to accept now: ``c`` and those that agree with it, when there are enough; else ``c``
-        waits and nothing is accepted."""
+        """The closures to accept now: ``c`` and a set of waiting ones that agree with it and with one another
+        (with the closures accepted before, which are trusted, agreeing with ``c`` counting too), when they are
+        ``min_agreeing`` in all; else ``c`` waits and nothing is accepted."""
         est_wTa, travel = np.asarray(est_wTa), np.asarray(travel)
-        agree_pending = [p for p in self.pending if agreement(p, c, est_wTa, travel, self.cfg) <= self.cfg.gate]
-        agree_accepted = [a for a in self.accepted if agreement(a, c, est_wTa, travel, self.cfg) <= self.cfg.gate]
-        if 1 + len(agree_pending) + len(agree_accepted) >= self.cfg.min_agreeing:
-            chosen = {id(p) for p in agree_pending}
+        gate = self.cfg.gate
+
+        def agree(a, b) -> bool:
+            return agreement(a, b, est_wTa, travel, self.cfg) <= gate
+
+        trusted = sum(agree(a, c) for a in self.accepted)
+        group: list = []
+        for p in reversed(self.pending):  # the most recent first: the estimate has drifted least since
+            if agree(p, c) and all(agree(p, q) for q in group):
+                group.append(p)
+        if 1 + len(group) + trusted >= self.cfg.min_agreeing:
+            chosen = {id(p) for p in group}
             self.pending = [p for p in self.pending if id(p) not in chosen]
-            out = [*agree_pending, c]
+            out = [*group[::-1], c]
             self.accepted.extend(out)
             return out
         self.pending.append(c)

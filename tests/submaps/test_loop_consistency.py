@@ -59,10 +59,22 @@ def test_the_allowance_grows_with_the_travel_between_the_closures():
     assert near > cfg.gate > far
 
 
-def test_a_closure_waits_until_another_agrees_and_aliases_never_join():
+def test_a_closure_waits_until_enough_agree_with_one_another_and_aliases_never_join():
     pool = LoopConsistency()
     assert pool.offer(closure(0, 2, 300.0), EST, TRAVEL) == []
     assert pool.offer(closure(1, 3, 306.0, error=(3.0, 0.0, 0.0)), EST, TRAVEL) == []  # alias: waits
-    accepted = pool.offer(closure(1, 3, 306.5), EST, TRAVEL)
-    assert {(c.old, c.new, c.travelled) for c in accepted} == {(0, 2, 300.0), (1, 3, 306.5)}
-    assert len(pool.pending) == 1 and pool.pending[0].mTn[0] != accepted[0].mTn[0]
+    assert pool.offer(closure(1, 3, 306.5), EST, TRAVEL) == []  # two agree: not yet (min_agreeing 3)
+    accepted = pool.offer(closure(0, 3, 312.0), EST, TRAVEL)
+    assert {(c.old, c.new, c.travelled) for c in accepted} == {(0, 2, 300.0), (1, 3, 306.5), (0, 3, 312.0)}
+    assert len(pool.pending) == 1 and pool.pending[0].travelled == 306.0  # the alias still waits, alone
+    # once a join is accepted, one closure agreeing with it is enough, and the alias still never joins
+    assert pool.offer(closure(1, 2, 320.0), EST, TRAVEL) != []
+    assert pool.offer(closure(1, 3, 330.0, error=(3.0, 0.0, 0.0)), EST, TRAVEL) == []
+
+
+def test_two_wrong_closures_that_agree_with_each_other_do_not_join_alone():
+    pool = LoopConsistency()
+    wrong = (4.0, 1.0, 0.3)
+    assert pool.offer(closure(0, 2, 300.0, wrong), EST, TRAVEL) == []
+    assert pool.offer(closure(1, 3, 306.0, wrong), EST, TRAVEL) == []  # they agree, but only two
+    assert pool.offer(closure(0, 3, 312.0), EST, TRAVEL) == []  # a right one disagrees with both
