@@ -113,6 +113,19 @@ def cmd_run(a: argparse.Namespace) -> int:
     return EXIT_OK if outcome["ok"] else EXIT_FAILED
 
 
+def cmd_demo(a: argparse.Namespace) -> int:
+    from holoslam.config import load_run_config
+    from holoslam.run_jobs import run_demo
+
+    progress = Progress(quiet=a.quiet or a.json)
+    outcome = run_demo(a.output, load_run_config(a.config), progress=progress)
+    if a.json:
+        print(_json(outcome))
+    elif not a.quiet:
+        print(outcome["text"])
+    return EXIT_OK if outcome["ok"] else EXIT_FAILED
+
+
 def cmd_solve(a: argparse.Namespace) -> int:
     from holoslam.jobs import solve_graph_file
 
@@ -352,6 +365,20 @@ def _add_run(sub: Any) -> None:
     s.set_defaults(func=cmd_run)
 
 
+def _add_demo(sub: Any) -> None:
+    """The ``demo`` command's arguments."""
+    s = sub.add_parser(
+        "demo", help="run the main job on the bundled household log (from any folder; output ./holoslam-demo)"
+    )
+    s.add_argument(
+        "-o", "--output", type=Path, default=Path("holoslam-demo"), help="output folder (default ./holoslam-demo)"
+    )
+    s.add_argument("--config", type=Path, help="YAML run configuration (see README)")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    s.add_argument("--json", action="store_true", help="print the summary as JSON only")
+    s.set_defaults(func=cmd_demo)
+
+
 def _add_config(sub: Any) -> None:
     """The ``config`` command's arguments."""
     s = sub.add_parser("config", help="the run configuration: --dump writes every setting with its default")
@@ -543,7 +570,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"holoslam {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_run, _add_config, _add_inspect, _add_simulate, _add_solve, _add_plan, _add_export, _add_evaluate, _add_datasets, _add_tags, _add_topology):
+    for add in (_add_run, _add_demo, _add_config, _add_inspect, _add_simulate, _add_solve, _add_plan, _add_export, _add_evaluate, _add_datasets, _add_tags, _add_topology):
         add(sub)
     return p
 
