@@ -223,12 +223,15 @@ def _surface_covariance(S, pred, off, angles, aTb, kappa, res, step) -> np.ndarr
     D = np.empty((3, *S.shape))  # the offsets of every window pose, written in place (no broadcast copies)
     D[0] = pred[0] + off[None, None, :] - aTb[0]
     D[1] = pred[1] + off[None, :, None] - aTb[1]
-    D[2] = g.wrap(pred[2] + angles[:, None, None] - aTb[2])
+    dt = (pred[2] + angles[:, None, None] - aTb[2] + np.pi) % (2.0 * np.pi) - np.pi  # geometry.wrap's arithmetic
+    dt[dt >= np.pi] = -np.pi
+    D[2] = dt
     D = D.reshape(3, -1)
     cov = (D * w.ravel()) @ D.T
-    cov += np.diag([res**2 / 12.0, res**2 / 12.0, step**2 / 12.0])
-    # the surface is in the grid frame; a pose covariance lives in the pose's own frame (x, y rotated)
-    R = g.rot2(aTb[2])
-    J = np.eye(3)
-    J[:2, :2] = R.T
+    cov[0, 0] += res**2 / 12.0
+    cov[1, 1] += res**2 / 12.0
+    cov[2, 2] += step**2 / 12.0
+    # the surface is in the grid frame; a pose covariance lives in the pose's own frame (x, y rotated): J = diag(R^T, 1)
+    c, s = np.cos(aTb[2]), np.sin(aTb[2])
+    J = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
     return J @ cov @ J.T
