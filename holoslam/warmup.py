@@ -125,23 +125,30 @@ def _kernel_module(name: str):
 
 
 def _dispatcher(sig: KernelSignature):
-    obj: Any = _kernel_module(sig.module)
-    for part in sig.function.split("."):
-        obj = getattr(obj, part)
-    return obj
+    """The kernel of ``sig``: a module attribute, or ``NAME[i]``, item i of a module's tuple of kernels (a
+    module that builds its kernels on first use keeps them so: ``holoslam.submaps.loops._KERNELS``)."""
+    mod: Any = _kernel_module(sig.module)
+    name, _, index = sig.function.partition("[")
+    obj = getattr(mod, name)
+    return obj[int(index.rstrip("]"))] if index else obj
 
 
 def _kernel_dispatchers(module_names: Iterable[str]) -> list[tuple[str, str, Any]]:
     """(module, name, dispatcher) of every kernel defined in the given modules."""
     from numba.core.dispatcher import Dispatcher
 
+    def own(v: Any, name: str) -> bool:
+        py = getattr(v, "py_func", None)
+        return isinstance(v, Dispatcher) and py is not None and py.__module__ == name
+
     out = []
     for name in module_names:
         mod = importlib.import_module(name)
         for attr, v in sorted(vars(mod).items()):
-            py = getattr(v, "py_func", None)
-            if isinstance(v, Dispatcher) and py is not None and py.__module__ == name:
+            if own(v, name):
                 out.append((name, attr, v))
+            elif isinstance(v, tuple):  # kernels built on first use, kept in a tuple (``_dispatcher``)
+                out += [(name, f"{attr}[{i}]", x) for i, x in enumerate(v) if own(x, name)]
     return out
 
 
