@@ -87,7 +87,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--record", action="store_true", help="re-record holoslam/_kernel_signatures.txt first")
     ap.add_argument("--seconds", action="store_true", help="re-measure the record's compile seconds only")
-    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--repeats", type=int, default=1, help="serial vs parallel warm-ups (0: none)")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 2)
     ap.add_argument("--top", type=int, default=25)
     a = ap.parse_args()
@@ -95,6 +95,8 @@ def main() -> None:
         record()
     elif a.seconds:
         write_seconds()
+    if a.repeats < 1:
+        return
     walls: dict[int, list[float]] = {1: [], a.workers: []}
     last: dict = {}
     for _ in range(a.repeats):
@@ -107,7 +109,7 @@ def main() -> None:
     per_module: dict[str, float] = {}
     for module, _f, s, _e in rows:
         per_module[module] = per_module.get(module, 0.0) + s
-    print(f"\nslowest kernel signatures (serial compile, callees compiled inside their first caller; {len(rows)} in all)")
+    print(f"\nslowest kernel signatures (serial compile, CPU s, callees compiled inside their first caller; {len(rows)} in all)")
     print(f"{'module':<34} {'kernel':<28} {'s':>7}")
     for module, function, s, err in rows[: a.top]:
         print(f"{module:<34} {function:<28} {s:7.2f}{'  ' + err if err else ''}")
