@@ -95,8 +95,9 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 
 def _compile_kernels_first(quiet: bool) -> Any:
     """Before a run: when numba's cache lacks recorded kernels (the first run after an install), say so once
-    and start compiling them in background processes while the run goes on (``holoslam.warmup``); later runs
-    find them cached and print nothing. Returns the pool to shut down after the run, or None."""
+    and compile them in parallel processes: the front end's before the run starts, the later stages' while it
+    goes on (``holoslam.warmup``); later runs find them cached and print nothing. Returns the pool to shut down
+    after the run, or None."""
     from holoslam.warmup import compile_in_background, estimate_seconds, pending
 
     todo = pending()
@@ -104,7 +105,7 @@ def _compile_kernels_first(quiet: bool) -> Any:
         return None
     if not quiet:
         _err(f"compiling holoslam's kernels, once per install: ~{estimate_seconds(todo):.0f} s "
-             f"({len(todo)} kernel signatures, in parallel with the run; 'holoslam warmup' does it ahead)")
+             f"({len(todo)} kernel signatures, in parallel; 'holoslam warmup' does it ahead)")
     return compile_in_background(todo)
 
 

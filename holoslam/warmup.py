@@ -251,32 +251,34 @@ def warm_up(
         return [r for rs in pool.map(_compile_module, groups) for r in rs]
 
 
-# kernel modules by the run's stage that first calls them, the last stages first: a run compiling in the
-# background (``compile_in_background``) gets the maps' and planner's kernels ready while it is still in its
-# front end, whose kernels it compiles itself as it reaches them
-_LATE_FIRST = ("holoslam.planning", "holoslam.maps", "holoslam._common_fast", "holoslam.submaps.loops",
-               "holoslam.submaps._bnb_fast")
+# the kernel modules of the front end, the first stage that calls kernels and the one that compiles the most:
+# a first run waits for them (compiled over every core), then runs while the rest compiles in the background
+FRONT_END = ("holoslam.submaps",)
 
 
-def _stage_rank(module: str) -> int:
-    return next((k for k, p in enumerate(_LATE_FIRST) if module.startswith(p)), len(_LATE_FIRST))
-
-
-def compile_in_background(signatures: list[KernelSignature], workers: int | None = None) -> ProcessPoolExecutor:
-    """Start compiling ``signatures`` in a process pool (default: one process fewer than the cores, at least
-    one) and return at once: the caller runs meanwhile, compiling on first call what is not cached yet and
-    loading from numba's cache what the pool has finished (numba reads its cache index at each compile). The
-    caller shuts the pool down (``shutdown(wait=True)``) when its run is over."""
+def compile_in_background(
+    signatures: list[KernelSignature], workers: int | None = None, wait_for: tuple[str, ...] = FRONT_END
+) -> ProcessPoolExecutor:
+    """Compile ``signatures`` in a process pool of ``workers`` (default: the cores), one kernel module per
+    task, the modules named by the prefixes ``wait_for`` first (the largest first); return once those are in
+    numba's cache, with the rest still compiling. The caller runs meanwhile (numba reads its cache index at
+    each compile: a kernel the pool has finished is loaded, one it has not is compiled by the caller) and shuts
+    the pool down (``shutdown(wait=True)``) when its run is over."""
     import multiprocessing
+    from concurrent.futures import wait
 
     by_module: dict[str, list[KernelSignature]] = {}
     for s in signatures:
         by_module.setdefault(s.module, []).append(s)
-    groups = sorted(by_module.values(), key=lambda g: (_stage_rank(g[0].module), -sum(s.seconds for s in g)))
-    workers = workers or max(1, (os.cpu_count() or 1) - 1)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"))
-    for g in groups:
-        pool.submit(_compile_module, g)
+
+    def first(module: str) -> bool:
+        return module.startswith(wait_for)
+
+    groups = sorted(by_module.values(), key=lambda g: (not first(g[0].module), -sum(s.seconds for s in g)))
+    pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1,
+                               mp_context=multiprocessing.get_context("spawn"))
+    futures = [(pool.submit(_compile_module, g), first(g[0].module)) for g in groups]
+    wait([f for f, w in futures if w])
     return pool
 
 
