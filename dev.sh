@@ -30,6 +30,8 @@ ensure_venv() {
     echo "[holoslam] installing holoslam and its dependencies into $VENV" >&2
     $VENV/bin/python -m pip install -q --upgrade pip >/dev/null
     $VENV/bin/python -m pip install -q -e '.[dev]'
+    # compile the numba kernels a run uses now, in parallel, instead of during the first run
+    $VENV/bin/holoslam warmup || echo "[holoslam] notice: warmup failed; the first run compiles its kernels" >&2
     touch $stamp
   fi
 }
@@ -37,10 +39,10 @@ ensure_venv() {
 cmd=${1:-demo}
 shift || true
 case "$cmd" in
-  install) ensure_zbar; ensure_venv ;;
+  install) ensure_zbar; ensure_venv; $VENV/bin/holoslam warmup ;;
   demo)
     ensure_zbar; ensure_venv
-    $VENV/bin/holoslam run "$($VENV/bin/python -c 'from holoslam.io.datasets import bundled_household_log as f; print(f())')" -o out/household "$@"
+    $VENV/bin/holoslam demo -o out/household "$@"
     ;;
   test)
     ensure_zbar; ensure_venv

@@ -93,6 +93,39 @@ def cmd_inspect(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _compile_kernels_first(quiet: bool) -> Any:
+    """Before a run: when numba's cache lacks recorded kernels (the first run after an install), say so once
+    and compile them in parallel processes: the front end's before the run starts, the later stages' while it
+    goes on (``holoslam.warmup``); later runs find them cached and print nothing. Returns the pool to shut down
+    after the run, or None."""
+    from holoslam.warmup import compile_in_background, estimate_seconds, pending
+
+    todo = pending()
+    if not todo:
+        return None
+    if not quiet:
+        _err(f"compiling holoslam's kernels, once per install: ~{estimate_seconds(todo):.0f} s "
+             f"({len(todo)} kernel signatures, in parallel; 'holoslam warmup' does it ahead)")
+    return compile_in_background(todo)
+
+
+def cmd_warmup(a: argparse.Namespace) -> int:
+    from holoslam.warmup import load_signatures, pending, warm_up
+
+    todo = load_signatures() if a.all else pending()
+    if not todo:
+        print("holoslam's kernels are compiled (numba's cache holds every recorded signature)")
+        return EXIT_OK
+    t0 = time.perf_counter()
+    done = warm_up(todo, workers=a.workers)
+    failed = [d for d in done if d[3]]
+    for module, function, _s, error in failed:
+        _err(f"warmup: {module}.{function}: {error} (the run compiles it on first use)")
+    print(f"compiled {len(done) - len(failed)} kernel signatures of "
+          f"{len({d[0] for d in done})} modules in {time.perf_counter() - t0:.1f} s")
+    return EXIT_OK
+
+
 def cmd_run(a: argparse.Namespace) -> int:
     from holoslam.batch import collect_logs
     from holoslam.config import load_run_config
@@ -104,8 +137,31 @@ def cmd_run(a: argparse.Namespace) -> int:
         raise ConfigError(
             f"no logs found in {', '.join(map(str, a.logs))}; give .mcap files or folders of them"
         )
+    compiling = _compile_kernels_first(a.quiet or a.json)
     progress = Progress(quiet=a.quiet or a.json)
-    outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress)
+    try:
+        outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress)
+    finally:
+        if compiling is not None:
+            compiling.shutdown(wait=True, cancel_futures=True)
+    if a.json:
+        print(_json(outcome))
+    elif not a.quiet:
+        print(outcome["text"])
+    return EXIT_OK if outcome["ok"] else EXIT_FAILED
+
+
+def cmd_demo(a: argparse.Namespace) -> int:
+    from holoslam.config import load_run_config
+    from holoslam.run_jobs import run_demo
+
+    compiling = _compile_kernels_first(a.quiet or a.json)
+    progress = Progress(quiet=a.quiet or a.json)
+    try:
+        outcome = run_demo(a.output, load_run_config(a.config), progress=progress)
+    finally:
+        if compiling is not None:
+            compiling.shutdown(wait=True, cancel_futures=True)
     if a.json:
         print(_json(outcome))
     elif not a.quiet:
@@ -352,6 +408,30 @@ def _add_run(sub: Any) -> None:
     s.set_defaults(func=cmd_run)
 
 
+def _add_demo(sub: Any) -> None:
+    """The ``demo`` command's arguments."""
+    s = sub.add_parser(
+        "demo", help="run the main job on the bundled household log (from any folder; output ./holoslam-demo)"
+    )
+    s.add_argument(
+        "-o", "--output", type=Path, default=Path("holoslam-demo"), help="output folder (default ./holoslam-demo)"
+    )
+    s.add_argument("--config", type=Path, help="YAML run configuration (see README)")
+    s.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
+    s.add_argument("--json", action="store_true", help="print the summary as JSON only")
+    s.set_defaults(func=cmd_demo)
+
+
+def _add_warmup(sub: Any) -> None:
+    """The ``warmup`` command's arguments."""
+    s = sub.add_parser(
+        "warmup", help="compile the numba kernels a run uses into numba's cache (once per install)"
+    )
+    s.add_argument("--workers", type=int, help="compiling processes (default: the cores)")
+    s.add_argument("--all", action="store_true", help="recompile every recorded signature, cached or not")
+    s.set_defaults(func=cmd_warmup)
+
+
 def _add_config(sub: Any) -> None:
     """The ``config`` command's arguments."""
     s = sub.add_parser("config", help="the run configuration: --dump writes every setting with its default")
@@ -545,7 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"holoslam {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_run, _add_config, _add_inspect, _add_simulate, _add_solve, _add_plan, _add_export, _add_evaluate, _add_datasets, _add_tags, _add_topology):
+    for add in (_add_run, _add_demo, _add_warmup, _add_config, _add_inspect, _add_simulate, _add_solve, _add_plan, _add_export, _add_evaluate, _add_datasets, _add_tags, _add_topology):
         add(sub)
     return p
 

@@ -18,7 +18,9 @@ from holoslam.timing import Progress
 if TYPE_CHECKING:
     from holoslam.config import RunConfig
 
-__all__ = ["run_log_to_folder", "run_logs", "simulate", "plan_to_object", "export_run"]
+__all__ = ["run_log_to_folder", "run_logs", "run_demo", "DEMO_OUTPUT", "simulate", "plan_to_object", "export_run"]
+
+DEMO_OUTPUT = "holoslam-demo"  # ``holoslam demo``'s output folder, relative to the current folder
 
 
 def _noop(*_a: Any, **_k: Any) -> None:
@@ -109,6 +111,18 @@ def run_logs(
         "logs": [dataclasses.asdict(i) for i in items],
         "text": "\n".join(lines),
     }
+
+
+def run_demo(
+    out_dir: str | Path = DEMO_OUTPUT, config: RunConfig | None = None, progress: Progress | None = None
+) -> dict[str, Any]:
+    """``holoslam demo``: the main job (``run_logs``) on the bundled household log (found inside the installed
+    package or the checkout's ``datasets/``, its sha256 checked), written to ``out_dir``."""
+    from holoslam.config import RunConfig
+    from holoslam.io.datasets import bundled_household_log
+
+    log = bundled_household_log()
+    return run_logs([log], out_dir, config or RunConfig(), progress=progress)
 
 
 def simulate(

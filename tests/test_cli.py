@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -18,10 +19,16 @@ pytestmark = pytest.mark.slow
 
 @pytest.fixture(scope="module")
 def household_run(tmp_path_factory) -> Path:
-    """One full run of the bundled household log through the CLI (the README's main job)."""
-    out = tmp_path_factory.mktemp("run") / "household"
-    assert main(["run", str(bundled_household_log()), "-o", str(out), "--quiet"]) == 0
-    return out
+    """One full run of the bundled household log through the CLI (the README's main job): ``holoslam demo`` from
+    an empty folder, writing its default ``./holoslam-demo``."""
+    here = tmp_path_factory.mktemp("run")
+    before = os.getcwd()
+    os.chdir(here)
+    try:
+        assert main(["demo", "--quiet"]) == 0
+    finally:
+        os.chdir(before)
+    return here / "holoslam-demo"
 
 
 def test_run_writes_every_file_of_the_output_folder(household_run):

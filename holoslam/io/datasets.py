@@ -2,8 +2,10 @@
 
 Where a dataset is looked for, by its manifest entry's ``where``:
 
-- ``bundled``: the ``datasets/`` folder next to the ``holoslam`` package (a source checkout or an editable
-  install), or a ``datasets/`` folder in the folders of ``$HOLOSLAM_DATA``; the sha256 is verified.
+- ``bundled``: the package's own ``holoslam/_datasets/`` folder (an installed wheel: ``setup.py`` copies the
+  repository's ``datasets/`` there at build time), else the ``datasets/`` folder next to the ``holoslam``
+  package (a source checkout or an editable install), or a ``datasets/`` folder in the folders of
+  ``$HOLOSLAM_DATA``; the sha256 is verified.
 - ``gtsam``: inside the installed gtsam wheel (``gtsam.findExampleDataFile``).
 - ``external``: the folders listed in ``$HOLOSLAM_DATA`` (separated by ``os.pathsep``), e.g.
   ``HOLOSLAM_DATA=/work/shared/posegraph``.
@@ -48,8 +50,13 @@ class DatasetEntry:
 
 
 def datasets_dir() -> Path:
-    """The ``datasets/`` folder beside the package (holds ``manifest.yaml``)."""
-    return Path(__file__).resolve().parent.parent.parent / "datasets"
+    """The folder of the manifest and the bundled log: ``holoslam/_datasets`` inside an installed wheel, else
+    the repository's ``datasets/`` beside the package (a source checkout or an editable install)."""
+    package = Path(__file__).resolve().parent.parent
+    shipped = package / "_datasets"
+    if (shipped / "manifest.yaml").is_file():
+        return shipped
+    return package.parent / "datasets"
 
 
 def _env_dirs() -> list[Path]:
@@ -66,8 +73,8 @@ def load_manifest(path: str | Path | None = None) -> dict[str, DatasetEntry]:
         data = yaml.safe_load(p.read_text(encoding="utf-8"))
     except OSError as e:
         raise IngestError(
-            f"dataset manifest {p} cannot be read ({e.strerror}); run from a holoslam source "
-            f"checkout or pass the manifest's path"
+            f"dataset manifest {p} cannot be read ({e.strerror}); reinstall holoslam from its wheel "
+            f"(it ships the manifest) or pass the manifest's path"
         ) from e
     except yaml.YAMLError as e:
         raise IngestError(f"dataset manifest {p} is not valid YAML: {e}") from e

@@ -121,6 +121,14 @@ def graph_nodes(submaps: Sequence[Any]) -> Nodes:
                  tuple(seen[t][3] for t in ts))
 
 
+def _nearest_owners(owners: np.ndarray, dists: np.ndarray, count: int) -> list[int]:
+    """The ``count`` submaps nearest by their nearest keyframe, nearest first (ties: the lower index first);
+    ``owners`` is non-decreasing (keyframes listed submap by submap)."""
+    ks, start = np.unique(owners, return_index=True)
+    nearest = np.minimum.reduceat(dists, start)
+    return [int(k) for k in ks[np.argsort(nearest, kind="stable")[:count]]]
+
+
 def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: RevisitConfig | None = None,
                 match_cfg: MatchConfig | None = None,
                 progress: Callable[[int, int], None] | None = None) -> NodeMatches:
@@ -145,10 +153,7 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
         near = (d <= cfg.keyframe_distance_m) & (np.abs(owner - nodes.host[n]) > cfg.skip_recent)
         if not near.any():
             continue
-        best: dict[int, float] = {}
-        for k, dk in zip(owner[near], d[near], strict=True):
-            best[int(k)] = min(best.get(int(k), np.inf), float(dk))
-        for k in sorted(best, key=best.__getitem__)[: cfg.max_submaps]:
+        for k in _nearest_owners(owner[near], d[near], cfg.max_submaps):
             grid = by_index[k].grid
             if grid is None or not hasattr(grid, "prob"):
                 continue

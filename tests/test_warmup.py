@@ -1,0 +1,55 @@
+"""holoslam.warmup: the recorded kernel signatures resolve to today's kernels and decode to numba types, and
+compiling one writes numba's cache (what ``holoslam warmup`` and the first run rely on)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+from repo_paths import REPO
+
+from holoslam import warmup
+
+
+def test_record_resolves_to_kernels_of_the_run():
+    sigs = warmup.load_signatures()
+    assert len(sigs) >= 40  # a household run compiles ~56 signatures of 10 kernel modules
+    modules = {s.module for s in sigs}
+    assert {"holoslam.submaps._grid_fast", "holoslam.maps._thin_fast", "holoslam.planning._fast.build"} <= modules
+    for s in sigs:
+        disp = warmup._dispatcher(s)  # a renamed or removed kernel fails here: re-record the file
+        assert hasattr(disp, "compile"), s
+        argtypes = tuple(warmup._decode(a) for a in s.args)
+        assert len(argtypes) == len(disp.py_func.__code__.co_varnames[: disp.py_func.__code__.co_argcount]), s
+        assert s.seconds >= 0.0
+
+
+def test_types_round_trip():
+    from numba import typeof
+
+    values = [np.zeros((2, 3), np.float32), np.zeros(4, np.int64)[::2], np.asfortranarray(np.zeros((2, 2))),
+              1.5, 3, True, (1.0, 2.0), (1, 2.0), None]
+    for v in values:
+        t = typeof(v)
+        assert warmup._decode(warmup._encode(t)) == t
+    ro = np.zeros(3)
+    ro.flags.writeable = False
+    assert warmup._decode(warmup._encode(typeof(ro))) == typeof(ro)
+
+
+def test_compiling_a_signature_fills_the_cache(tmp_path):
+    # in a child process with an empty numba cache: the kernel is pending, compiled, then cached
+    code = (
+        "from holoslam import warmup\n"
+        "sig = next(s for s in warmup.load_signatures() if s.module == 'holoslam.maps._raycast_fast')\n"
+        "before = len(warmup.pending([sig]))\n"
+        "done = warmup.warm_up([sig], workers=1)\n"
+        "print(before, len(done), repr(done[0][3]), len(warmup.pending([sig])))\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["1", "1", "''", "0"]
+    assert any(tmp_path.rglob("*.nbi"))
