@@ -24,6 +24,7 @@ from typing import Any, TypeVar
 from holoslam.choices import Method
 from holoslam.errors import ConfigError, MapError
 from holoslam.maps.settings import HolographicConfig, TopologyConfig
+from holoslam.maps.topology import DEFAULT_ROBOT_RADIUS_M
 from holoslam.submaps.frontend import FrontEndConfig
 
 if typing.TYPE_CHECKING:
@@ -302,7 +303,7 @@ class RobotConfig:
     # m: radius of the circle the base sweeps turning in place about its centre (the odometry frame's origin);
     # the paper's Pioneer III (3-DX datasheet: body 455 x 381 mm, swing radius about 26 cm). The planning graph's
     # configuration space, the reach model's standing points and the narrowest doorway (2 radius_m) use it
-    radius_m: float = 0.26
+    radius_m: float = DEFAULT_ROBOT_RADIUS_M
     # m: horizontal distance from the base centre the gripper reaches; a Kinova JACO-class arm (reach 0.90 m)
     # mounted near the centre of the top plate
     arm_reach_m: float = 0.9

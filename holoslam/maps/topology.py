@@ -105,6 +105,11 @@ __all__ = [
 _LAST: dict[str, tuple] = {}
 
 
+# m, the reference robot's radius (seed 002's service robot): ``holoslam.config.RobotConfig.radius_m``'s default,
+# here so that the maps layer (the light ``holoslam topology`` command) needs nothing of the run configuration
+DEFAULT_ROBOT_RADIUS_M = 0.26
+
+
 def _reuse(kind: str, source: np.ndarray, key, compute):
     """The last result of ``compute`` for this very ``source`` array (the same object, still alive: a weak
     reference) and ``key``, else a new one. The maps stages ask for the same cleaned free space and clearance
@@ -385,9 +390,7 @@ def topology_from_settings(grid: OccupancyGrid, settings, anchors_wTa: np.ndarra
     (:class:`holoslam.maps.settings.TopologyConfig`): the one place its fields become the call's options.
     ``robot_radius_m`` (default: ``RobotConfig``'s) sets the depth of ``spur_robot_diameters``."""
     if robot_radius_m is None:
-        from holoslam.config import RobotConfig
-
-        robot_radius_m = RobotConfig().radius_m
+        robot_radius_m = DEFAULT_ROBOT_RADIUS_M
     return topology_from_grid(
         grid,
         anchors_wTa=anchors_wTa,
