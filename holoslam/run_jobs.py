@@ -18,34 +18,44 @@ from holoslam.timing import Progress
 if TYPE_CHECKING:
     from holoslam.config import RunConfig
 
-__all__ = ["run_log_to_folder", "run_logs", "simulate", "plan_to_object", "export_run"]
+__all__ = ["run_log_to_folder", "run_config_hash", "run_logs", "simulate", "plan_to_object", "export_run"]
 
 
 def _noop(*_a: Any, **_k: Any) -> None:
     return None
 
 
+def run_config_hash(config: RunConfig | None) -> str:
+    """The hash a run folder's manifest records for its configuration (every setting and the mapping file's
+    bytes): two runs with equal hashes ran with the same settings."""
+    from holoslam.config import RunConfig, to_mapping
+    from holoslam.io.run_manifest import config_sha256
+
+    cfg = config if config is not None else RunConfig()
+    return config_sha256(to_mapping(cfg), cfg.mapping)
+
+
 def run_log_to_folder(
     log: str, out_dir: str, config: RunConfig | None = None, progress: Progress | None = None
 ) -> dict[str, Any]:
-    """Run one log and write its output folder; returns a short summary (for the batch runner)."""
-    from holoslam.io.run_folder import prepare_output_folder, write_run
+    """Run one log and write its output folder, whole or not at all (a previous folder of that name stays until
+    the new one is complete; see :func:`holoslam.io.run_folder.write_run`); returns a short summary (for the
+    batch runner)."""
+    from holoslam.io.run_folder import prepare_run_folder, write_run
+    from holoslam.io.run_manifest import input_fingerprint
     from holoslam.pipeline import run
 
-    existed = Path(out_dir).exists()
-    prepare_output_folder(out_dir)  # an unwritable folder is a one-line error before the run, not after it
-    try:
-        result = run(log, config, progress)
-    except BaseException:
-        if not existed and not any(Path(out_dir).iterdir()):
-            Path(out_dir).rmdir()  # a run that failed leaves no empty folder behind
-        raise
+    prepare_run_folder(out_dir)  # an unwritable folder is a one-line error before the run, not after it
+    fingerprint = input_fingerprint(log) if Path(log).exists() else None  # before the run: what it read
+    result = run(log, config, progress)
     written = write_run(
         result,
         out_dir,
         pictures=result.config.pictures,
         results_mcap=result.config.results_mcap,
         progress=progress,
+        log_fingerprint=fingerprint,
+        config_hash=run_config_hash(result.config),
     )
     acc = result.report.accuracy
     return {
