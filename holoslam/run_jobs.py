@@ -5,7 +5,6 @@ and only under the folder the caller named; the run itself is ``holoslam.pipelin
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -79,15 +78,16 @@ def run_logs(
     workers: int | None = None,
     scheduler: str | None = None,
     progress: Progress | None = None,
+    force: bool = False,
 ) -> dict[str, Any]:
-    """Run one or many logs. One log writes straight into ``out_root``; many logs get one sub-folder each,
-    processed in parallel (local processes, or a Dask cluster given its scheduler address)."""
-    from holoslam.batch import run_many
+    """Run one or many logs. One log writes straight into ``out_root`` (always run). Many logs (or any on a
+    cluster) get one sub-folder each, processed in parallel (local processes, or a Dask cluster given its
+    scheduler address); a log whose folder is complete for the same input and configuration is skipped as up
+    to date unless ``force`` (:func:`holoslam.batch_resume.run_batch`: the table, ``batch.json``)."""
+    from holoslam.batch_resume import run_batch
     from holoslam.io.run_folder import prepare_output_folder
 
     progress = progress or _noop
-    if len(logs) > 1 or scheduler is not None:
-        prepare_output_folder(out_root)  # once, before any log is dispatched
     if len(logs) == 1 and scheduler is None:
         try:
             summary = run_log_to_folder(str(logs[0]), str(out_root), config, progress)
@@ -95,30 +95,18 @@ def run_logs(
             msg = str(e)
             raise IngestError(msg if msg.startswith(str(logs[0])) else f"{logs[0]}: {msg}") from None
         return {"ok": True, "logs": [summary], "text": summary["text"] + f"\n  output: {out_root}"}
-
-    def on_done(item, done, total):
-        progress(f"{done}/{total} {'ok' if item.ok else 'FAILED'} {item.log} ({item.seconds:.1f} s)")
-
-    items = run_many(
+    prepare_output_folder(out_root)  # once, before any log is dispatched
+    return run_batch(
         run_log_to_folder,
         logs,
         out_root,
+        config,
+        run_config_hash(config),
+        force=force,
         workers=workers,
         scheduler=scheduler,
-        on_done=on_done,
-        config=config,
+        progress=progress,
     )
-    lines = [f"{sum(i.ok for i in items)} of {len(items)} logs processed into {out_root}"]
-    for i in items:
-        lines.append(
-            f"  {'ok    ' if i.ok else 'FAILED'} {i.log} -> {i.out_dir} ({i.seconds:.1f} s)"
-            + ("" if i.ok else f": {i.error}")
-        )
-    return {
-        "ok": all(i.ok for i in items),
-        "logs": [dataclasses.asdict(i) for i in items],
-        "text": "\n".join(lines),
-    }
 
 
 def simulate(

@@ -44,6 +44,8 @@ __all__ = [
     "complete",
     "up_to_date",
     "holoslam_version",
+    "write_batch_json",
+    "BATCH",
 ]
 
 MANIFEST = "run.json"
@@ -205,3 +207,25 @@ def up_to_date(
     if now["mtime_ns"] != was.get("mtime_ns") and input_fingerprint(log)["sha256"] != was.get("sha256"):
         return False, "the log changed (content)"
     return True, "up to date"
+
+
+BATCH = "batch.json"
+
+
+def write_batch_json(out_root: str | Path, batch: dict[str, Any]) -> Path:
+    """Write ``batch.json`` into ``out_root`` whole (a temporary file, flushed, renamed over the previous one)."""
+    from holoslam.errors import OutputError
+    from holoslam.io.jsonsafe import dumps
+
+    path = Path(out_root) / BATCH
+    tmp = path.with_name(f".{BATCH}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "w", encoding="utf-8") as f:
+            f.write(dumps(batch, indent=2) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise OutputError(f"cannot write {path}: {e.strerror or e}; the run folders are written") from None
+    return path
