@@ -115,8 +115,8 @@ def _killed_reason(client: Any, e: Any, since: float) -> str:
     if hits:
         gib = f"{limit / 2**30:.2f} GiB" if limit else "its limit"
         return (
-            f"needs more memory than a worker's limit of {gib}: {n} workers exceeded 95 % of it running this "
-            f"log and were restarted (last {addr}, {hits[-1].get('rss', 0) / 2**30:.2f} GiB; {failures}); "
+            f"needs more memory than its worker's memory limit of {gib}: {n} workers exceeded 95 % of it running "
+            f"this log and were restarted (last {addr}, {hits[-1].get('rss', 0) / 2**30:.2f} GiB; {failures}); "
             "give the workers more memory (dask worker --memory-limit) or cut the log"
         )
     return (
@@ -154,17 +154,26 @@ def _run_cluster(
             ): i
             for i, (p, o) in enumerate(zip(paths, outs, strict=True))
         }
-        for fut in as_completed(futures):
-            i = futures[fut]
-            try:
-                item = fut.result()
-            except KilledWorker as e:
-                item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=_killed_reason(client, e, since))
-            except Exception as e:  # raised on every try
-                why = traceback.format_exception_only(type(e), e)[-1].strip()
+        # results gathered as they complete and their futures released at once: a result left on a worker
+        # would be lost with it and its log recomputed
+        for fut, result in as_completed(futures, with_results=True, raise_errors=False):
+            i = futures.pop(fut)
+            if fut.status == "error" and isinstance(result, tuple):  # (type, exception, traceback)
+                result = result[1]
+            if isinstance(result, BatchItem):
+                item = result
+            elif isinstance(result, KilledWorker):
+                item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=_killed_reason(client, result, since))
+            else:  # raised on every try
+                why = (
+                    traceback.format_exception_only(type(result), result)[-1].strip()
+                    if isinstance(result, BaseException)
+                    else repr(result)
+                )
                 item = BatchItem(
                     str(paths[i]), outs[i], False, 0.0, error=f"failed {retries + 1} times on the cluster: {why}"
                 )
+            fut.release()
             finished(i, item)
     finally:
         client.close()
