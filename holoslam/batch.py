@@ -154,22 +154,16 @@ def _run_cluster(
             ): i
             for i, (p, o) in enumerate(zip(paths, outs, strict=True))
         }
-        # results gathered as they complete and their futures released at once: a result left on a worker
+        # each result fetched as soon as its job completes and its future released: a result left on a worker
         # would be lost with it and its log recomputed
-        for fut, result in as_completed(futures, with_results=True, raise_errors=False):
+        for fut in as_completed(futures):
             i = futures.pop(fut)
-            if fut.status == "error" and isinstance(result, tuple):  # (type, exception, traceback)
-                result = result[1]
-            if isinstance(result, BatchItem):
-                item = result
-            elif isinstance(result, KilledWorker):
-                item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=_killed_reason(client, result, since))
-            else:  # raised on every try
-                why = (
-                    traceback.format_exception_only(type(result), result)[-1].strip()
-                    if isinstance(result, BaseException)
-                    else repr(result)
-                )
+            try:
+                item = fut.result()
+            except KilledWorker as e:
+                item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=_killed_reason(client, e, since))
+            except Exception as e:  # raised on every try
+                why = traceback.format_exception_only(type(e), e)[-1].strip()
                 item = BatchItem(
                     str(paths[i]), outs[i], False, 0.0, error=f"failed {retries + 1} times on the cluster: {why}"
                 )
