@@ -37,28 +37,22 @@ def _cluster(n: int):
         )
 
 
-def _batch(address: str, logs: list[Path], out: Path, config, kill_after: int | None = None) -> tuple[float, int]:
-    """Seconds for the batch and the number of logs that completed."""
-    import distributed
-
+def _batch(lc, logs: list[Path], out: Path, config, kill_after: int | None = None) -> tuple[float, int]:
+    """Seconds for the batch and the number of logs that completed; ``kill_after``: SIGKILL a worker that runs
+    a log once that many logs are done (read from the LocalCluster's scheduler and nannies in this process)."""
     from holoslam.batch import run_many
     from holoslam.run_jobs import run_log_to_folder
 
-    client = distributed.Client(address) if kill_after is not None else None
-
     def on_done(item, done, total):
-        if client is not None and done == kill_after:
-            busy = [w for w, keys in client.processing().items() if keys]
-            if busy:
-                pid = client.run(os.getpid, workers=[busy[0]])[busy[0]]
-                os.kill(pid, signal.SIGKILL)
+        if done == kill_after:
+            busy = [ws.address for ws in list(lc.scheduler.workers.values()) if ws.processing]
+            pids = {n.worker_address: n.pid for n in list(lc.workers.values())}
+            if busy and pids.get(busy[0]):
+                os.kill(pids[busy[0]], signal.SIGKILL)
 
     t0 = time.perf_counter()
-    items = run_many(run_log_to_folder, logs, out, scheduler=address, config=config, on_done=on_done)
-    seconds = time.perf_counter() - t0
-    if client is not None:
-        client.close()
-    return seconds, sum(i.ok for i in items)
+    items = run_many(run_log_to_folder, logs, out, scheduler=lc.scheduler_address, config=config, on_done=on_done)
+    return time.perf_counter() - t0, sum(i.ok for i in items)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -68,8 +62,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--pictures", action="store_true", help="write pictures and the results MCAP too")
     a = ap.parse_args(argv)
-
-    import distributed
 
     from holoslam.config import RunConfig
     from holoslam.sim import SimConfig, simulate_to_file
@@ -87,16 +79,16 @@ def main(argv: list[str] | None = None) -> int:
         rows = []
         for label, n, kill in (("1 worker", 1, None), ("2 workers", 2, None), ("4 workers", 4, None),
                                ("2 workers, 1 killed", 2, a.logs // 3)):  # fmt: skip
-            with _cluster(n) as lc, distributed.Client(lc.scheduler_address) as client:
-                client.wait_for_workers(n)
-                _batch(lc.scheduler_address, logs[:n], root / "warm", config)  # imports, kernels: not timed
+            with _cluster(n) as lc:
+                lc.wait_for_workers(n, timeout=120)
+                _batch(lc, logs[:n], root / "warm", config)  # imports, kernels: not timed
                 times, completed = [], []
                 for r in range(a.repeats):
-                    s, ok = _batch(lc.scheduler_address, logs, root / f"{label}-{r}", config, kill)
+                    s, ok = _batch(lc, logs, root / f"{label}-{r}", config, kill)
                     times.append(s)
                     completed.append(ok)
                     if kill is not None:
-                        client.wait_for_workers(n, timeout=120)
+                        lc.wait_for_workers(n, timeout=120)
             med = statistics.median(times)
             rows.append((label, med, 60.0 * a.logs / med, min(completed)))
             print(f"  {label}: {', '.join(f'{t:.1f}' for t in times)} s", file=sys.stderr, flush=True)
