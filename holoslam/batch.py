@@ -162,11 +162,14 @@ def _run_cluster(
                 item = fut.result()
             except KilledWorker as e:
                 item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=_killed_reason(client, e, since))
-            except Exception as e:  # raised on every try
+            except Exception as e:
                 why = traceback.format_exception_only(type(e), e)[-1].strip()
-                item = BatchItem(
-                    str(paths[i]), outs[i], False, 0.0, error=f"failed {retries + 1} times on the cluster: {why}"
+                what = (
+                    f"failed {retries + 1} times on the cluster"  # the job raised on every try
+                    if fut.status == "error"
+                    else f"its result could not be fetched from the cluster ({fut.status})"
                 )
+                item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=f"{what}: {why}")
             fut.release()
             finished(i, item)
     finally:
