@@ -79,25 +79,131 @@ def _timed(job: Callable[..., dict[str, Any]], log: str, out_dir: str, kwargs: d
         return BatchItem(log, out_dir, False, time.perf_counter() - t0, error=f"unexpected error: {tb}")
 
 
+def _timed_cluster(
+    job: Callable[..., dict[str, Any]], log: str, out_dir: str, kwargs: dict[str, Any]
+) -> BatchItem:
+    """``_timed`` on a cluster worker: a holoslam error (bad input: the same on any worker) is the log's outcome;
+    anything else (out of memory, an OSError of a node, a bug) is raised so that Dask retries the job."""
+    t0 = time.perf_counter()
+    try:
+        summary = job(log, out_dir, **kwargs)
+    except HoloslamError as e:
+        return BatchItem(log, out_dir, False, time.perf_counter() - t0, error=str(e))
+    return BatchItem(log, out_dir, True, time.perf_counter() - t0, summary=summary)
+
+
+RETRIES = 2
+"""Times a job that raised an unexpected exception (not a holoslam error: an OSError of a node, a MemoryError)
+is run again on the cluster (Dask ``retries=``). A job whose *worker died* under it is recomputed by the
+scheduler itself until it has killed more than ``distributed.scheduler.allowed-failures`` workers (Dask's
+default 3; holoslam's README recommends 1 for a batch of logs: a log that kills two workers is bad)."""
+
+
+def _killed_reason(client: Any, e: Any, since: float) -> str:
+    """One line for a log whose workers died under it (Dask's ``KilledWorker``): memory beyond the worker's
+    limit (the nanny restarts a worker above 95 % of it: its event names the worker) or a crash."""
+    n = int(getattr(e, "allowed_failures", 0)) + 1
+    ws = getattr(e, "last_worker", None)
+    addr = getattr(ws, "address", "?")
+    limit = getattr(ws, "memory_limit", None)
+    try:
+        events = client.get_events("worker-restart-memory")
+    except Exception:
+        events = ()
+    hits = [ev for t, ev in events if t >= since and isinstance(ev, dict) and ev.get("worker") == addr]
+    failures = f"distributed.scheduler.allowed-failures = {n - 1}"
+    if hits:
+        gib = f"{limit / 2**30:.2f} GiB" if limit else "its limit"
+        return (
+            f"needs more memory than its worker's memory limit of {gib}: {n} workers exceeded 95 % of it running "
+            f"this log and were restarted (last {addr}, {hits[-1].get('rss', 0) / 2**30:.2f} GiB; {failures}); "
+            "give the workers more memory (dask worker --memory-limit) or cut the log"
+        )
+    return (
+        f"its worker process died {n} times while running it (last {addr}; {failures}): a crash in native code "
+        "or the process killed from outside; run the log alone ('holoslam run LOG -o OUT') to see why"
+    )
+
+
+def _run_cluster(
+    job: Callable[..., dict[str, Any]],
+    paths: list[Path],
+    outs: list[str],
+    kwargs: dict[str, Any],
+    scheduler: str,
+    connect_timeout_s: float,
+    retries: int,
+    finished: Callable[[int, BatchItem], None],
+) -> None:
+    try:
+        from distributed import Client, as_completed
+        from distributed.scheduler import KilledWorker
+    except ImportError:
+        raise ConfigError(
+            "a Dask scheduler was given but dask.distributed is not installed; pip install 'holoslam[dask]'"
+        ) from None
+    try:
+        client = Client(scheduler, timeout=f"{connect_timeout_s}s")
+    except OSError as e:
+        raise ConfigError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
+    since = time.time()
+    try:
+        futures = {
+            client.submit(
+                _timed_cluster, job, str(p), o, kwargs, pure=False, retries=retries, key=f"holoslam-{i}-{p.name}"
+            ): i
+            for i, (p, o) in enumerate(zip(paths, outs, strict=True))
+        }
+        # each result fetched as soon as its job completes and its future released: a result left on a worker
+        # would be lost with it and its log recomputed
+        for fut in as_completed(futures):
+            i = futures.pop(fut)
+            try:
+                item = fut.result()
+            except KilledWorker as e:
+                item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=_killed_reason(client, e, since))
+            except Exception as e:
+                why = traceback.format_exception_only(type(e), e)[-1].strip()
+                what = (
+                    f"failed {retries + 1} times on the cluster"  # the job raised on every try
+                    if fut.status == "error"
+                    else f"its result could not be fetched from the cluster ({fut.status})"
+                )
+                item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=f"{what}: {why}")
+            fut.release()
+            finished(i, item)
+    finally:
+        client.close()
+
+
 def run_many(
     job: Callable[..., dict[str, Any]],
     logs: Sequence[str | Path],
     out_root: str | Path,
     *,
+    out_dirs: Sequence[str | Path] | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     on_done: Callable[[BatchItem, int, int], None] | None = None,
     connect_timeout_s: float = 10.0,
+    retries: int = RETRIES,
     **kwargs: Any,
 ) -> list[BatchItem]:
     """Run ``job(log, out_dir, **kwargs) -> summary`` for every log; results in the order of ``logs``.
 
     ``job`` must be a module-level function (it is pickled to worker processes). ``on_done(item, done,
-    total)`` is called as each log finishes, for progress display.
+    total)`` is called as each log finishes, for progress display. ``out_dirs``: each log's folder (default
+    :func:`output_folder_for` under ``out_root``). On a cluster (``scheduler``) a job is submitted with
+    ``retries`` (for unexpected exceptions), a job whose worker is lost is recomputed on another worker, and a
+    job that killed more workers than the scheduler allows is failed with the reason (:func:`_killed_reason`):
+    one log never stops the batch.
     """
     paths = [Path(p) for p in logs]
     root = Path(out_root)
-    outs = [str(output_folder_for(p, root, paths)) for p in paths]
+    if out_dirs is None:
+        outs = [str(output_folder_for(p, root, paths)) for p in paths]
+    else:
+        outs = [str(o) for o in out_dirs]
     total = len(paths)
     results: dict[int, BatchItem] = {}
 
@@ -107,31 +213,8 @@ def run_many(
             on_done(item, len(results), total)
 
     if scheduler:
-        try:
-            from distributed import Client, as_completed
-        except ImportError:
-            raise ConfigError(
-                "a Dask scheduler was given but dask.distributed is not installed; pip install 'holoslam[dask]'"
-            ) from None
-        try:
-            client = Client(scheduler, timeout=f"{connect_timeout_s}s")
-        except OSError as e:
-            raise ConfigError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
-        try:
-            futures = {
-                client.submit(_timed, job, str(p), o, kwargs, pure=False, key=f"holoslam-{i}-{p.name}"): i
-                for i, (p, o) in enumerate(zip(paths, outs, strict=True))
-            }
-            for fut in as_completed(futures):
-                i = futures[fut]
-                try:
-                    item = fut.result()
-                except Exception as e:  # the worker died
-                    item = BatchItem(str(paths[i]), outs[i], False, 0.0, error=f"worker failed: {e}")
-                finished(i, item)
-        finally:
-            client.close()
-    elif total == 1 or (workers or os.cpu_count() or 1) == 1:
+        _run_cluster(job, paths, outs, kwargs, scheduler, connect_timeout_s, retries, finished)
+    elif total <= 1 or (workers or os.cpu_count() or 1) == 1:
         for i, (p, o) in enumerate(zip(paths, outs, strict=True)):
             finished(i, _timed(job, str(p), o, kwargs))
     else:

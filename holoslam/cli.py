@@ -140,7 +140,8 @@ def cmd_run(a: argparse.Namespace) -> int:
     compiling = _compile_kernels_first(a.quiet or a.json)
     progress = Progress(quiet=a.quiet or a.json)
     try:
-        outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress)
+        outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress,
+                           force=a.force)
     finally:
         if compiling is not None:
             compiling.shutdown(wait=True, cancel_futures=True)
@@ -402,6 +403,12 @@ def _add_run(sub: Any) -> None:
     s.add_argument("--workers", type=int, help="parallel processes for many logs (default: all cores)")
     s.add_argument(
         "--scheduler", help="Dask scheduler address (tcp://host:8786) to run many logs on a cluster"
+    )
+    s.add_argument(
+        "--force",
+        action="store_true",
+        help="many logs: run every log again (default: a log whose folder is complete for the same log and "
+        "configuration is skipped as up to date)",
     )
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     s.add_argument("--json", action="store_true", help="print the summary as JSON only")

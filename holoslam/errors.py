@@ -18,6 +18,7 @@ __all__ = [
     "MapError",
     "PlanningError",
     "VisionError",
+    "OutputError",
 ]
 
 
@@ -64,3 +65,7 @@ class PlanningError(HoloslamError):
 class VisionError(HoloslamError):
     """Camera geometry or an image measurement is invalid (a non-orthonormal rotation, a point behind the
     camera, a degenerate view pair, a missing camera calibration)."""
+
+
+class OutputError(HoloslamError):
+    """An output cannot be written (disk full, read-only file system, no permission); nothing was replaced."""

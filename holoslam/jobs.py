@@ -71,9 +71,13 @@ class Evaluation:
 
 
 def trajectory_path(target: str | Path) -> Path:
-    """The TUM file to score: ``target`` itself, or the ``trajectory.tum`` of a run folder."""
+    """The TUM file to score: ``target`` itself, or the ``trajectory.tum`` of a complete run folder (one with a
+    valid ``run.json``; any other folder is refused with a one-line ``IngestError``)."""
     p = Path(target)
     if p.is_dir():
+        from holoslam.io.run_manifest import require_complete
+
+        require_complete(p)  # a folder is a run's only when its run.json says it is complete
         tum = p / "trajectory.tum"
         if not tum.is_file():
             raise IngestError(

@@ -5,7 +5,6 @@ and only under the folder the caller named; the run itself is ``holoslam.pipelin
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,7 +17,8 @@ from holoslam.timing import Progress
 if TYPE_CHECKING:
     from holoslam.config import RunConfig
 
-__all__ = ["run_log_to_folder", "run_logs", "run_demo", "DEMO_OUTPUT", "simulate", "plan_to_object", "export_run"]
+__all__ = ["run_log_to_folder", "run_config_hash", "run_logs", "run_demo", "DEMO_OUTPUT", "simulate", "plan_to_object",
+           "export_run"]
 
 DEMO_OUTPUT = "holoslam-demo"  # ``holoslam demo``'s output folder, relative to the current folder
 
@@ -27,27 +27,37 @@ def _noop(*_a: Any, **_k: Any) -> None:
     return None
 
 
+def run_config_hash(config: RunConfig | None) -> str:
+    """The hash a run folder's manifest records for its configuration (every setting and the mapping file's
+    bytes): two runs with equal hashes ran with the same settings."""
+    from holoslam.config import RunConfig, to_mapping
+    from holoslam.io.run_manifest import config_sha256
+
+    cfg = config if config is not None else RunConfig()
+    return config_sha256(to_mapping(cfg), cfg.mapping)
+
+
 def run_log_to_folder(
     log: str, out_dir: str, config: RunConfig | None = None, progress: Progress | None = None
 ) -> dict[str, Any]:
-    """Run one log and write its output folder; returns a short summary (for the batch runner)."""
-    from holoslam.io.run_folder import prepare_output_folder, write_run
+    """Run one log and write its output folder, whole or not at all (a previous folder of that name stays until
+    the new one is complete; see :func:`holoslam.io.run_folder.write_run`); returns a short summary (for the
+    batch runner)."""
+    from holoslam.io.run_folder import prepare_run_folder, write_run
+    from holoslam.io.run_manifest import input_fingerprint
     from holoslam.pipeline import run
 
-    existed = Path(out_dir).exists()
-    prepare_output_folder(out_dir)  # an unwritable folder is a one-line error before the run, not after it
-    try:
-        result = run(log, config, progress)
-    except BaseException:
-        if not existed and not any(Path(out_dir).iterdir()):
-            Path(out_dir).rmdir()  # a run that failed leaves no empty folder behind
-        raise
+    prepare_run_folder(out_dir)  # an unwritable folder is a one-line error before the run, not after it
+    fingerprint = input_fingerprint(log) if Path(log).exists() else None  # before the run: what it read
+    result = run(log, config, progress)
     written = write_run(
         result,
         out_dir,
         pictures=result.config.pictures,
         results_mcap=result.config.results_mcap,
         progress=progress,
+        log_fingerprint=fingerprint,
+        config_hash=run_config_hash(result.config),
     )
     acc = result.report.accuracy
     return {
@@ -71,15 +81,16 @@ def run_logs(
     workers: int | None = None,
     scheduler: str | None = None,
     progress: Progress | None = None,
+    force: bool = False,
 ) -> dict[str, Any]:
-    """Run one or many logs. One log writes straight into ``out_root``; many logs get one sub-folder each,
-    processed in parallel (local processes, or a Dask cluster given its scheduler address)."""
-    from holoslam.batch import run_many
+    """Run one or many logs. One log writes straight into ``out_root`` (always run). Many logs (or any on a
+    cluster) get one sub-folder each, processed in parallel (local processes, or a Dask cluster given its
+    scheduler address); a log whose folder is complete for the same input and configuration is skipped as up
+    to date unless ``force`` (:func:`holoslam.batch_resume.run_batch`: the table, ``batch.json``)."""
+    from holoslam.batch_resume import run_batch
     from holoslam.io.run_folder import prepare_output_folder
 
     progress = progress or _noop
-    if len(logs) > 1 or scheduler is not None:
-        prepare_output_folder(out_root)  # once, before any log is dispatched
     if len(logs) == 1 and scheduler is None:
         try:
             summary = run_log_to_folder(str(logs[0]), str(out_root), config, progress)
@@ -87,30 +98,18 @@ def run_logs(
             msg = str(e)
             raise IngestError(msg if msg.startswith(str(logs[0])) else f"{logs[0]}: {msg}") from None
         return {"ok": True, "logs": [summary], "text": summary["text"] + f"\n  output: {out_root}"}
-
-    def on_done(item, done, total):
-        progress(f"{done}/{total} {'ok' if item.ok else 'FAILED'} {item.log} ({item.seconds:.1f} s)")
-
-    items = run_many(
+    prepare_output_folder(out_root)  # once, before any log is dispatched
+    return run_batch(
         run_log_to_folder,
         logs,
         out_root,
+        config,
+        run_config_hash(config),
+        force=force,
         workers=workers,
         scheduler=scheduler,
-        on_done=on_done,
-        config=config,
+        progress=progress,
     )
-    lines = [f"{sum(i.ok for i in items)} of {len(items)} logs processed into {out_root}"]
-    for i in items:
-        lines.append(
-            f"  {'ok    ' if i.ok else 'FAILED'} {i.log} -> {i.out_dir} ({i.seconds:.1f} s)"
-            + ("" if i.ok else f": {i.error}")
-        )
-    return {
-        "ok": all(i.ok for i in items),
-        "logs": [dataclasses.asdict(i) for i in items],
-        "text": "\n".join(lines),
-    }
 
 
 def run_demo(

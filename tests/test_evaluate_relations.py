@@ -212,6 +212,12 @@ def test_cli_run_folder_and_truth(tmp_path, capsys):
     truth = np.column_stack([np.arange(11.0), np.zeros(11), np.zeros(11)])
     write_tum(run / "trajectory.tum", t, truth * [1.1, 1, 1])
     gt = write_tum(tmp_path / "gt.tum", t, truth)
+    # a folder without run.json may mix two runs' files: refused in one line, exit 2
+    assert main(["evaluate", str(run), "--truth", str(gt)]) == 2
+    assert "has no run.json" in _one_line_error(capsys)
+    from holoslam.io.run_manifest import build_manifest, write_manifest
+
+    write_manifest(run, build_manifest(run, version="test", log_fingerprint=None, config_hash=None))
     assert main(["evaluate", str(run), "--truth", str(gt), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["trajectory"] == str(run / "trajectory.tum")
@@ -233,7 +239,7 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert main(["evaluate", str(empty), "--relations", str(rel_path)]) == 2
-    assert "without trajectory.tum" in _one_line_error(capsys)
+    assert "not a holoslam run folder" in _one_line_error(capsys)
     assert main(["evaluate", str(tmp_path / "nope.tum"), "--relations", str(rel_path)]) == 2
     assert "no such file" in _one_line_error(capsys)
     bad = tmp_path / "bad.relations"

@@ -34,7 +34,15 @@ import numpy as np
 from holoslam.errors import ConfigError, IngestError
 from holoslam.io.jsonsafe import dumps
 
-__all__ = ["SavedRun", "write_run", "load_run", "export_saved", "prepare_output_folder", "RUN_FILES"]
+__all__ = [
+    "SavedRun",
+    "write_run",
+    "load_run",
+    "export_saved",
+    "prepare_output_folder",
+    "prepare_run_folder",
+    "RUN_FILES",
+]
 
 RUN_FILES = (
     "trajectory.tum",
@@ -191,6 +199,107 @@ def _pictures(
     return written
 
 
+_OTHER_FILES = (
+    "dead_reckoning.tum",
+    "anchors.csv",
+    "objects.csv",
+    "topology.json",
+    "rooms.png",
+    "results.mcap",
+    "trajectory.png",
+    "map_topology.png",
+    "holographic.png",
+    "planning.png",
+    "run.json",
+)
+
+
+def replaceable(folder: Path) -> str:
+    """Why an existing folder must not be replaced by a run's folder ('' when it may): a run folder holds only
+    the files a run writes; anything else (a user's folder named by mistake) is kept and the run refused."""
+    known = set(RUN_FILES + _OTHER_FILES)
+    try:
+        foreign = sorted(p.name for p in folder.iterdir() if p.name not in known)
+    except OSError:
+        return ""
+    if not foreign:
+        return ""
+    more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+    return (
+        f"holds files a run does not write ({', '.join(foreign[:3])}{more}) and would be replaced by the run's "
+        "folder; name a new folder (-o) or empty this one"
+    )
+
+
+def prepare_run_folder(out_dir: str | Path) -> Path:
+    """Check before a run that ``out_dir`` can become its folder (see ``check_target``); nothing is created but
+    the parent folders. Raises ``ConfigError`` (one line)."""
+    from holoslam.io.atomic_folder import check_target
+
+    return check_target(out_dir, replaceable)
+
+
+def _write_files(result: Any, out: Path, pictures: bool, results_mcap: bool) -> None:
+    """Every output file of a ``RunResult`` into ``out`` (a fresh folder), each step a checkpoint."""
+    from holoslam.io.atomic_folder import _checkpoint
+    from holoslam.io.g2o_write import write_g2o
+    from holoslam.io.graphs import write_graph_files
+    from holoslam.io.grid import write_grid, write_grid_png, write_label_png
+    from holoslam.io.planning import write_planning
+    from holoslam.io.results_mcap import write_results_mcap
+    from holoslam.io.trajectory import write_tum
+    from holoslam.maps.polyline import compact_paths
+    from holoslam.maps.topology import to_graphml_ready
+
+    steps: list[tuple[str, Callable[[], Any]]] = [
+        ("trajectory.tum", lambda: write_tum(out / "trajectory.tum", result.stamps_ns, result.wTb)),
+        ("dead_reckoning.tum",
+         lambda: write_tum(out / "dead_reckoning.tum", result.stamps_ns, result.dead_reckoning_wTb)),
+        ("anchors.csv", lambda: (out / "anchors.csv").write_text(
+            _anchors_csv(result.anchor_stamps_ns, result.wTa, result.cov_wTa))),
+        ("objects.csv", lambda: (out / "objects.csv").write_text(_objects_csv(result.objects))),
+        ("graph.g2o", lambda: write_g2o(_graph_g2o(result), out / "graph.g2o")),
+        ("map.yaml", lambda: write_grid(result.grid, out / "map.yaml")),
+        ("map.png", lambda: write_grid_png(result.grid, out / "map.png")),
+        # paths and passages simplified to the map's resolution (holoslam.maps.polyline)
+        ("topology", lambda: write_graph_files(to_graphml_ready(compact_paths(result.topology)), out, "topology")),
+        ("holographic", lambda: write_graph_files(compact_paths(result.holographic), out, "holographic")),
+    ]  # fmt: skip
+    if getattr(result, "rooms", None) is not None:
+        steps.append(("rooms.png", lambda: write_label_png(result.rooms.labels, out / "rooms.png")))
+    steps += [
+        # planning.json and, beside it, planning_layer1.npz (layer 1's blocks)
+        ("planning.json", lambda: write_planning(result.planning, out / "planning.json")),
+        # strict JSON: NaN/inf -> null
+        ("report.json", lambda: (out / "report.json").write_text(dumps(result.report.to_dict(), indent=2))),
+        ("report.txt", lambda: (out / "report.txt").write_text(result.report.text() + "\n")),
+    ]
+    if results_mcap:
+        steps.append(("results.mcap", lambda: write_results_mcap(_result_scene(result), out / "results.mcap")))
+    if pictures:
+        steps.append(("pictures", lambda: _pictures(
+            out, result.wTb, result.dead_reckoning_wTb, result.wTa, result.cov_wTa, result.grid,
+            result.topology, result.holographic, result.planning,
+            rooms=None if getattr(result, "rooms", None) is None else result.rooms.labels,
+        )))  # fmt: skip
+    for name, step in steps:
+        step()
+        _checkpoint("file", name)
+
+
+def _result_scene(result: Any) -> Any:
+    return _scene(
+        result.stamps_ns,
+        result.wTb,
+        result.dead_reckoning_wTb,
+        result.wTa,
+        result.grid,
+        result.objects,
+        result.topology,
+        result.holographic,
+    )
+
+
 def write_run(
     result: Any,
     out_dir: str | Path,
@@ -198,66 +307,42 @@ def write_run(
     pictures: bool = True,
     results_mcap: bool = True,
     progress: Callable[..., None] | None = None,
+    log_fingerprint: dict[str, Any] | None = None,
+    config_hash: str | None = None,
 ) -> list[Path]:
-    """Write every output file of a ``RunResult`` into ``out_dir`` (created if needed); returns the paths."""
-    from holoslam.io.g2o_write import write_g2o
-    from holoslam.io.graphs import write_graph_files
-    from holoslam.io.grid import write_grid, write_grid_png, write_label_png
-    from holoslam.io.planning import layer1_file, write_planning
-    from holoslam.io.results_mcap import write_results_mcap
-    from holoslam.io.trajectory import write_tum
-    from holoslam.maps.polyline import compact_paths
-    from holoslam.maps.topology import to_graphml_ready
+    """Write every output file of a ``RunResult`` as the folder ``out_dir``, whole or not at all: the files go
+    into a temporary sibling folder, are flushed, ``run.json`` (the manifest: ``log_fingerprint``,
+    ``config_hash``, every file's size and sha256, the stage timings) is written last, and the folder is
+    swapped into place (:mod:`holoslam.io.atomic_folder`). A previous folder of that name stays intact until
+    the swap. Returns the paths of the files written. Raises ``OutputError`` when a file cannot be written
+    (disk full, read-only), the previous folder unchanged."""
+    from holoslam.io.atomic_folder import FolderWriter
+    from holoslam.io.run_manifest import (
+        build_manifest,
+        complete,
+        holoslam_version,
+        input_fingerprint,
+        write_manifest,
+    )
 
-    out = prepare_output_folder(out_dir)
+    target = prepare_run_folder(out_dir)
     if progress:
-        progress(f"writing {out}")
-    written: list[Path] = []
-    written.append(write_tum(out / "trajectory.tum", result.stamps_ns, result.wTb))
-    written.append(write_tum(out / "dead_reckoning.tum", result.stamps_ns, result.dead_reckoning_wTb))
-    (out / "anchors.csv").write_text(_anchors_csv(result.anchor_stamps_ns, result.wTa, result.cov_wTa))
-    (out / "objects.csv").write_text(_objects_csv(result.objects))
-    written += [out / "anchors.csv", out / "objects.csv"]
-    written.append(write_g2o(_graph_g2o(result), out / "graph.g2o"))
-    written.append(write_grid(result.grid, out / "map.yaml"))
-    written.append(out / "map.yaml")
-    written.append(write_grid_png(result.grid, out / "map.png"))
-    # paths and passages simplified to the map's resolution (holoslam.maps.polyline)
-    written += list(write_graph_files(to_graphml_ready(compact_paths(result.topology)), out, "topology"))
-    written += list(write_graph_files(compact_paths(result.holographic), out, "holographic"))
-    if getattr(result, "rooms", None) is not None:
-        written.append(write_label_png(result.rooms.labels, out / "rooms.png"))
-    written.append(write_planning(result.planning, out / "planning.json"))
-    written.append(layer1_file(out / "planning.json"))  # layer 1's blocks, beside it
-    (out / "report.json").write_text(dumps(result.report.to_dict(), indent=2))  # strict JSON: NaN/inf -> null
-    (out / "report.txt").write_text(result.report.text() + "\n")
-    written += [out / "report.json", out / "report.txt"]
-    if results_mcap:
-        scene = _scene(
-            result.stamps_ns,
-            result.wTb,
-            result.dead_reckoning_wTb,
-            result.wTa,
-            result.grid,
-            result.objects,
-            result.topology,
-            result.holographic,
+        progress(f"writing {out_dir}")
+    if log_fingerprint is None and getattr(result, "source", None) and Path(result.source).exists():
+        log_fingerprint = input_fingerprint(result.source)
+    writer = FolderWriter(target, valid=complete)
+    with writer as tmp:
+        _write_files(result, tmp, pictures, results_mcap)
+        timings = getattr(getattr(result, "report", None), "timings_s", None)
+        writer.commit(
+            lambda folder: write_manifest(
+                folder,
+                build_manifest(
+                    folder, version=holoslam_version(), log_fingerprint=log_fingerprint, config_hash=config_hash, timings_s=timings
+                ),
+            )
         )
-        written.append(write_results_mcap(scene, out / "results.mcap"))
-    if pictures:
-        written += _pictures(
-            out,
-            result.wTb,
-            result.dead_reckoning_wTb,
-            result.wTa,
-            result.cov_wTa,
-            result.grid,
-            result.topology,
-            result.holographic,
-            result.planning,
-            rooms=None if getattr(result, "rooms", None) is None else result.rooms.labels,
-        )
-    return written
+    return sorted(p for p in target.iterdir() if p.is_file())
 
 
 @dataclass(frozen=True, eq=False)
@@ -334,15 +419,16 @@ _PARTS = ("trajectory", "anchors", "objects", "grid", "topology", "holographic",
 
 
 def load_run(folder: str | Path, parts: Sequence[str] = _PARTS) -> SavedRun:
-    """Load a run folder back (only the ``parts`` asked for). Raises ``IngestError`` naming a missing file."""
+    """Load a complete run folder back (only the ``parts`` asked for). Raises ``IngestError`` (one line) for a
+    folder without a valid ``run.json`` (see :mod:`holoslam.io.run_manifest`) or naming a missing file."""
     from holoslam.io.graphs import read_graphml, read_node_link_json
     from holoslam.io.grid import read_grid
     from holoslam.io.planning import read_planning
+    from holoslam.io.run_manifest import require_complete
     from holoslam.io.trajectory import read_tum
 
     f = Path(folder)
-    if not f.is_dir():
-        raise IngestError(f"run folder {f} does not exist; give the folder 'holoslam run' wrote")
+    require_complete(f)
     kw: dict[str, Any] = {"folder": f}
     if "trajectory" in parts:
         kw["stamps_ns"], kw["wTb"] = read_tum(_need(f, "trajectory.tum"))
@@ -370,17 +456,43 @@ def load_run(folder: str | Path, parts: Sequence[str] = _PARTS) -> SavedRun:
 
 def export_saved(saved: SavedRun, to: Path, formats: set[str]) -> list[Path]:
     """Re-export a saved run into ``to``: ``pictures``, ``mcap`` (results MCAP), ``graphs`` (GraphML + JSON),
-    ``tum``, or ``all``."""
-    from holoslam.io.graphs import write_graph_files
-    from holoslam.io.results_mcap import write_results_mcap
-    from holoslam.io.trajectory import write_tum
-
+    ``tum``, or ``all``. Into the run folder itself, the folder is rewritten whole (a copy with the new files
+    and a new manifest, swapped into place), so it stays complete; elsewhere the files are written as they are."""
     if saved.stamps_ns is None or saved.wTb is None:
         raise IngestError(
             f"{saved.folder}: the run was loaded without its trajectory; load it with the 'trajectory' part "
             "(load_run's default) to export it"
         )
-    out = prepare_output_folder(to)
+    if Path(to).absolute() != Path(saved.folder).absolute():
+        return _export_files(saved, prepare_output_folder(to), formats)
+    from holoslam.io.atomic_folder import FolderWriter
+    from holoslam.io.run_manifest import build_manifest, complete, require_complete, write_manifest
+
+    old = require_complete(saved.folder)
+    writer = FolderWriter(saved.folder, copy_from=saved.folder, valid=complete)
+    with writer as tmp:
+        names = [p.name for p in _export_files(saved, tmp, formats)]
+        writer.commit(
+            lambda folder: write_manifest(
+                folder,
+                build_manifest(
+                    folder,
+                    version=old["holoslam_version"],
+                    log_fingerprint=old.get("input"),
+                    config_hash=old.get("config_sha256"),
+                    timings_s=old.get("timings_s"),
+                ),
+            )
+        )
+    return [Path(saved.folder) / n for n in names]
+
+
+def _export_files(saved: SavedRun, out: Path, formats: set[str]) -> list[Path]:
+    from holoslam.io.graphs import write_graph_files
+    from holoslam.io.results_mcap import write_results_mcap
+    from holoslam.io.trajectory import write_tum
+
+    assert saved.stamps_ns is not None and saved.wTb is not None  # export_saved checked
     every = "all" in formats
     written: list[Path] = []
     dr = saved.dead_reckoning_wTb if saved.dead_reckoning_wTb is not None else saved.wTb
