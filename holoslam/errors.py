@@ -18,6 +18,7 @@ __all__ = [
     "MapError",
     "PlanningError",
     "VisionError",
+    "StoreError",
 ]
 
 
@@ -64,3 +65,7 @@ class PlanningError(HoloslamError):
 class VisionError(HoloslamError):
     """Camera geometry or an image measurement is invalid (a non-orthonormal rotation, a point behind the
     camera, a degenerate view pair, a missing camera calibration)."""
+
+
+class StoreError(HoloslamError):
+    """A map store (``holoslam.store``) cannot be opened, read or updated."""
