@@ -53,6 +53,9 @@ class RelocaliseConfig:
     min_consistent: int = 3  # Cartographer's relocalisation test: at least 3 cross-trajectory constraints
     min_session_submaps: int = 2  # the consistent matches come from this many session submaps at least
     runner_up_ratio: float = 0.5  # the best inconsistent group may hold at most this fraction of the best's size
+    # the laser search stops after a session submap once a verified group holds this many matches (twice the
+    # minimum: a margin over the runner-up test); 0 searches every pair
+    enough_consistent: int = 6
     search_voxel_m: float = 0.1  # m: the session submap's points thinned for the branch and bound (2 cells)
     search_min_points: int = 150  # points kept at least by that thinning
     depth: int = 7  # the branch and bound's precomputed levels (Cartographer's 7)
@@ -209,24 +212,33 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
 
 def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
                   cfg: RelocaliseConfig = RelocaliseConfig()) -> tuple[list[LaserMatch], int]:
-    """Every session submap (``.points``, ``.index``) against every stored submap (``StoredSubmap`` with grids):
-    the matches above ``min_score`` and the number of searches."""
+    """Every session submap (``.points``; the largest first) against every stored submap (``StoredSubmap`` with
+    grids): the matches above ``min_score`` and the number of searches. The search stops early once the matches
+    hold a verified group of ``enough_consistent`` (``laser_hypothesis``)."""
     from holoslam.submaps import bnb
 
     out: list[LaserMatch] = []
     searches = 0
-    for st in stored_submaps:
-        pre = bnb.precompute(st.prob, cfg.depth, origin=st.origin, res=st.resolution)
-        for k, sm in enumerate(session_submaps):
-            if len(sm.points) < cfg.search_min_points:
-                continue
+    pre: dict[int, object] = {}
+    order = sorted(range(len(session_submaps)), key=lambda k: -len(session_submaps[k].points))
+    for k in order:
+        sm = session_submaps[k]
+        if len(sm.points) < cfg.search_min_points:
+            continue
+        for st in stored_submaps:
+            if st.id not in pre:
+                pre[st.id] = bnb.precompute(st.prob, cfg.depth, origin=st.origin, res=st.resolution)
             searches += 1
-            m = global_match(st, sm.points, cfg, pre)
+            m = global_match(st, sm.points, cfg, pre[st.id])
             if m is None:
                 continue
             oTn, cov, score = m
             wTs = g.compose(g.compose(st.wTa, oTn), g.inverse(session_sTa[k]))
             out.append(LaserMatch(k, st.id, oTn, cov, score, wTs))
+        if cfg.enough_consistent and len(out) >= cfg.enough_consistent:
+            h = laser_hypothesis(out, cfg)
+            if h is not None and h.verified and h.support >= cfg.enough_consistent:
+                break
     return out, searches
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,7 @@ def _logit(p: np.ndarray) -> np.ndarray:
     return np.log(q / (1 - q))
 
 
-def merge_submaps(wTa: np.ndarray, grids: Sequence[tuple[np.ndarray, np.ndarray, tuple[float, float], float]],
+def merge_submaps(wTa: np.ndarray, grids: Sequence[tuple[Any, Any, tuple[float, float], float]],
                   session_of: Sequence[int], margin_m: float = 0.5) -> MergedGrid:
     """Merge submap grids (prob, known, origin, resolution in the anchor frame) placed at ``wTa`` (N, 3), newer
     sessions (higher ``session_of``) winning (module docstring). Nearest-cell lookup of each world cell centre."""

@@ -12,7 +12,6 @@ a session that cannot be placed is stored unjoined, in its own frame, and its ru
 from __future__ import annotations
 
 import dataclasses
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,7 +22,14 @@ from holoslam import geometry as g
 from holoslam.lifelong.changes import ChangeConfig, Located, classify, to_world, view_directions
 from holoslam.lifelong.summary import ObjectChange, SessionSummary
 from holoslam.relocalise import RelocaliseConfig, fit_se2
-from holoslam.store.records import NewSubmap, ObjectState, ObjectStatus, SessionUpdate, StoredTrajectory, new_ref
+from holoslam.store.records import (
+    NewSubmap,
+    ObjectState,
+    ObjectStatus,
+    SessionUpdate,
+    StoredTrajectory,
+    new_ref,
+)
 
 __all__ = ["LifelongConfig", "SessionRun", "run_session", "place_session"]
 
@@ -263,7 +269,7 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
         if o.status in (ObjectStatus.MOVED, ObjectStatus.GONE, ObjectStatus.NEW) and o.w_xy is not None:
             d = None if o.displacement is None else [float(v) for v in o.displacement]
             changes.append(ObjectChange(o.object_id, o.status, float(o.w_xy[0]), float(o.w_xy[1]),
-                                        None if d is None else float(np.hypot(*d)), d,
+                                        None if d is None else float(np.hypot(d[0], d[1])), d,
                                         None if o.cov_displacement is None else np.asarray(o.cov_displacement).tolist()))
     joined = founded or (reloc is not None and reloc.placed)
     counts = store.counts()

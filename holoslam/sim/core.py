@@ -164,7 +164,7 @@ def simulate_household(config: SimConfig = SimConfig(), world: World | None = No
 
     if world is None:
         world = reference_household(config.wall_codes, config.sizeless_labels)
-    start = START_POSE if start_pose is None else tuple(float(v) for v in start_pose)
+    start = START_POSE if start_pose is None else (float(start_pose[0]), float(start_pose[1]), float(start_pose[2]))
     traj = household_trajectory(world, config.duration_s, config.odom_rate_hz, config.seed, t0_ns, start)
 
     def rng(stream: int) -> np.random.Generator:

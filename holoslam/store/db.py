@@ -10,7 +10,7 @@ import json
 import sqlite3
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +36,7 @@ StoreProgress = Callable[[str], None]
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def _opt(blob: bytes | None, where: str) -> np.ndarray | None:
@@ -70,7 +70,7 @@ class MapStore:
             store = cls(p, con)
             store._prepare()
         except sqlite3.DatabaseError as e:
-            raise StoreError(f"{p} is not a holoslam map store ({e}); give a store 'holoslam run --map' wrote")
+            raise StoreError(f"{p} is not a holoslam map store ({e}); give a store 'holoslam run --map' wrote") from None
         return store
 
     def _prepare(self) -> None:
@@ -196,7 +196,8 @@ class MapStore:
         """Object states by session, then object id; filtered by object and/or session."""
         sql = ("SELECT session_id, object_id, kind, payload, status, x, y, z, cov, dx, dy, cov_d, sightings, "
                "view_x, view_y, placement FROM object_history")
-        cond, args = [], []
+        cond: list[str] = []
+        args: list[Any] = []
         if object_id is not None:
             cond.append("object_id = ?")
             args.append(object_id)
@@ -273,7 +274,7 @@ class MapStore:
             con.execute("INSERT INTO trajectories VALUES (?, ?, ?, ?, ?)", (
                 sid, pack(np.diff(np.asarray(t.stamps_ns, np.int64), prepend=np.int64(0))),
                 pack(np.asarray(t.anchor_idx, np.int32)), pack(np.asarray(t.aTb, np.float32)),
-                pack(np.asarray(t.sTb, np.float64))))
+                pack(np.asarray(t.sTb, np.float32))))
             step("trajectory")
             con.executemany("UPDATE submaps SET wTa = ?, cov_wTa = ? WHERE id = ?", [
                 (pack(np.asarray(T, np.float64)), None if C is None else pack(np.asarray(C, np.float64)), int(k))
