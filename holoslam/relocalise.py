@@ -56,6 +56,9 @@ class RelocaliseConfig:
     # the laser search stops after a session submap once a verified group holds this many matches (twice the
     # minimum: a margin over the runner-up test); 0 searches every pair
     enough_consistent: int = 6
+    # m: the session submap's anchor is searched over the stored grid and this far beyond it (a robot starts a
+    # submap inside what it sees; overlapping submaps hold each other's anchors or nearly)
+    window_margin_m: float = 1.0
     search_voxel_m: float = 0.1  # m: the session submap's points thinned for the branch and bound (2 cells)
     search_min_points: int = 150  # points kept at least by that thinning
     depth: int = 7  # the branch and bound's precomputed levels (Cartographer's 7)
@@ -198,8 +201,8 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     half = np.array([w * res / 2.0, h * res / 2.0])
     centre = np.array(origin) + half
     pts = adaptive_voxel_filter(points, ScanFilterConfig(cfg.search_voxel_m, cfg.search_min_points))
-    hit = bnb.search(pre, pts, np.array([centre[0], centre[1], 0.0]), (float(half[0]), float(half[1])), math.pi,
-                     cfg.min_score)
+    win = (float(half[0]) + cfg.window_margin_m, float(half[1]) + cfg.window_margin_m)
+    hit = bnb.search(pre, pts, np.array([centre[0], centre[1], 0.0]), win, math.pi, cfg.min_score)
     if hit is None:
         return None
     refine = MatchConfig(linear_window=0.5, angular_window_deg=3.0, translation_delta_weight=1e3,
