@@ -9,7 +9,7 @@ Day 1 is the reference household. Before each later day, ``changes`` of the smal
 - **added**: a new object (ids ``O36``, ``O37``...) put on a free spot.
 
 A spot is on an edge of a surface (tables, counters, desk, nightstands, cabinet, TV stand) that faces free space:
-the label 1 cm outside the edge at the surface's height plus 5 cm, facing out, at least ``MIN_SPACING_M`` from
+every 0.15 m, the label 1 cm outside the edge at the surface's height plus 5 cm, facing out, at least ``MIN_SPACING_M`` from
 every other label, with a viewing spot for the operator in front of it. The robot starts each day at a random
 standable place with a random heading; its odometry starts at the identity there, so the world frame of the day
 is unknown to the log. ``days.json`` beside the logs holds per day the log, the start pose, the changes (before
@@ -28,8 +28,9 @@ from holoslam.sim.world import World, WorldObject
 __all__ = ["DayChange", "Day", "household_days", "simulate_days", "SURFACES", "MIN_MOVE_M", "MIN_SPACING_M", "NEW_KINDS",
            "DAY_NS"]
 
+# the furniture objects are put on (tables, counters, desk, nightstands, cabinet, TV stand, sofa, beds...)
 SURFACES = ("coffee_table", "tv_stand", "balcony_table", "counter", "cabinet", "dining_table", "nightstand_1",
-            "nightstand_2", "desk")
+            "nightstand_2", "desk", "sofa", "armchair", "bed_1", "bed_2", "washing_machine")
 MIN_MOVE_M = 0.6  # m: a moved object lands this far from its place at least (twice the 0.3 m "moved")
 MIN_SPACING_M = 0.4  # m between two labels (two cups side by side still read apart)
 NEW_KINDS = (("cup", 60, "g=handle,m=0.3"), ("book", 50, "g=side,m=0.6"), ("remote", 50, "g=top,m=0.2"),
@@ -78,7 +79,7 @@ def _spots(world: World, fs: Any) -> list[tuple[str, tuple[float, float, float],
             e = b - a
             L = float(np.hypot(*e))
             n = np.array([e[1], -e[0]]) / L  # outward normal of a counter-clockwise polygon
-            for s in np.arange(0.15, L - 0.149, 0.25):
+            for s in np.arange(0.1, L - 0.099, 0.15):
                 p = a + e * (s / L) + 0.01 * n
                 view = p + 1.0 * n
                 r, c = fs.cell_of(view[None])
@@ -118,7 +119,7 @@ def _change_day(rng: np.random.Generator, day: int, world: World, spots: list, n
     objs = list(world.objects)
     changes: list[DayChange] = []
     for _ in range(n_changes):
-        kind = ("moved", "removed", "added")[int(rng.choice(3, p=[0.5, 0.25, 0.25]))]
+        kind = ("moved", "removed", "added")[int(rng.choice(3, p=[0.5, 0.3, 0.2]))]
         small = [k for k, o in enumerate(objs) if o.label_size <= STATION_MAX_LABEL
                  and o.object_id not in {c.object_id for c in changes}]
         if kind != "added" and not small:
