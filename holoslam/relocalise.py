@@ -56,6 +56,9 @@ class RelocaliseConfig:
     # the laser search stops after a session submap once a verified group holds this many matches (twice the
     # minimum: a margin over the runner-up test); 0 searches every pair
     enough_consistent: int = 6
+    # searches at most (session submaps x stored submaps); a long session against a large store is cut off here
+    # and, without a verified group by then, stays unjoined (the report says how many were searched)
+    max_searches: int = 600
     # m: the session submap's anchor is searched over the stored grid and this far beyond it (a robot starts a
     # submap inside what it sees; overlapping submaps hold each other's anchors or nearly)
     window_margin_m: float = 1.0
@@ -229,6 +232,8 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
         if len(sm.points) < cfg.search_min_points:
             continue
         for st in stored_submaps:
+            if searches >= cfg.max_searches:
+                break
             if st.id not in pre:
                 pre[st.id] = bnb.precompute(st.prob, cfg.depth, origin=st.origin, res=st.resolution)
             searches += 1

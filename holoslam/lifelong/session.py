@@ -31,7 +31,7 @@ from holoslam.store.records import (
     new_ref,
 )
 
-__all__ = ["LifelongConfig", "SessionRun", "run_session", "place_session"]
+__all__ = ["LifelongConfig", "SessionRun", "run_session", "run_session_data", "place_session"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +53,7 @@ class SessionRun:
     relocalisation: Any  # Relocalisation | None (None for the founding session)
     joint: Any  # JointSolution | None
     update: SessionUpdate
+    joint_graph: Any = None  # the JointGraph solved (benchmarks re-solve it by another method)
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +70,7 @@ class _Placed:
     retire: tuple[int, ...]
     cross: tuple
     joint: Any
+    graph: Any = None
 
 
 def run_session(log_path: str | Path, store_path: str | Path, config: Any = None,
@@ -79,27 +81,42 @@ def run_session(log_path: str | Path, store_path: str | Path, config: Any = None
     from holoslam.config import RunConfig
     from holoslam.io.digest import file_sha256
     from holoslam.io.mcap import read_log
+    from holoslam.store.db import MapStore
+    from holoslam.timing import StageClock
+
+    cfg = config or RunConfig()
+    clock = StageClock(progress)
+    with MapStore.open(store_path):  # a bad store is a one-line error before the run, not after it
+        pass
+    with clock.stage("ingest"):
+        log, ingest_report = read_log(log_path, mapping=cfg.mapping, require=["odometry", "scan"])
+        sha = file_sha256(log_path)
+    return run_session_data(log, ingest_report, store_path, Path(log_path).name, sha, cfg, lifelong, clock,
+                            store_progress)
+
+
+def run_session_data(log: Any, ingest_report: Any, store_path: str | Path, log_name: str, log_sha256: str,
+                     config: Any = None, lifelong: LifelongConfig | None = None, clock: Any = None,
+                     store_progress: Any = None) -> SessionRun:
+    """``run_session`` on a log already in memory (``holoslam.io.mcap.read_log``'s records), named
+    ``log_name`` with content hash ``log_sha256`` in the store (e.g. a window of a longer log)."""
+    from holoslam.config import RunConfig
     from holoslam.pipeline import finish_run, slam_stages
     from holoslam.store.db import MapStore
     from holoslam.timing import StageClock
 
     cfg = config or RunConfig()
     lc = lifelong or LifelongConfig()
-    clock = StageClock(progress)
-    with MapStore.open(store_path) as store:  # a bad store is a one-line error before the run, not after it
-        pass
-    with clock.stage("ingest"):
-        log, ingest_report = read_log(log_path, mapping=cfg.mapping, require=["odometry", "scan"])
-        sha = file_sha256(log_path)
+    clock = clock or StageClock(None)
     st = slam_stages(log, cfg, clock)
     with MapStore.open(store_path) as store:
         with clock.stage("session (relocalise, join)"):
             placed, reloc, summary = place_session(store, st, lc)
             world = _in_world(st, placed, log)
-        run = finish_run(log, ingest_report, world, cfg, clock, str(log_path), session=summary)
-        update = _update(Path(log_path).name, sha, log, st, placed, reloc, summary)
+        run = finish_run(log, ingest_report, world, cfg, clock, str(log.source), session=summary)
+        update = _update(log_name, log_sha256, log, st, placed, reloc, summary)
         store.add_session(update, store_progress)
-    return SessionRun(run, summary, reloc, placed.joint, update)
+    return SessionRun(run, summary, reloc, placed.joint, update, placed.graph)
 
 
 def _session_objects(st: Any) -> dict[str, tuple[np.ndarray, np.ndarray, Any]]:
@@ -199,7 +216,7 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     retire = _retire(stored, js, st, lc.retire_cover)
     updates = {int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
                for n, k in enumerate(ids.tolist())}
-    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, reloc.matches, js)
+    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, reloc.matches, js, jg)
 
 
 def _kept_landmarks(st: Any) -> Any:
