@@ -54,6 +54,7 @@ class SessionRun:
     joint: Any  # JointSolution | None
     update: SessionUpdate
     joint_graph: Any = None  # the JointGraph solved (benchmarks re-solve it by another method)
+    stages: Any = None  # the SLAM stages in the session's own frame (pipeline.SlamStages), before the join
 
 
 @dataclass(frozen=True, eq=False)
@@ -116,7 +117,7 @@ def run_session_data(log: Any, ingest_report: Any, store_path: str | Path, log_n
         run = finish_run(log, ingest_report, world, cfg, clock, str(log.source), session=summary)
         update = _update(log_name, log_sha256, log, st, placed, reloc, summary)
         store.add_session(update, store_progress)
-    return SessionRun(run, summary, reloc, placed.joint, update, placed.graph)
+    return SessionRun(run, summary, reloc, placed.joint, update, placed.graph, st)
 
 
 def _session_objects(st: Any) -> dict[str, tuple[np.ndarray, np.ndarray, Any]]:
