@@ -73,7 +73,7 @@ def test_objects_and_export_answer_from_the_store(home, capsys):
     assert oid in capsys.readouterr().out
     assert main(["export", str(d / "home.holomap"), "--to", str(d / "ex")]) == 0
     names = {p.name for p in (d / "ex").iterdir()}
-    assert {"map.yaml", "map.pgm", "session_1.tum", "session_2.tum", "objects.csv", "topology.graphml"} <= names
+    assert {"map.yaml", "map.pgm", "session_1.tum", "session_2.tum", "objects.csv", "topology.graphml", "store.png"} <= names
     assert main(["objects", str(d / "absent.holomap")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert main(["objects", str(d / "home.holomap"), "--id", "O99"]) == 2

@@ -1,7 +1,7 @@
 """Writing a map store's export (``holoslam export STORE --to DIR``): the merged map (map_server PGM + YAML and a
 PNG), its topology (GraphML + JSON), one TUM file per session (``session_<id>.tum`` in the world,
 ``session_<id>_unjoined.tum`` in its own frame), the objects now (``objects.csv``) and their history
-(``objects_history.csv``)."""
+(``objects_history.csv``), and a picture of it all (``store.png``)."""
 
 from __future__ import annotations
 
@@ -28,8 +28,10 @@ def _states_csv(states: Any, with_session: bool) -> str:
     return buf.getvalue()
 
 
-def write_store_export(ex: Any, to: str | Path) -> list[Path]:
-    """Write a ``holoslam.lifelong.export.StoreExport`` into the folder ``to`` (created); returns the paths."""
+def write_store_export(ex: Any, to: str | Path, pictures: bool = True, follow: tuple[str, ...] = ()) -> list[Path]:
+    """Write a ``holoslam.lifelong.export.StoreExport`` into the folder ``to`` (created); returns the paths. With
+    ``pictures``, ``store.png``: the merged map, the sessions' trajectories, the objects and the history of the
+    objects in ``follow`` (default: the one that moved most often)."""
     from holoslam.io.graphs import write_graph_files
     from holoslam.io.grid import write_grid, write_grid_png
     from holoslam.io.run_folder import prepare_output_folder
@@ -44,4 +46,15 @@ def write_store_export(ex: Any, to: str | Path) -> list[Path]:
                                  wTb))
     (out / "objects.csv").write_text(_states_csv(ex.objects_now, True))
     (out / "objects_history.csv").write_text(_states_csv(ex.history, True))
-    return written + [out / "objects.csv", out / "objects_history.csv"]
+    written += [out / "objects.csv", out / "objects_history.csv"]
+    if pictures:
+        from collections import Counter
+
+        from holoslam import viz
+
+        moves = Counter(o.object_id for o in ex.history if o.status == "moved")
+        ids = follow or tuple(k for k, _n in moves.most_common(1))
+        viz.store_figure(ex, ids, title=f"{Path(ex.store).name}: {len(ex.trajectories)} sessions").savefig(
+            out / "store.png", dpi=130)
+        written.append(out / "store.png")
+    return written

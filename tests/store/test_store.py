@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from store_updates import make_update
 
 from holoslam.errors import StoreError
 from holoslam.store import schema
 from holoslam.store.codec import pack, pack_prob, unpack, unpack_prob
 from holoslam.store.db import MapStore
-from store_updates import make_update
 
 FIXTURE = Path(__file__).with_name("fixture_v1.holomap")
 REPO = Path(__file__).resolve().parents[2]
