@@ -39,6 +39,17 @@ def _now() -> str:
     return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
+def _version() -> str:
+    """The installed holoslam's version (read from its metadata: importing the package here would close an import
+    cycle through its lazy names)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("holoslam")
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def _opt(blob: bytes | None, where: str) -> np.ndarray | None:
     return None if blob is None else unpack(blob, where)
 
@@ -78,11 +89,9 @@ class MapStore:
         if not names:
             with self.transaction():
                 create_schema(self._con)
-                from holoslam import __version__
-
                 self._con.executemany("INSERT INTO meta VALUES (?, ?)", [
                     ("format", STORE_FORMAT), ("schema_version", str(SCHEMA_VERSION)),
-                    ("created_by", f"holoslam {__version__}"), ("created_utc", _now())])
+                    ("created_by", f"holoslam {_version()}"), ("created_utc", _now())])
             return
         if "meta" not in names:
             raise StoreError(f"{self.path} is an SQLite database but not a holoslam map store (no meta table)")
