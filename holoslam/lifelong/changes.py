@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -163,7 +164,7 @@ def _gone(stored: Mapping[str, ObjectState], located: Mapping[str, Located], sta
     if not missing or not len(stamps_ns):
         return []
     t, xy = _thin(stamps_ns, w_xy_robot, cfg.view_step_s)
-    places = [(stored[k].w_xy, stored[k].view) for k in missing]
+    places: list[tuple[Any, Any]] = [(stored[k].w_xy, stored[k].view) for k in missing]
     places += [(o.w_xy, o.view) for o in located.values()]
     masks = np.array([in_view_mask(p, v, xy, merged, cfg) for p, v in places])
     share = (masks * _dt(t)[None]) / np.maximum(masks.sum(axis=0), 1)[None]

@@ -347,8 +347,6 @@ def _in_world(st: Any, p: _Placed, log: Any) -> Any:
 def _update(log_name: str, sha: str, log: Any, st: Any, p: _Placed, reloc: Any, summary: SessionSummary
             ) -> SessionUpdate:
     """The store update of the session (one transaction)."""
-    from holoslam.store.records import StoredTrajectory as _T  # noqa: F401 (the record the update carries)
-
     sTa = np.asarray(st.sol.wTa, np.float64)
     anchors = np.asarray(st.fe.anchor_stamps_ns, np.int64)
     subs = tuple(NewSubmap(k, int(sm.anchor_stamp_ns), p.wTa[k], None if p.cov_wTa is None else p.cov_wTa[k], sTa[k],
