@@ -56,6 +56,10 @@ class RelocaliseConfig:
     # the laser search stops after a session submap once a verified group holds this many matches (twice the
     # minimum: a margin over the runner-up test); 0 searches every pair
     enough_consistent: int = 6
+    # once this many matches agree, a session submap is searched only in the stored submaps near where they put it
+    # (each search still global); a single match guides nothing (one wrong match would steer the search)
+    guide_support: int = 2
+    guide_radius_m: float = 8.0  # m: a submap reaches a few metres (household rooms, the real logs' corridors)
     # searches at most (session submaps x stored submaps); a long session against a large store is cut off here
     # and, without a verified group by then, stays unjoined (the report says how many were searched)
     max_searches: int = 600
@@ -227,11 +231,12 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
     searches = 0
     pre: dict[int, object] = {}
     order = sorted(range(len(session_submaps)), key=lambda k: -len(session_submaps[k].points))
+    guide: Hypothesis | None = None
     for k in order:
         sm = session_submaps[k]
         if len(sm.points) < cfg.search_min_points:
             continue
-        for st in stored_submaps:
+        for st in _candidates(stored_submaps, guide, session_sTa[k], cfg):
             if searches >= cfg.max_searches:
                 break
             if st.id not in pre:
@@ -243,11 +248,23 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
             oTn, cov, score = m
             wTs = g.compose(g.compose(st.wTa, oTn), g.inverse(session_sTa[k]))
             out.append(LaserMatch(k, st.id, oTn, cov, score, wTs))
-        if cfg.enough_consistent and len(out) >= cfg.enough_consistent:
-            h = laser_hypothesis(out, cfg)
-            if h is not None and h.verified and h.support >= cfg.enough_consistent:
-                break
+        h = laser_hypothesis(out, cfg)
+        if cfg.enough_consistent and h is not None and h.verified and h.support >= cfg.enough_consistent:
+            break
+        if h is not None and h.support >= cfg.guide_support:
+            guide = h
     return out, searches
+
+
+def _candidates(stored_submaps, guide: Hypothesis | None, sTa: np.ndarray, cfg: RelocaliseConfig) -> list:
+    """The stored submaps a session submap is searched in: all of them, or, once ``guide_support`` matches agree
+    on a transform, those whose anchor lies within ``guide_radius_m`` of where it puts the session submap, nearest
+    first. Each search is still global (whole submap, every heading): the guide only chooses where to look."""
+    if guide is None:
+        return list(stored_submaps)
+    p = g.compose(guide.wTs, sTa)[:2]
+    d = np.array([np.hypot(*(np.asarray(s.wTa[:2]) - p)) for s in stored_submaps])
+    return [stored_submaps[i] for i in np.argsort(d, kind="stable") if d[i] <= cfg.guide_radius_m]
 
 
 def _consistent(a: np.ndarray, b: np.ndarray, cfg: RelocaliseConfig) -> np.ndarray:
