@@ -18,7 +18,7 @@ their odometry moved by a hidden transform (metres, any heading) and no pose pri
 fresh store. Printed: joined and relocalisation s per session, the relation error of every relation (.relations)
 on the sessions' world trajectories (within and across sessions) against the whole log run in one piece
 (``pipeline.run_data``), and the wrong joins: every session of one log relocalised against the stores of the
-others (must never be placed).
+others (must never be placed); ``wrong`` does the same from the stores ``real`` left (when it was cut short).
 
 ``growth``: ``--growth-days`` shorter days into one store: the working graph's anchors, the session's run
 time and the store's size per day.
@@ -189,6 +189,39 @@ def real_part(out: Path, logs: list[str]) -> None:
     print(f"wrong joins: {false} of {tried} sessions placed in another building's store")
 
 
+def wrong_part(out: Path) -> None:
+    """Every session stored in one real log's store relocalised against every other log's store (from the stores
+    ``real`` wrote: a session's submaps keep their points and their pose in the session's frame)."""
+    from types import SimpleNamespace
+
+    from holoslam.relocalise import relocalise
+    from holoslam.store.db import MapStore
+
+    stores = sorted((out.parent / "real").glob("*.holomap"))
+    sessions, working = {}, {}
+    for p in stores:
+        with MapStore.open(p, create=False) as s:
+            working[p.stem] = s.submaps(working=True, grids=True)
+            sessions[p.stem] = []
+            for e in s.sessions():
+                subs = sorted(s.submaps(working=False, grids=True, session_id=e.id), key=lambda m: m.idx)
+                sessions[p.stem].append(([SimpleNamespace(points=m.points) for m in subs],
+                                         np.array([m.sTa for m in subs])))
+    print("store   session of   placed  searches  reloc s")
+    false = tried = 0
+    for a in working:
+        for b in sessions:
+            if a == b:
+                continue
+            for k, (subs, sTa) in enumerate(sessions[b]):
+                r = relocalise(subs, sTa, {}, working[a], {})
+                tried += 1
+                false += r.placed
+                print(f"{a:<7} {b}-{k + 1:<10} {str(r.placed):<7} {r.searches:>8} {r.seconds:8.1f}")
+                sys.stdout.flush()
+    print(f"wrong joins: {false} of {tried} sessions placed in another building's store")
+
+
 def growth_part(out: Path, days: int, duration: float, seed: int) -> None:
     from holoslam.lifelong.session import run_session
     from holoslam.sim.days import simulate_days
@@ -212,7 +245,8 @@ def growth_part(out: Path, days: int, duration: float, seed: int) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--parts", nargs="+", default=["sim", "real", "growth"], choices=["sim", "real", "growth"])
+    ap.add_argument("--parts", nargs="+", default=["sim", "real", "growth"],
+                    choices=["sim", "real", "wrong", "growth"])
     ap.add_argument("--days", type=int, default=10)
     ap.add_argument("--duration", type=float, default=None, help="s of each simulated day (default: a whole tour)")
     ap.add_argument("--seed", type=int, default=1)
@@ -230,6 +264,8 @@ def main() -> None:
             sim_part(d, a.days, a.duration, a.seed)
         elif part == "real":
             real_part(d, a.logs)
+        elif part == "wrong":
+            wrong_part(d)
         else:
             growth_part(d, a.growth_days, a.growth_duration, a.seed + 100)
         sys.stdout.flush()
