@@ -217,7 +217,8 @@ def wrong_part(out: Path) -> None:
                 r = relocalise(subs, sTa, {}, working[a], {})
                 tried += 1
                 false += r.placed
-                print(f"{a:<7} {b}-{k + 1:<10} {str(r.placed):<7} {r.searches:>8} {r.seconds:8.1f}")
+                print(f"{a:<7} {b}-{k + 1:<10} {str(r.placed):<7} {r.searches:>8} {r.seconds:8.1f} "
+                      f"(cpu {r.cpu_seconds:.1f})")
                 sys.stdout.flush()
     print(f"wrong joins: {false} of {tried} sessions placed in another building's store")
 

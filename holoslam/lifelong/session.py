@@ -302,7 +302,8 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
         laser_matches=0 if reloc is None else len(reloc.matches),
         laser_searches=0 if reloc is None else reloc.searches, objects_seen=n_seen, changes=changes, joint=joint,
         working_submaps=counts["working_submaps"] - len(p.retire) + (len(p.wTa) if joined else 0),
-        retired_submaps=counts["submaps"] - counts["working_submaps"] + len(p.retire))
+        retired_submaps=counts["submaps"] - counts["working_submaps"] + len(p.retire),
+        relocalisation_cpu_s=0.0 if reloc is None else round(reloc.cpu_seconds, 4))
 
 
 def _rehang(stamps_ns: np.ndarray, poses: np.ndarray, anchor_stamps_ns: np.ndarray, sTa: np.ndarray,

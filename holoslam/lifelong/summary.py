@@ -46,6 +46,7 @@ class SessionSummary:
     joint: dict[str, Any] = field(default_factory=dict)
     working_submaps: int = 0
     retired_submaps: int = 0
+    relocalisation_cpu_s: float = 0.0  # the process's CPU time of the relocalisation
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
