@@ -184,8 +184,8 @@ def _placements(statuses: dict[str, str], latest: dict[str, ObjectState], all_pl
         if s == ObjectStatus.SEEN and latest[oid].placement:
             out[oid] = latest[oid].placement
         elif s in (ObjectStatus.MOVED, ObjectStatus.NEW):
-            n = 1 + sum(p.rsplit("#", 1)[0] == oid for p in all_placements)
-            out[oid] = f"{oid}#{n}"
+            used = [p.rsplit("#", 1)[1] for p in all_placements if p.rsplit("#", 1)[0] == oid]
+            out[oid] = f"{oid}#{1 + max((int(u) for u in used if u.isdigit()), default=0)}"
     return out
 
 
@@ -202,7 +202,9 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     located = _located(st, sobj, h.wTs, h.cov_wTs)
     statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), merged, lc.changes)
     sightings = store.sightings(ids)
-    placement = _placements(statuses, latest, set(sightings.placement) | {o.placement for o in latest.values()})
+    # every placement the store ever gave (retired submaps' sightings included): a new one never reuses a name
+    ever = {o.placement for o in store.object_history() if o.placement}
+    placement = _placements(statuses, latest, set(sightings.placement) | ever)
     lm = _kept_landmarks(st)
     for oid in set(lm.landmark) - set(placement):  # a landmark without an object record: a fresh placement
         placement[oid] = f"{oid}#new{len(placement)}"
