@@ -66,6 +66,10 @@ class RelocaliseConfig:
     # m: the session submap's anchor is searched over the stored grid and this far beyond it (a robot starts a
     # submap inside what it sees; overlapping submaps hold each other's anchors or nearly)
     window_margin_m: float = 1.0
+    # m: the branch and bound uses the points within this range of the session submap's anchor: the angular step
+    # is the rotation that moves the farthest point by one cell, so a 30 m laser's far points (the real logs)
+    # make 3,700 headings where 8 m (the household laser's range) make 1,000; the refinement uses every point
+    search_max_range_m: float = 8.0
     search_voxel_m: float = 0.1  # m: the session submap's points thinned for the branch and bound (2 cells)
     search_min_points: int = 150  # points kept at least by that thinning
     depth: int = 7  # the branch and bound's precomputed levels (Cartographer's 7)
@@ -208,7 +212,10 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     h, w = prob.shape
     half = np.array([w * res / 2.0, h * res / 2.0])
     centre = np.array(origin) + half
-    pts = adaptive_voxel_filter(points, ScanFilterConfig(cfg.search_voxel_m, cfg.search_min_points))
+    pts = np.asarray(points, np.float64)
+    near = pts[np.hypot(pts[:, 0], pts[:, 1]) <= cfg.search_max_range_m]
+    pts = adaptive_voxel_filter(near if len(near) >= cfg.search_min_points else pts,
+                                ScanFilterConfig(cfg.search_voxel_m, cfg.search_min_points))
     win = (float(half[0]) + cfg.window_margin_m, float(half[1]) + cfg.window_margin_m)
     hit = bnb.search(pre, pts, np.array([centre[0], centre[1], 0.0]), win, math.pi, cfg.min_score)
     if hit is None:
