@@ -229,17 +229,18 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
 
 
 def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
-                  cfg: RelocaliseConfig = RelocaliseConfig()) -> tuple[list[LaserMatch], int]:
+                  cfg: RelocaliseConfig = RelocaliseConfig(), guide: Hypothesis | None = None
+                  ) -> tuple[list[LaserMatch], int]:
     """Every session submap (``.points``; the largest first) against every stored submap (``StoredSubmap`` with
     grids): the matches above ``min_score`` and the number of searches. The search stops early once the matches
-    hold a verified group of ``enough_consistent`` (``laser_hypothesis``)."""
+    hold a verified group of ``enough_consistent`` (``laser_hypothesis``). ``guide``: a hypothesis (the objects')
+    that chooses where to search from the start (``_candidates``)."""
     from holoslam.submaps import bnb
 
     out: list[LaserMatch] = []
     searches = 0
     pre: dict[int, object] = {}
     order = sorted(range(len(session_submaps)), key=lambda k: -len(session_submaps[k].points))
-    guide: Hypothesis | None = None
     for k in order:
         sm = session_submaps[k]
         if len(sm.points) < cfg.search_min_points:
@@ -332,9 +333,11 @@ def relocalise(session_submaps, session_sTa: np.ndarray, session_objects: dict[s
     the other absent, unverified but agreeing, or unverified and disagreeing -> that one; both verified but
     disagreeing -> not placed (said why); neither verified -> not placed."""
     t0, c0 = time.perf_counter(), time.process_time()
-    matches, searches = laser_matches(session_submaps, session_sTa, stored_submaps, cfg)
-    las = laser_hypothesis(matches, cfg)
     obj = object_hypothesis(session_objects, stored_objects, cfg)
+    # a verified object hypothesis only chooses where the laser looks first; the laser's matches stay global
+    matches, searches = laser_matches(session_submaps, session_sTa, stored_submaps, cfg,
+                                      obj if obj is not None and obj.verified else None)
+    las = laser_hypothesis(matches, cfg)
     lv, ov = las is not None and las.verified, obj is not None and obj.verified
     chosen: Hypothesis | None = None
     if lv and ov:

@@ -89,11 +89,12 @@ def merge_submaps(wTa: np.ndarray, grids: Sequence[tuple[Any, Any, tuple[float, 
             K[rr.ravel()[ok], cc.ravel()[ok]] = True
         prob[K] = (1.0 / (1.0 + np.exp(-L[K]))).astype(np.float32)
         known |= K
-    r, c = np.nonzero(known)
-    if r.size == 0:
+    kr, kc = np.nonzero(known)
+    if kr.size == 0:
         return MergedGrid(prob, known, (float(lo[0]), float(lo[1])), res)
     m = int(round(margin_m / res))  # cropped to the known cells and the margin
-    r0, r1, c0, c1 = max(r.min() - m, 0), min(r.max() + m + 1, H), max(c.min() - m, 0), min(c.max() + m + 1, W)
+    r0, r1 = max(int(kr.min()) - m, 0), min(int(kr.max()) + m + 1, H)
+    c0, c1 = max(int(kc.min()) - m, 0), min(int(kc.max()) + m + 1, W)
     return MergedGrid(np.ascontiguousarray(prob[r0:r1, c0:c1]), np.ascontiguousarray(known[r0:r1, c0:c1]),
                       (float(lo[0] + c0 * res), float(lo[1] + r0 * res)), res)
 
