@@ -9,8 +9,8 @@ Two independent sources of hypotheses, each verified before a session is joined:
   a session sees tens of objects), the hypothesis with most objects within ``object_inlier_m`` is refined by
   least squares over them. It is verified when ``min_object_inliers`` objects agree (two points always fit
   an SE(2) exactly; the third is the first check, and a moved object is simply an outlier).
-- **Laser**: every submap of the session is searched in every working submap of the store by a global
-  branch-and-bound over the whole stored submap and every heading (``global_match``: the one function to swap
+- **Laser**: the scan at every session submap's anchor (``query_points``) is searched in every working submap of
+  the store by a global branch-and-bound over the whole stored submap and every heading (``global_match``: the one function to swap
   for another global search), refined by the continuous matcher (its covariance). A match of session submap i
   in stored submap j gives wTs = wTa_j ∘ ajTai ∘ (sTa_i)^-1. Matches are grouped by pairwise consistency
   (``consistent_xy_m``, ``consistent_deg``); the largest group is verified when it holds ``min_consistent``
@@ -72,6 +72,7 @@ class RelocaliseConfig:
     search_max_range_m: float = 8.0
     search_voxel_m: float = 0.1  # m: the session submap's points thinned for the branch and bound (2 cells)
     search_min_points: int = 150  # points kept at least by that thinning
+    min_query_points: int = 50  # a session submap whose anchor scan has fewer returns is not searched
     depth: int = 7  # the branch and bound's precomputed levels (Cartographer's 7)
     object_inlier_m: float = 0.3  # m: an object this close to its stored place agrees (the "moved" threshold)
     min_object_inliers: int = 3  # objects agreeing with an object hypothesis for it to be verified
@@ -228,10 +229,22 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     return ref.aTb, ref.cov_aTb, float(ref.score)
 
 
+def query_points(submap) -> np.ndarray:
+    """What a session submap is searched with: the scan taken at its anchor (its first keyframe's points, in the
+    anchor frame), as a loop closure searches one scan. A scan sees from one place what a stored submap of that
+    place holds; the submap's own points reach beyond any one stored submap's explored area, and on the real logs
+    (30 m lasers, partial overlaps) those points scoring 0.1 kept every match under the score. A record without
+    scans (a stored submap: ``points`` is its anchor scan) gives its ``points``."""
+    scans = getattr(submap, "scan_points", None)
+    if scans:
+        return g.transform_points(np.asarray(submap.aTb, np.float64).reshape(-1, 3)[0], np.asarray(scans[0], float))
+    return np.asarray(submap.points, np.float64).reshape(-1, 2)
+
+
 def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
                   cfg: RelocaliseConfig = RelocaliseConfig(), guide: Hypothesis | None = None
                   ) -> tuple[list[LaserMatch], int]:
-    """Every session submap (``.points``; the largest first) against every stored submap (``StoredSubmap`` with
+    """Every session submap (``query_points``: its anchor scan; the fullest first) against every stored submap (``StoredSubmap`` with
     grids): the matches above ``min_score`` and the number of searches. The search stops early once the matches
     hold a verified group of ``enough_consistent`` (``laser_hypothesis``). ``guide``: a hypothesis (the objects')
     that chooses where to search from the start (``_candidates``)."""
@@ -240,10 +253,10 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
     out: list[LaserMatch] = []
     searches = 0
     pre: dict[int, object] = {}
-    order = sorted(range(len(session_submaps)), key=lambda k: -len(session_submaps[k].points))
+    queries = [query_points(sm) for sm in session_submaps]
+    order = sorted(range(len(session_submaps)), key=lambda k: -len(queries[k]))
     for k in order:
-        sm = session_submaps[k]
-        if len(sm.points) < cfg.search_min_points:
+        if len(queries[k]) < cfg.min_query_points:
             continue
         for st in _candidates(stored_submaps, guide, session_sTa[k], cfg):
             if searches >= cfg.max_searches:
@@ -251,7 +264,7 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
             if st.id not in pre:
                 pre[st.id] = bnb.precompute(st.prob, cfg.depth, origin=st.origin, res=st.resolution)
             searches += 1
-            m = global_match(st, sm.points, cfg, pre[st.id])
+            m = global_match(st, queries[k], cfg, pre[st.id])
             if m is None:
                 continue
             oTn, cov, score = m

@@ -21,7 +21,7 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.lifelong.changes import ChangeConfig, Located, classify, to_world, view_directions
 from holoslam.lifelong.summary import ObjectChange, SessionSummary
-from holoslam.relocalise import RelocaliseConfig, fit_se2
+from holoslam.relocalise import RelocaliseConfig, fit_se2, query_points
 from holoslam.store.records import (
     NewSubmap,
     ObjectState,
@@ -353,7 +353,7 @@ def _update(log_name: str, sha: str, log: Any, st: Any, p: _Placed, reloc: Any, 
     sTa = np.asarray(st.sol.wTa, np.float64)
     anchors = np.asarray(st.fe.anchor_stamps_ns, np.int64)
     subs = tuple(NewSubmap(k, int(sm.anchor_stamp_ns), p.wTa[k], None if p.cov_wTa is None else p.cov_wTa[k], sTa[k],
-                           sm.grid.prob, sm.grid.origin, sm.grid.resolution, sm.points, sm.grid.known)
+                           sm.grid.prob, sm.grid.origin, sm.grid.resolution, query_points(sm), sm.grid.known)
                  for k, sm in enumerate(st.fe.submaps))
     rel = st.fe.problem.relative
     cross = p.cross
