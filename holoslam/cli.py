@@ -74,7 +74,14 @@ def _parse_xy(text: str) -> tuple[float, float]:
 
 
 def cmd_simulate(a: argparse.Namespace) -> int:
-    from holoslam.run_jobs import simulate
+    from holoslam.run_jobs import simulate, simulate_days
+
+    if a.days is not None:
+        days = simulate_days(a.output, a.days, seed=a.seed, duration_s=a.duration, changes=tuple(a.changes))
+        print(_json(days) if a.json else "\n".join(
+            f"day {d['day']}: {a.output / d['log']}, start {d['start_pose']}, changes: "
+            + (", ".join(f"{c['id']} {c['change']}" for c in d["changes"]) or "none") for d in days["days"]))
+        return EXIT_OK
 
     summary = simulate(
         a.output, seed=a.seed, duration_s=a.duration, image_rate_hz=a.image_rate, noise_scale=a.noise_scale,
@@ -140,8 +147,11 @@ def cmd_run(a: argparse.Namespace) -> int:
     compiling = _compile_kernels_first(a.quiet or a.json)
     progress = Progress(quiet=a.quiet or a.json)
     try:
-        outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler, progress=progress,
-                           force=a.force)
+        if a.map is not None:
+            outcome = _run_into_store(a, logs, config, progress)
+        else:
+            outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler,
+                               progress=progress, force=a.force)
     finally:
         if compiling is not None:
             compiling.shutdown(wait=True, cancel_futures=True)
@@ -168,6 +178,24 @@ def cmd_demo(a: argparse.Namespace) -> int:
     elif not a.quiet:
         print(outcome["text"])
     return EXIT_OK if outcome["ok"] else EXIT_FAILED
+
+
+def _run_into_store(a: argparse.Namespace, logs: list, config: Any, progress: Progress) -> dict:
+    """``holoslam run LOG --map STORE -o OUT``: one log, a new session of the store."""
+    from holoslam.run_jobs import run_session_to_folder
+
+    if len(logs) != 1 or a.scheduler is not None:
+        raise ConfigError(f"--map takes one log at a time (got {len(logs)}); run each log of a home in turn, "
+                          "oldest first")
+    return run_session_to_folder(logs[0], a.output, a.map, config, progress)
+
+
+def cmd_objects(a: argparse.Namespace) -> int:
+    from holoslam.lifelong.export import object_history
+
+    hist = object_history(a.store, object_id=a.id, at=a.at)
+    print(_json(hist.to_dict()) if a.json else hist.text())
+    return EXIT_OK
 
 
 def cmd_solve(a: argparse.Namespace) -> int:
@@ -268,6 +296,14 @@ def cmd_plan(a: argparse.Namespace) -> int:
 def cmd_export(a: argparse.Namespace) -> int:
     from holoslam.run_jobs import export_run
 
+    if a.run.is_file():  # a map store: the merged map, every session's trajectory, the objects
+        from holoslam.io.store_export import write_store_export
+        from holoslam.lifelong.export import store_export
+
+        if a.to is None:
+            raise ConfigError(f"{a.run} is a map store: name the folder to export it into with --to DIR")
+        print("\n".join(str(p) for p in write_store_export(store_export(a.run), a.to)))
+        return EXIT_OK
     written = export_run(a.run, a.to, formats=a.formats)
     print("\n".join(str(p) for p in written))
     return EXIT_OK
@@ -410,6 +446,9 @@ def _add_run(sub: Any) -> None:
         help="many logs: run every log again (default: a log whose folder is complete for the same log and "
         "configuration is skipped as up to date)",
     )
+    s.add_argument("--map", type=Path, metavar="STORE",
+                   help="a map store (created when absent): the log becomes a new session of it, relocalised and "
+                   "joined to its world when it can be placed; OUT is then in the store's world frame")
     s.add_argument("-q", "--quiet", action="store_true", help="print nothing but errors")
     s.add_argument("--json", action="store_true", help="print the summary as JSON only")
     s.set_defaults(func=cmd_run)
@@ -439,6 +478,16 @@ def _add_warmup(sub: Any) -> None:
     s.set_defaults(func=cmd_warmup)
 
 
+def _add_objects(sub: Any) -> None:
+    """The ``objects`` command's arguments."""
+    s = sub.add_parser("objects", help="the objects of a map store and their history across sessions")
+    s.add_argument("store", type=Path, help="a map store ('holoslam run LOG --map STORE')")
+    s.add_argument("--id", help="one object (e.g. O05)")
+    s.add_argument("--at", type=int, metavar="SESSION", help="one session (its id)")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_objects)
+
+
 def _add_config(sub: Any) -> None:
     """The ``config`` command's arguments."""
     s = sub.add_parser("config", help="the run configuration: --dump writes every setting with its default")
@@ -460,7 +509,7 @@ def _add_inspect(sub: Any) -> None:
 def _add_simulate(sub: Any) -> None:
     """The ``simulate`` command's arguments."""
     s = sub.add_parser("simulate", help="write a simulated reference-household log")
-    s.add_argument("-o", "--output", required=True, type=Path, help="MCAP file to write")
+    s.add_argument("-o", "--output", required=True, type=Path, help="MCAP file to write (a folder with --days)")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument(
         "--duration", type=float, default=None, help="seconds of robot time (default: whole route)"
@@ -476,6 +525,11 @@ def _add_simulate(sub: Any) -> None:
                    help="the robot: default, noisy (3x every noise), skid-steer (another odometer), dense-lidar (1,081 beams at 40 Hz); see holoslam.sim.profiles")
     s.add_argument("--wall-codes", type=int, default=0, help="foreign QR codes on the walls (0-12)")
     s.add_argument("--sizeless-labels", type=int, default=0, help="labels printed without their size (0-8)")
+    s.add_argument("--days", type=int, default=None, metavar="N",
+                   help="N days of the household into the folder -o: objects moved, removed and added between days, "
+                   "a different start each day, the truth in days.json (holoslam.sim.days)")
+    s.add_argument("--changes", type=int, nargs=2, default=[5, 10], metavar=("LO", "HI"),
+                   help="with --days: changes per day, drawn from LO..HI (default 5 10)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_simulate)
 
@@ -531,8 +585,9 @@ def _add_plan(sub: Any) -> None:
 
 def _add_export(sub: Any) -> None:
     """The ``export`` command's arguments."""
-    s = sub.add_parser("export", help="re-export a saved run (pictures, results MCAP, graphs)")
-    s.add_argument("run", type=Path)
+    s = sub.add_parser("export", help="re-export a saved run (pictures, results MCAP, graphs), or a map store "
+                       "(merged map, every session's trajectory, objects)")
+    s.add_argument("run", type=Path, help="a run folder, or a map store file")
     s.add_argument("--to", type=Path, help="folder to write into (default: the run folder)")
     s.add_argument(
         "--formats", nargs="+", default=["all"], choices=["all", "pictures", "mcap", "graphs", "tum"]
@@ -632,7 +687,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"holoslam {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add in (_add_run, _add_demo, _add_warmup, _add_config, _add_inspect, _add_simulate, _add_solve, _add_plan, _add_export, _add_evaluate, _add_datasets, _add_tags, _add_topology):
+    for add in (_add_run, _add_demo, _add_warmup, _add_config, _add_inspect, _add_simulate, _add_solve, _add_plan, _add_export, _add_objects, _add_evaluate, _add_datasets, _add_tags, _add_topology):
         add(sub)
     return p
 

@@ -19,6 +19,7 @@ __all__ = [
     "PlanningError",
     "VisionError",
     "OutputError",
+    "StoreError",
 ]
 
 
@@ -69,3 +70,7 @@ class VisionError(HoloslamError):
 
 class OutputError(HoloslamError):
     """An output cannot be written (disk full, read-only file system, no permission); nothing was replaced."""
+
+
+class StoreError(HoloslamError):
+    """A map store (``holoslam.store``) cannot be opened, read or updated."""

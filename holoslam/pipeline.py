@@ -101,12 +101,24 @@ def run_data(log: Any, ingest_report: Any, config: RunConfig | None = None,
     return _run_stages(log, ingest_report, cfg, StageClock(progress), str(log.source))
 
 
-def _run_stages(log: Any, ingest_report: Any, cfg: RunConfig, clock: StageClock, source: str) -> RunResult:
-    """The stages after ingestion (``run``)."""
-    from holoslam.mapping import build_maps
-    from holoslam.objects import located_by, located_objects
+@dataclass(frozen=True, eq=False)
+class SlamStages:
+    """What the stages up to the located objects produced (``slam_stages``), before the maps: the front end,
+    the solution (anchors from the keyframe solve), the sightings, the keyframe solve, the trajectory and the
+    located objects, all in the run's own frame (the odometry's at the first scan)."""
+
+    fe: Any
+    sol: Any
+    seen: Any
+    revisits: Any
+    traj: Any
+    objects: tuple
+
+
+def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
+    """The stages of a run from vision to the located objects (``run`` without the maps and the report)."""
+    from holoslam.objects import located_objects
     from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
-    from holoslam.report import build_report
     from holoslam.sightings import see_objects, triangulate_objects
     from holoslam.solve import solve
     from holoslam.submaps.frontend import build_problem
@@ -126,11 +138,27 @@ def _run_stages(log: Any, ingest_report: Any, cfg: RunConfig, clock: StageClock,
     with clock.stage("trajectory"):
         traj = run_trajectory(log, fe, sol, revisits)
         objects = located_objects(fe.problem, sol, seen)
+    return SlamStages(fe, sol, seen, revisits, traj, objects)
+
+
+def finish_run(log: Any, ingest_report: Any, st: SlamStages, cfg: RunConfig, clock: StageClock, source: str,
+               session: Any = None) -> RunResult:
+    """The map stages and the report after ``slam_stages`` (``session``: a lifelong session's summary for the
+    report, ``holoslam.lifelong``)."""
+    from holoslam.mapping import build_maps
+    from holoslam.objects import located_by
+    from holoslam.report import build_report
+
+    fe, sol, seen, traj, objects = st.fe, st.sol, st.seen, st.traj, st.objects
     maps = build_maps(log, fe, sol, traj, objects, cfg, clock)
     report = build_report(log=log, ingest_report=ingest_report, sightings=seen, fe=fe, sol=sol, objects=objects,
                           maps=maps, trajectory=traj, timings=clock.total(),
                           located_by=located_by(seen.observations, objects),
-                          codes_truth=cfg.vision.foreign_landmarks, revisits=revisits)
+                          codes_truth=cfg.vision.foreign_landmarks, revisits=st.revisits)
+    if session is not None:
+        import dataclasses
+
+        report = dataclasses.replace(report, session=session)
     return RunResult(
         source=source,
         config=cfg,
@@ -152,3 +180,8 @@ def _run_stages(log: Any, ingest_report: Any, cfg: RunConfig, clock: StageClock,
         report=report,
         rooms=maps.rooms,
     )
+
+
+def _run_stages(log: Any, ingest_report: Any, cfg: RunConfig, clock: StageClock, source: str) -> RunResult:
+    """The stages after ingestion (``run``)."""
+    return finish_run(log, ingest_report, slam_stages(log, cfg, clock), cfg, clock, source)

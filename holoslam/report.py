@@ -218,13 +218,18 @@ class RunReport:
     # the base frame's name and the planar pose (x m, y m, yaw rad) in it of every frame the log's static
     # transforms fix to it (the laser, cameras): ``holoslam evaluate --frame`` moves the trajectory there
     frames: dict[str, Any] = dataclasses.field(default_factory=dict)
+    session: Any = None  # holoslam.lifelong.summary.SessionSummary: the run as a session of a map store
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON form (report.json)."""
+        """The JSON form (report.json); ``session`` only for a run into a map store."""
         out: dict[str, Any] = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         for k in ("submaps", "solver", "objects", "map", "topology", "holographic", "planning"):
             out[k] = dataclasses.asdict(out[k])
         out["accuracy"] = self.accuracy.to_dict() if self.accuracy is not None else None
+        if self.session is None:
+            del out["session"]
+        else:
+            out["session"] = self.session.to_dict()
         return out
 
     @classmethod
@@ -247,6 +252,7 @@ class RunReport:
             timings_s=dict(d["timings_s"]),
             accuracy=Accuracy.from_dict(acc) if acc else None,
             frames=dict(d.get("frames") or {}),
+            session=_session_from_dict(d.get("session")),
         )
 
     def text(self) -> str:
@@ -279,8 +285,18 @@ class RunReport:
         )
         if self.accuracy is not None:
             lines += _accuracy_text(self.accuracy)
+        if self.session is not None:
+            lines += self.session.text_lines()
         lines.append("  timings (s): " + ", ".join(f"{k} {v:.2f}" for k, v in self.timings_s.items()))
         return "\n".join(lines)
+
+
+def _session_from_dict(d: Mapping[str, Any] | None) -> Any:
+    if not d:
+        return None
+    from holoslam.lifelong.summary import SessionSummary
+
+    return SessionSummary.from_dict(d)
 
 
 def format_run_report(report: RunReport | Mapping[str, Any]) -> str:

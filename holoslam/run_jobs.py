@@ -17,8 +17,8 @@ from holoslam.timing import Progress
 if TYPE_CHECKING:
     from holoslam.config import RunConfig
 
-__all__ = ["run_log_to_folder", "run_config_hash", "run_logs", "run_demo", "DEMO_OUTPUT", "simulate", "plan_to_object",
-           "export_run"]
+__all__ = ["run_log_to_folder", "run_config_hash", "run_logs", "run_session_to_folder", "run_demo", "DEMO_OUTPUT",
+           "simulate", "simulate_days", "plan_to_object", "export_run"]
 
 DEMO_OUTPUT = "holoslam-demo"  # ``holoslam demo``'s output folder, relative to the current folder
 
@@ -71,6 +71,28 @@ def run_log_to_folder(
         "seconds": result.report.timings_s["total"],
         "text": result.report.text(),
     }
+
+
+def run_session_to_folder(
+    log: str | Path, out_dir: str | Path, store: str | Path, config: RunConfig | None = None,
+    progress: Progress | None = None
+) -> dict[str, Any]:
+    """Run one log as a new session of the map store ``store`` (created when absent;
+    ``holoslam.lifelong.session.run_session``) and write its run folder, in the store's world frame when the
+    session was joined. Returns the summary ``run_logs`` returns, with the report's ``session`` object."""
+    from holoslam.io.run_folder import prepare_output_folder, write_run
+    from holoslam.lifelong.session import run_session
+
+    prepare_output_folder(out_dir)
+    done = run_session(log, store, config, progress=progress)
+    result = done.run
+    written = write_run(result, out_dir, pictures=result.config.pictures, results_mcap=result.config.results_mcap,
+                        progress=progress)
+    text = result.report.text() + f"\n  output: {out_dir}"
+    return {"ok": True, "logs": [{"log": str(log), "out_dir": str(out_dir), "files": len(written),
+                                  "anchors": int(len(result.wTa)), "objects": len(result.objects),
+                                  "seconds": result.report.timings_s["total"],
+                                  "session": done.summary.to_dict()}], "text": text}
 
 
 def run_logs(
@@ -166,6 +188,20 @@ def simulate(
     if out.parent and not out.parent.exists():
         raise ConfigError(f"folder {out.parent} does not exist; create it first")
     return simulate_to_file(out, cfg)
+
+
+def simulate_days(output: str | Path, days: int, seed: int = 0, duration_s: float | None = None,
+                  changes: tuple[int, ...] = (5, 10)) -> dict[str, Any]:
+    """``days`` simulated days of the household into the folder ``output`` (``holoslam.sim.days``)."""
+    from holoslam.sim.days import simulate_days as _days
+
+    if not 1 <= days <= 1000:
+        raise ConfigError(f"--days must be 1..1000, got {days}")
+    if len(changes) != 2 or not 0 <= changes[0] <= changes[1] <= 20:
+        raise ConfigError(f"--changes LO HI must satisfy 0 <= LO <= HI <= 20, got {list(changes)}")
+    if duration_s is not None and not duration_s > 0:
+        raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
+    return _days(output, days, seed=seed, duration_s=duration_s, changes=(int(changes[0]), int(changes[1])))
 
 
 def plan_to_object(

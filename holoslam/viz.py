@@ -32,6 +32,7 @@ __all__ = [
     "map_figure",
     "trajectory_figure",
     "draw_rooms",
+    "store_figure",
 ]
 
 PLACE_COLOURS = {"room": "tab:red", "doorway": "tab:green", "crossing": "tab:blue", "dead_end": "tab:purple"}
@@ -374,6 +375,47 @@ def trajectory_figure(
         cov = (covariances or {}).get(name)
         draw_trajectory(ax, T, cov, every=every, colour=colours[i % len(colours)], label=name)
     ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def store_figure(ex: Any, object_ids: tuple[str, ...] = (), title: str | None = None, size_in: float = 8.0
+                 ) -> Figure:
+    """A map store (``holoslam.lifelong.export.StoreExport``): the merged grid, every joined session's trajectory
+    (one colour each), the objects where they are now (gone ones as crosses) and the history of ``object_ids``:
+    their place in each session that saw them, joined in order and labelled with the session."""
+    from matplotlib.figure import Figure
+
+    grid = ex.grid
+    h, w = grid.shape
+    fig = Figure(figsize=(size_in, size_in * h / max(w, 1) + 0.5))
+    ax = fig.add_subplot(1, 1, 1)
+    draw_grid(ax, grid)
+    colours = [f"C{k % 10}" for k in range(len(ex.trajectories))]
+    for c, (sid, (_t, wTb, joined)) in zip(colours, sorted(ex.trajectories.items()), strict=True):
+        if joined:
+            ax.plot(wTb[:, 0], wTb[:, 1], "-", lw=0.6, color=c, alpha=0.7, label=f"session {sid}")
+    for o in ex.objects_now:
+        if o.w_xy is None:
+            continue
+        gone = o.status == "gone"
+        ax.plot(o.w_xy[0], o.w_xy[1], "x" if gone else "o", ms=4, color="tab:red" if gone else "black")
+        ax.annotate(o.object_id, o.w_xy, fontsize=5, xytext=(2, 2), textcoords="offset points")
+    for oid in object_ids:
+        hist = [o for o in ex.history if o.object_id == oid and o.w_xy is not None and o.status != "unplaced"]
+        if not hist:
+            continue
+        xy = np.array([o.w_xy for o in hist])
+        ax.plot(xy[:, 0], xy[:, 1], "-o", color="tab:orange", lw=1.5, ms=5, label=f"{oid} by session")
+        for o in hist:
+            ax.annotate(f"{o.session_id}:{o.status}", o.w_xy, fontsize=6, color="tab:orange", xytext=(3, -8),
+                        textcoords="offset points")
+    x0, x1, y0, y1 = _extent(grid)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.legend(loc="upper right", fontsize=6)
     if title:
         ax.set_title(title)
     fig.tight_layout()

@@ -153,14 +153,19 @@ class SimulatedRun:
     snapshots: tuple[Snapshot, ...]
 
 
-def simulate_household(config: SimConfig = SimConfig()) -> SimulatedRun:
-    """Simulate the reference household run for ``config`` (pure and deterministic for a config)."""
-    from holoslam.sim.route import household_trajectory
+def simulate_household(config: SimConfig = SimConfig(), world: World | None = None,
+                       start_pose: tuple[float, float, float] | None = None, t0_ns: int = T0_NS) -> SimulatedRun:
+    """Simulate the reference household run for ``config`` (pure and deterministic for a config). ``world``:
+    another household (default: the reference household with the config's extras); ``start_pose`` (x, y, yaw
+    in map): where the robot starts (default ``route.START_POSE``); ``t0_ns``: the first stamp (another day)."""
+    from holoslam.sim.route import START_POSE, household_trajectory
     from holoslam.sim.sensors import camera_snapshots, compass, laser_scans, odometry
     from holoslam.sim.world import reference_household
 
-    world = reference_household(config.wall_codes, config.sizeless_labels)
-    traj = household_trajectory(world, config.duration_s, config.odom_rate_hz, config.seed, T0_NS)
+    if world is None:
+        world = reference_household(config.wall_codes, config.sizeless_labels)
+    start = START_POSE if start_pose is None else (float(start_pose[0]), float(start_pose[1]), float(start_pose[2]))
+    traj = household_trajectory(world, config.duration_s, config.odom_rate_hz, config.seed, t0_ns, start)
 
     def rng(stream: int) -> np.random.Generator:
         return np.random.default_rng(np.random.SeedSequence([config.seed, stream]))

@@ -109,8 +109,8 @@ def _view_spot(world: World, fs, obj) -> Station | None:
     return None
 
 
-def plan_stations(world: World) -> list[Station]:
-    """The ordered stations of one tour."""
+def plan_stations(world: World, start: tuple[float, float, float] = START_POSE) -> list[Station]:
+    """The ordered stations of one tour from ``start``."""
     fs = free_space(world, resolution=0.05)
     centres = {r.name: ((r.xmin + r.xmax) / 2, (r.ymin + r.ymax) / 2) for r in world.rooms}
     centres["living_room"] = (3.2, 5.2)
@@ -129,7 +129,7 @@ def plan_stations(world: World) -> list[Station]:
             spots.setdefault(o.room, []).append(s)
     seen: dict[str, int] = {}
     stations: list[Station] = []
-    pos = START_POSE[:2]
+    pos = start[:2]
     for room in _TOUR:
         k = seen.get(room, 0)
         seen[room] = k + 1
@@ -218,12 +218,13 @@ def household_trajectory(
     rate_hz: float = 20.0,
     seed: int = 2,
     t0_ns: int = 1_700_000_000_000_000_000,
+    start: tuple[float, float, float] = START_POSE,
 ) -> Trajectory:
-    """The true trajectory of the tour, looped or cut to ``duration_s`` (None: exactly one tour), sampled
-    at ``rate_hz``.
+    """The true trajectory of the tour from ``start`` (x, y, yaw in map), looped or cut to ``duration_s`` (None:
+    exactly one tour), sampled at ``rate_hz``.
 
     ``seed`` varies the operator's cruising speed per leg (0.3 m/s to ``V_MAX``) and the dwell times."""
-    P, T, t_end = _keyframes(world, seed, duration_s)
+    P, T, t_end = _keyframes(world, seed, duration_s, start)
     if duration_s is None:
         duration_s = t_end
     n = int(math.floor(duration_s * rate_hz)) + 1
@@ -241,7 +242,8 @@ def tour_duration_s(world: World, seed: int = 2) -> float:
     return _keyframes(world, seed, None)[2]
 
 
-def _keyframes(world: World, seed: int, duration_s: float | None) -> tuple[np.ndarray, np.ndarray, float]:
+def _keyframes(world: World, seed: int, duration_s: float | None,
+               start: tuple[float, float, float] = START_POSE) -> tuple[np.ndarray, np.ndarray, float]:
     """Keyframe poses and times of the tour until ``duration_s`` (None: one tour) and the end time."""
     one_tour = duration_s is None
     limit = math.inf if duration_s is None else duration_s
@@ -250,11 +252,11 @@ def _keyframes(world: World, seed: int, duration_s: float | None) -> tuple[np.nd
     clear = fs.clearance
     weights = np.where(clear >= PLAN_CLEARANCE, 1.0 + 6.0 * np.clip(0.7 - clear, 0, None) / 0.4, np.inf)
     weights = np.ascontiguousarray(weights, dtype=np.float32)
-    stations = plan_stations(world)
-    poses: list[np.ndarray] = [np.array([START_POSE])]
+    stations = plan_stations(world, start)
+    poses: list[np.ndarray] = [np.array([start], dtype=np.float64)]
     times: list[np.ndarray] = [np.array([0.0])]
     t = 0.0
-    cur = np.array(START_POSE, dtype=np.float64)
+    cur = np.array(start, dtype=np.float64)
 
     def add(p: np.ndarray, tt: np.ndarray) -> None:
         poses.append(p)

@@ -46,6 +46,7 @@ class ProbGrid:
     origin: tuple[float, float]
     resolution: float
     p_min: float = 0.1
+    known: np.ndarray | None = None  # (rows, cols) bool: cells a scan updated (None: not recorded)
 
     def known_bounds(self) -> tuple[float, float, float, float]:
         """(x0, y0, x1, y1) of the cells above p_min (the explored part)."""
@@ -134,10 +135,11 @@ class GridBuilder:
         p = self.prob
         r, c = np.nonzero(self.known)
         if r.size == 0:
-            return ProbGrid(p.copy(), self.origin, self.res, self.cfg.p_min)
+            return ProbGrid(p.copy(), self.origin, self.res, self.cfg.p_min, self.known.astype(bool))
         pad = 2
         r0, r1 = max(r.min() - pad, 0), min(r.max() + pad + 1, p.shape[0])
         c0, c1 = max(c.min() - pad, 0), min(c.max() + pad + 1, p.shape[1])
         origin = (self.origin[0] + c0 * self.res, self.origin[1] + r0 * self.res)
-        return ProbGrid(np.ascontiguousarray(p[r0:r1, c0:c1]), origin, self.res, self.cfg.p_min)
+        return ProbGrid(np.ascontiguousarray(p[r0:r1, c0:c1]), origin, self.res, self.cfg.p_min,
+                        np.ascontiguousarray(self.known[r0:r1, c0:c1] > 0))
 

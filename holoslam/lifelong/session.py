@@ -1,0 +1,375 @@
+"""``run_session``: a log run as a new session of a map store (``holoslam run LOG --map STORE -o OUT``).
+
+Steps: the run's SLAM stages in the session's own frame (``pipeline.slam_stages``); relocalisation against the
+store (``holoslam.relocalise``: laser and objects, verified); when placed, the object changes
+(``changes.classify``, before the solve: a moved object gets a new placement) and the joint solve of the working
+graph with the session (``joint``); the session's results moved into the world (anchors from the joint solve,
+every pose hung from its anchor, objects at their placements); the maps and the report in the world frame
+(``pipeline.finish_run``, with the report's ``session`` object); the stored submaps the session's cover well
+retired; everything written to the store in one transaction. The first session founds the world (its own frame);
+a session that cannot be placed is stored unjoined, in its own frame, and its run folder stays in that frame."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from holoslam import geometry as g
+from holoslam.lifelong.changes import ChangeConfig, Located, classify, to_world, view_directions
+from holoslam.lifelong.summary import ObjectChange, SessionSummary
+from holoslam.relocalise import RelocaliseConfig, fit_se2, query_points
+from holoslam.store.records import (
+    NewSubmap,
+    ObjectState,
+    ObjectStatus,
+    SessionUpdate,
+    StoredTrajectory,
+    new_ref,
+)
+
+__all__ = ["LifelongConfig", "SessionRun", "run_session", "run_session_data", "place_session"]
+
+
+@dataclass(frozen=True, slots=True)
+class LifelongConfig:
+    relocalise: RelocaliseConfig = field(default_factory=RelocaliseConfig)
+    changes: ChangeConfig = field(default_factory=ChangeConfig)
+    joint_method: str = "batch"  # the joint solve: batch (LM) or isam2 (benchmarks/bench_lifelong.py measures both)
+    # a stored submap leaves the working graph when the new session's submaps know this fraction of its known
+    # cells (it stays in the store's history); the working graph then holds about one visit of each place
+    retire_cover: float = 0.9
+
+
+@dataclass(frozen=True, eq=False)
+class SessionRun:
+    """A session's run (in the world frame when joined), its summary, and the update written to the store."""
+
+    run: Any  # RunResult
+    summary: SessionSummary
+    relocalisation: Any  # Relocalisation | None (None for the founding session)
+    joint: Any  # JointSolution | None
+    update: SessionUpdate
+    joint_graph: Any = None  # the JointGraph solved (benchmarks re-solve it by another method)
+    stages: Any = None  # the SLAM stages in the session's own frame (pipeline.SlamStages), before the join
+
+
+@dataclass(frozen=True, eq=False)
+class _Placed:
+    """The session in the world: anchors, covariances, wTs, object states, factors/sightings for the store."""
+
+    wTa: np.ndarray
+    cov_wTa: np.ndarray | None
+    wTs: np.ndarray
+    cov_wTs: np.ndarray | None
+    objects: tuple[ObjectState, ...]
+    placement: dict[str, str]
+    stored_updates: dict[int, tuple[np.ndarray, np.ndarray | None]]
+    retire: tuple[int, ...]
+    cross: tuple
+    joint: Any
+    graph: Any = None
+
+
+def run_session(log_path: str | Path, store_path: str | Path, config: Any = None,
+                lifelong: LifelongConfig | None = None, progress: Any = None, store_progress: Any = None
+                ) -> SessionRun:
+    """Run a log as a new session of the store at ``store_path`` (created when absent); see the module
+    docstring. Returns the run (``RunResult``, report with ``session``), not writing a run folder."""
+    from holoslam.config import RunConfig
+    from holoslam.io.digest import file_sha256
+    from holoslam.io.mcap import read_log
+    from holoslam.store.db import MapStore
+    from holoslam.timing import StageClock
+
+    cfg = config or RunConfig()
+    clock = StageClock(progress)
+    with MapStore.open(store_path):  # a bad store is a one-line error before the run, not after it
+        pass
+    with clock.stage("ingest"):
+        log, ingest_report = read_log(log_path, mapping=cfg.mapping, require=["odometry", "scan"])
+        sha = file_sha256(log_path)
+    return run_session_data(log, ingest_report, store_path, Path(log_path).name, sha, cfg, lifelong, clock,
+                            store_progress)
+
+
+def run_session_data(log: Any, ingest_report: Any, store_path: str | Path, log_name: str, log_sha256: str,
+                     config: Any = None, lifelong: LifelongConfig | None = None, clock: Any = None,
+                     store_progress: Any = None) -> SessionRun:
+    """``run_session`` on a log already in memory (``holoslam.io.mcap.read_log``'s records), named
+    ``log_name`` with content hash ``log_sha256`` in the store (e.g. a window of a longer log)."""
+    from holoslam.config import RunConfig
+    from holoslam.pipeline import finish_run, slam_stages
+    from holoslam.store.db import MapStore
+    from holoslam.timing import StageClock
+
+    cfg = config or RunConfig()
+    lc = lifelong or LifelongConfig()
+    clock = clock or StageClock(None)
+    st = slam_stages(log, cfg, clock)
+    with MapStore.open(store_path) as store:
+        with clock.stage("session (relocalise, join)"):
+            placed, reloc, summary = place_session(store, st, lc)
+            world = _in_world(st, placed, log)
+        run = finish_run(log, ingest_report, world, cfg, clock, str(log.source), session=summary)
+        update = _update(log_name, log_sha256, log, st, placed, reloc, summary)
+        store.add_session(update, store_progress)
+    return SessionRun(run, summary, reloc, placed.joint, update, placed.graph, st)
+
+
+def _session_objects(st: Any) -> dict[str, tuple[np.ndarray, np.ndarray, Any]]:
+    return {o.object_id: (np.asarray(o.w_position[:2], np.float64),
+                          np.nan_to_num(np.asarray(o.cov_w_position)[:2, :2], nan=1e-2) + np.eye(2) * 1e-8, o)
+            for o in st.objects}
+
+
+def place_session(store: Any, st: Any, lc: LifelongConfig) -> tuple[_Placed, Any, SessionSummary]:
+    """Relocalise the session and join it (module docstring); nothing written yet."""
+    from holoslam.relocalise import relocalise
+
+    sessions = store.sessions()
+    sid = (max((s.id for s in sessions), default=0)) + 1
+    sTa = np.asarray(st.sol.wTa, np.float64)
+    sobj = _session_objects(st)
+    if not any(s.joined for s in sessions):
+        placed = _founding(st, sTa, sobj)
+        return placed, None, _summary(store, sid, placed, None, founded=True, n_seen=0)
+    stored = store.submaps(working=True, grids=True)
+    latest = store.latest_objects()
+    world_obj = {k: v.w_xy for k, v in latest.items() if v.status != ObjectStatus.GONE and v.w_xy is not None}
+    reloc = relocalise(st.fe.submaps, sTa, {k: v[0] for k, v in sobj.items()}, stored, world_obj, lc.relocalise)
+    if not reloc.placed:
+        placed = _unjoined(st, sTa, sobj)
+        return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=0)
+    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc)
+    n_seen = sum(o.status == ObjectStatus.SEEN for o in placed.objects)
+    return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=n_seen)
+
+
+def _founding(st: Any, sTa: np.ndarray, sobj: dict) -> _Placed:
+    cov = None if st.sol.cov_wTa is None else np.asarray(st.sol.cov_wTa)
+    objs = tuple(ObjectState(k, o.object_type, o.payload, ObjectStatus.NEW, xy, float(o.w_position[2]), c,
+                             int(o.sightings), f"{k}#1") for k, (xy, c, o) in sobj.items())
+    return _Placed(sTa, cov, np.zeros(3), None, objs, {k: f"{k}#1" for k in sobj}, {}, (), (), None)
+
+
+def _unjoined(st: Any, sTa: np.ndarray, sobj: dict) -> _Placed:
+    cov = None if st.sol.cov_wTa is None else np.asarray(st.sol.cov_wTa)
+    objs = tuple(ObjectState(k, o.object_type, o.payload, ObjectStatus.UNPLACED, xy, float(o.w_position[2]), c,
+                             int(o.sightings), "") for k, (xy, c, o) in sobj.items())
+    return _Placed(sTa, cov, np.zeros(3), None, objs, {}, {}, (), (), None)
+
+
+def _robot_world(st: Any, wTs: np.ndarray) -> np.ndarray:
+    return g.compose(np.broadcast_to(wTs, st.traj.wTb.shape), st.traj.wTb)[:, :2]
+
+
+def _located(st: Any, sobj: dict, wTs: np.ndarray, cov_wTs: np.ndarray) -> dict[str, Located]:
+    """The session's objects in the world under the relocalisation's wTs, with the side each was seen from."""
+    w = {k: to_world(xy, c, wTs, cov_wTs) for k, (xy, c, _o) in sobj.items()}
+    obs = st.seen.observations
+    views = view_directions(np.array([o.stamp_ns for o in obs], np.int64), tuple(o.object_id for o in obs),
+                            st.traj.stamps_ns, _robot_world(st, wTs), {k: v[0] for k, v in w.items()})
+    return {k: Located(k, w[k][0], w[k][1], float(o.w_position[2]), int(o.sightings), views.get(k),
+                       o.object_type, o.payload) for k, (_xy, _c, o) in sobj.items()}
+
+
+def _placements(statuses: dict[str, str], latest: dict[str, ObjectState], all_placements: set[str]
+                ) -> dict[str, str]:
+    out = {}
+    for oid, s in statuses.items():
+        if s == ObjectStatus.SEEN and latest[oid].placement:
+            out[oid] = latest[oid].placement
+        elif s in (ObjectStatus.MOVED, ObjectStatus.NEW):
+            used = [p.rsplit("#", 1)[1] for p in all_placements if p.rsplit("#", 1)[0] == oid]
+            out[oid] = f"{oid}#{1 + max((int(u) for u in used if u.isdigit()), default=0)}"
+    return out
+
+
+def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, latest: dict, reloc: Any,
+          lc: LifelongConfig) -> _Placed:
+    """The joined session: object changes, the joint solve, the session transform it implies, retirements."""
+    from holoslam.lifelong.joint import joint_problem, solve_joint
+    from holoslam.lifelong.merge import merge_submaps
+
+    h = reloc.hypothesis
+    ids = np.array([s.id for s in stored], np.int64)
+    merged = merge_submaps(np.array([s.wTa for s in stored]), [(s.prob, s.known, s.origin, s.resolution)
+                                                                for s in stored], [s.session_id for s in stored])
+    located = _located(st, sobj, h.wTs, h.cov_wTs)
+    statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), merged, lc.changes)
+    sightings = store.sightings(ids)
+    # every placement the store ever gave (retired submaps' sightings included): a new one never reuses a name
+    ever = {o.placement for o in store.object_history() if o.placement}
+    placement = _placements(statuses, latest, set(sightings.placement) | ever)
+    lm = _kept_landmarks(st)
+    for oid in set(lm.landmark) - set(placement):  # a landmark without an object record: a fresh placement
+        placement[oid] = f"{oid}#new{len(placement)}"
+    init = {p: latest[k].w_xy for k, p in placement.items() if k in latest and latest[k].w_xy is not None
+            and statuses.get(k) == ObjectStatus.SEEN}
+    init.update({placement[k]: v.w_xy for k, v in located.items() if placement[k] not in init})
+    jg = joint_problem(stored, store.factors(ids), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
+                       reloc.matches, init)
+    js = solve_joint(jg, lc.joint_method)
+    wTs = fit_se2(sTa[:, :2], js.new_wTa[:, :2]) if len(sTa) >= 2 else g.compose(js.new_wTa[0], g.inverse(sTa[0]))
+    objs = _object_states(statuses, located, latest, placement, js)
+    retire = _retire(stored, js, st, lc.retire_cover)
+    updates = {int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
+               for n, k in enumerate(ids.tolist())}
+    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, reloc.matches, js, jg)
+
+
+def _kept_landmarks(st: Any) -> Any:
+    """The session's landmark sightings its own solve kept (the rejected ones were misreads or outliers)."""
+    from holoslam.graph.problem import MeasurementFamily
+
+    lm = st.fe.problem.landmarks
+    rejected = {r.index for r in st.sol.rejected if r.family is MeasurementFamily.LANDMARK}
+    keep = np.array([k not in rejected for k in range(len(lm))], bool)
+    return lm.select(keep) if len(lm) else lm
+
+
+def _object_states(statuses: dict[str, str], located: dict[str, Located], latest: dict[str, ObjectState],
+                   placement: dict[str, str], js: Any) -> tuple[ObjectState, ...]:
+    out = []
+    for oid, s in sorted(statuses.items()):
+        if s == ObjectStatus.GONE:
+            old = latest[oid]
+            out.append(ObjectState(oid, old.kind, old.payload, s, old.w_xy, old.z, old.cov_w_xy, 0, old.placement,
+                                   view=old.view))
+            continue
+        loc = located[oid]
+        xy, cov = js.placements.get(placement[oid], (loc.w_xy, loc.cov_w_xy))
+        cov = loc.cov_w_xy if cov is None else cov
+        d = cd = None
+        if s == ObjectStatus.MOVED:
+            old = latest[oid]
+            oxy, ocov = js.placements.get(old.placement, (old.w_xy, old.cov_w_xy))
+            ocov = old.cov_w_xy if ocov is None else ocov
+            d, cd = np.asarray(xy) - np.asarray(oxy), np.asarray(cov) + np.asarray(ocov)
+        out.append(ObjectState(oid, loc.kind, loc.payload, s, np.asarray(xy), loc.z, np.asarray(cov), loc.sightings,
+                               placement[oid], d, cd, loc.view))
+    return tuple(out)
+
+
+def _retire(stored: tuple, js: Any, st: Any, cover: float) -> tuple[int, ...]:
+    """Stored submaps whose known cells the new session's submaps know for at least ``cover`` of them."""
+    from holoslam.lifelong.merge import merge_submaps
+
+    subs = [sm for sm in st.fe.submaps if sm.grid is not None and sm.grid.known is not None]
+    if not subs or not cover < 1.0 + 1e-9:
+        return ()
+    new = merge_submaps(js.new_wTa[[sm.index for sm in subs]],
+                        [(sm.grid.prob, sm.grid.known, sm.grid.origin, sm.grid.resolution) for sm in subs],
+                        [0] * len(subs), margin_m=0.0)
+    out = []
+    for n, s in enumerate(stored):
+        r, c = np.nonzero(s.known)
+        if r.size == 0:
+            continue
+        a = np.column_stack([s.origin[0] + (c + 0.5) * s.resolution, s.origin[1] + (r + 0.5) * s.resolution])
+        w = g.transform_points(js.stored_wTa[n], a)
+        cc = np.floor((w[:, 0] - new.origin[0]) / new.resolution).astype(np.int64)
+        rr = np.floor((w[:, 1] - new.origin[1]) / new.resolution).astype(np.int64)
+        H, W = new.known.shape
+        inside = (rr >= 0) & (rr < H) & (cc >= 0) & (cc < W)
+        hit = np.zeros(len(w), bool)
+        hit[inside] = new.known[rr[inside], cc[inside]]
+        if hit.mean() >= cover:
+            out.append(int(s.id))
+    return tuple(out)
+
+
+def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen: int) -> SessionSummary:
+    changes = []
+    for o in p.objects:
+        if o.status in (ObjectStatus.MOVED, ObjectStatus.GONE, ObjectStatus.NEW) and o.w_xy is not None:
+            d = None if o.displacement is None else [float(v) for v in o.displacement]
+            changes.append(ObjectChange(o.object_id, o.status, float(o.w_xy[0]), float(o.w_xy[1]),
+                                        None if d is None else float(np.hypot(d[0], d[1])), d,
+                                        None if o.cov_displacement is None else np.asarray(o.cov_displacement).tolist()))
+    joined = founded or (reloc is not None and reloc.placed)
+    counts = store.counts()
+    js = p.joint
+    joint = {} if js is None else {"method": js.method, "seconds": round(js.seconds, 4), "iterations": js.iterations,
+                                   "anchors": int(len(js.stored_wTa) + len(js.new_wTa)), "rejected": js.rejected}
+    return SessionSummary(
+        store=str(store.path), session_id=sid, joined=joined, joined_by=("none" if reloc is None else reloc.joined_by),
+        founded=founded, relocalisation_s=0.0 if reloc is None else round(reloc.seconds, 4),
+        why="the first session: its frame is the world" if reloc is None else reloc.why,
+        wTs=[float(v) for v in p.wTs] if joined else None,
+        laser_matches=0 if reloc is None else len(reloc.matches),
+        laser_searches=0 if reloc is None else reloc.searches, objects_seen=n_seen, changes=changes, joint=joint,
+        working_submaps=counts["working_submaps"] - len(p.retire) + (len(p.wTa) if joined else 0),
+        retired_submaps=counts["submaps"] - counts["working_submaps"] + len(p.retire),
+        relocalisation_cpu_s=0.0 if reloc is None else round(reloc.cpu_seconds, 4))
+
+
+def _rehang(stamps_ns: np.ndarray, poses: np.ndarray, anchor_stamps_ns: np.ndarray, sTa: np.ndarray,
+            wTa: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poses of the session frame hung from their anchors (the latest at or before each stamp): (world poses,
+    anchor index, pose in the anchor frame)."""
+    k = np.clip(np.searchsorted(anchor_stamps_ns, stamps_ns, side="right") - 1, 0, len(sTa) - 1)
+    aTb = g.between(sTa[k], poses)
+    return g.compose(wTa[k], aTb), k, aTb
+
+
+def _in_world(st: Any, p: _Placed, log: Any) -> Any:
+    """The SLAM stages' results moved into the world: anchors as placed, trajectory and keyframes hung from
+    them, dead reckoning and other landmarks by wTs, objects at their placements."""
+    from holoslam.pipeline import SlamStages
+
+    sTa = np.asarray(st.sol.wTa, np.float64)
+    anchors = np.asarray(st.fe.anchor_stamps_ns, np.int64)
+    wTb, _k, _a = _rehang(st.traj.stamps_ns, st.traj.wTb, anchors, sTa, p.wTa)
+    wTk, _k2, _a2 = _rehang(st.traj.key_stamps_ns, st.traj.wTk, anchors, sTa, p.wTa)
+    dr = g.compose(np.broadcast_to(p.wTs, st.traj.dead_reckoning_wTb.shape), st.traj.dead_reckoning_wTb)
+    traj = dataclasses.replace(st.traj, wTb=wTb, wTk=wTk, dead_reckoning_wTb=dr)
+    R = g.rot2(float(p.wTs[2]))
+    wl = g.transform_points(p.wTs, st.sol.w_landmarks.reshape(-1, 2)) if len(st.sol.w_landmarks) else st.sol.w_landmarks
+    cl = None if st.sol.cov_w_landmarks is None else R @ st.sol.cov_w_landmarks @ R.T
+    sol = dataclasses.replace(st.sol, wTa=p.wTa, cov_wTa=p.cov_wTa if p.cov_wTa is not None else st.sol.cov_wTa,
+                              w_landmarks=wl, cov_w_landmarks=cl)
+    by_id = {o.object_id: o for o in p.objects}
+    objects = []
+    for o in st.objects:
+        s = by_id.get(o.object_id)
+        if s is None or s.w_xy is None or s.status == ObjectStatus.UNPLACED:
+            objects.append(o)
+            continue
+        cov = np.array(o.cov_w_position, np.float64)
+        cov[:2, :2] = s.cov_w_xy
+        objects.append(dataclasses.replace(o, w_position=np.array([s.w_xy[0], s.w_xy[1], o.w_position[2]]),
+                                           cov_w_position=cov))
+    return SlamStages(st.fe, sol, st.seen, st.revisits, traj, tuple(objects))
+
+
+def _update(log_name: str, sha: str, log: Any, st: Any, p: _Placed, reloc: Any, summary: SessionSummary
+            ) -> SessionUpdate:
+    """The store update of the session (one transaction)."""
+    sTa = np.asarray(st.sol.wTa, np.float64)
+    anchors = np.asarray(st.fe.anchor_stamps_ns, np.int64)
+    subs = tuple(NewSubmap(k, int(sm.anchor_stamp_ns), p.wTa[k], None if p.cov_wTa is None else p.cov_wTa[k], sTa[k],
+                           sm.grid.prob, sm.grid.origin, sm.grid.resolution, query_points(sm), sm.grid.known)
+                 for k, sm in enumerate(st.fe.submaps))
+    rel = st.fe.problem.relative
+    cross = p.cross
+    fi = np.concatenate([[new_ref(i) for i in rel.i.tolist()], [m.old for m in cross]]).astype(np.int64)
+    fj = np.concatenate([[new_ref(j) for j in rel.j.tolist()], [new_ref(m.new) for m in cross]]).astype(np.int64)
+    fT = np.vstack([rel.iTj, np.array([m.oTn for m in cross]).reshape(-1, 3)])
+    fC = np.vstack([rel.cov_iTj, np.array([m.cov_oTn for m in cross]).reshape(-1, 3, 3)])
+    kinds = tuple(str(k) for k in rel.kind) + ("cross",) * len(cross)
+    lm = _kept_landmarks(st) if p.placement else st.fe.problem.landmarks.select(np.zeros(0, np.int64))
+    lm_keep = [k for k, o in enumerate(lm.landmark) if o in p.placement]
+    lm = lm.select(np.array(lm_keep, np.int64))
+    _w, k, aTb = _rehang(st.traj.stamps_ns, st.traj.wTb, anchors, sTa, p.wTa)
+    traj = StoredTrajectory(st.traj.stamps_ns, k.astype(np.int32), aTb, st.traj.wTb)
+    return SessionUpdate(
+        log_name, sha, int(st.traj.stamps_ns[0]), int(st.traj.stamps_ns[-1]), summary.joined, summary.joined_by,
+        p.wTs, p.cov_wTs, summary.relocalisation_s, summary.to_dict(), subs, fi, fj, fT, fC, kinds,
+        np.array([new_ref(i) for i in lm.i.tolist()], np.int64), tuple(lm.landmark),
+        tuple(p.placement[o] for o in lm.landmark), lm.a_position, lm.cov_a_position, np.asarray(lm.z),
+        p.objects, traj, p.stored_updates, p.retire, expected_id=summary.session_id)

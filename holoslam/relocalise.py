@@ -1,0 +1,381 @@
+"""Global relocalisation of a new session against a map store: where the session's own frame s lies in the
+store's world w (``wTs``), from an unknown start, or the answer that it cannot be placed.
+
+Two independent sources of hypotheses, each verified before a session is joined:
+
+- **Objects** (known data association): an object id the session located that the store knows is a
+  correspondence between its position in s and its latest position in w. Two objects at least
+  ``min_pair_separation_m`` apart fix an SE(2) hypothesis; every pair is tried (RANSAC over pairs, exhaustive:
+  a session sees tens of objects), the hypothesis with most objects within ``object_inlier_m`` is refined by
+  least squares over them. It is verified when ``min_object_inliers`` objects agree (two points always fit
+  an SE(2) exactly; the third is the first check, and a moved object is simply an outlier).
+- **Laser**: the scan at every session submap's anchor (``query_points``) is searched in every working submap of
+  the store by a global branch-and-bound over the whole stored submap and every heading (``global_match``: the one function to swap
+  for another global search), refined by the continuous matcher (its covariance). A match of session submap i
+  in stored submap j gives wTs = wTa_j ∘ ajTai ∘ (sTa_i)^-1. Matches are grouped by pairwise consistency
+  (``consistent_xy_m``, ``consistent_deg``); the largest group is verified when it holds ``min_consistent``
+  matches (Cartographer's own relocalisation test requires at least 3 cross-trajectory constraints) from at
+  least ``min_session_submaps`` session submaps and no inconsistent group comes close to it
+  (``runner_up_ratio``: a symmetric home or two alike rooms give two groups).
+
+No optimiser here: the joint solve (``holoslam.lifelong``) refines the verified hypothesis.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+
+from holoslam import geometry as g
+
+__all__ = ["RelocaliseConfig", "LaserMatch", "Hypothesis", "Relocalisation", "global_match", "laser_matches",
+           "laser_hypothesis", "object_hypothesis", "relocalise", "fit_se2"]
+
+
+@dataclass(frozen=True, slots=True)
+class RelocaliseConfig:
+    """Relocalisation settings (module docstring)."""
+
+    # mean probability of the points (0.1-0.9) a global match must reach: Cartographer's
+    # global_localization_min_score is 0.6; a session submap overlaps a stored one only in part, and its points
+    # off the stored submap's explored area score 0.1 (measured on the simulated household: true matches of
+    # well-overlapping submaps score 0.55-0.75, a wrong best-of-everything 0.35-0.5)
+    min_score: float = 0.55
+    # m / deg: two matches agree on the session's transform within these. A refined match is good to a cell or
+    # two (0.05 m grids) at the matched submap; a 1 deg error moves a point 10 m from the anchor by 0.17 m, so
+    # 0.3 m / 3 deg accepts the matches of one place and refuses those of another (a room 1 m over is 3x out)
+    consistent_xy_m: float = 0.3
+    consistent_deg: float = 3.0
+    min_consistent: int = 3  # Cartographer's relocalisation test: at least 3 cross-trajectory constraints
+    min_session_submaps: int = 2  # the consistent matches come from this many session submaps at least
+    runner_up_ratio: float = 0.5  # the best inconsistent group may hold at most this fraction of the best's size
+    # the laser search stops after a session submap once a verified group holds this many matches (twice the
+    # minimum: a margin over the runner-up test); 0 searches every pair
+    enough_consistent: int = 6
+    # once this many matches agree, a session submap is searched only in the stored submaps near where they put it
+    # (each search still global); a single match guides nothing (one wrong match would steer the search)
+    guide_support: int = 2
+    guide_radius_m: float = 8.0  # m: a submap reaches a few metres (household rooms, the real logs' corridors)
+    # searches at most (session submaps x stored submaps); a long session against a large store is cut off here
+    # and, without a verified group by then, stays unjoined (the report says how many were searched)
+    max_searches: int = 600
+    # m: the session submap's anchor is searched over the stored grid and this far beyond it (a robot starts a
+    # submap inside what it sees; overlapping submaps hold each other's anchors or nearly)
+    window_margin_m: float = 1.0
+    # m: the branch and bound uses the points within this range of the session submap's anchor: the angular step
+    # is the rotation that moves the farthest point by one cell, so a 30 m laser's far points (the real logs)
+    # make 3,700 headings where 8 m (the household laser's range) make 1,000; the refinement uses every point
+    search_max_range_m: float = 8.0
+    search_voxel_m: float = 0.1  # m: the session submap's points thinned for the branch and bound (2 cells)
+    search_min_points: int = 150  # points kept at least by that thinning
+    min_query_points: int = 50  # a session submap whose anchor scan has fewer returns is not searched
+    depth: int = 7  # the branch and bound's precomputed levels (Cartographer's 7)
+    object_inlier_m: float = 0.3  # m: an object this close to its stored place agrees (the "moved" threshold)
+    min_object_inliers: int = 3  # objects agreeing with an object hypothesis for it to be verified
+    min_pair_separation_m: float = 1.0  # m: two objects nearer fix the heading poorly (5 cm in 1 m = 3 deg)
+    # sigmas of the hypothesis's covariance floor (m, m, rad): one grid cell and the consistency's resolution
+    floor_sigmas: tuple[float, float, float] = (0.05, 0.05, math.radians(0.5))
+
+
+@dataclass(frozen=True, eq=False)
+class LaserMatch:
+    """Session submap ``new`` (index) found in stored submap ``old`` (row id): ``oTn`` the new anchor in the old
+    anchor's frame, its covariance, score, and the session transform it implies."""
+
+    new: int
+    old: int
+    oTn: np.ndarray
+    cov_oTn: np.ndarray
+    score: float
+    wTs: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Hypothesis:
+    """A verified (or not) session transform: ``wTs``, its covariance, the support (matches or objects)."""
+
+    wTs: np.ndarray
+    cov_wTs: np.ndarray
+    support: int
+    verified: bool
+    why: str
+    members: tuple = ()  # LaserMatch (laser) or object ids (objects) that agree
+
+
+@dataclass(frozen=True, eq=False)
+class Relocalisation:
+    """The outcome: ``joined_by`` laser / objects / both / none, the chosen hypothesis (None: not placed),
+    both sources' hypotheses, the consistent laser matches (cross-session factors), timings and the reason."""
+
+    joined_by: str
+    hypothesis: Hypothesis | None
+    laser: Hypothesis | None
+    objects: Hypothesis | None
+    matches: tuple[LaserMatch, ...]
+    searches: int
+    seconds: float
+    why: str
+    all_matches: tuple[LaserMatch, ...] = field(default_factory=tuple)
+    cpu_seconds: float = 0.0  # the process's CPU time (a shared machine's wall time reads high)
+
+    @property
+    def placed(self) -> bool:
+        return self.hypothesis is not None
+
+
+def fit_se2(s_xy: np.ndarray, w_xy: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """Least-squares wTs with w = R s + t over point pairs (weighted Kabsch/Umeyama in 2D, no scale)."""
+    s = np.asarray(s_xy, np.float64).reshape(-1, 2)
+    w = np.asarray(w_xy, np.float64).reshape(-1, 2)
+    wt = np.ones(len(s)) if weights is None else np.asarray(weights, np.float64)
+    wt = wt / wt.sum()
+    ms, mw = wt @ s, wt @ w
+    a, b = s - ms, w - mw
+    c = float(np.sum(wt * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1])))
+    d = float(np.sum(wt * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])))
+    th = math.atan2(d, c)
+    t = mw - g.rot2(th) @ ms
+    return np.array([t[0], t[1], g.wrap(th)])
+
+
+def _spread_cov(wTs: np.ndarray, members: np.ndarray, cfg: RelocaliseConfig) -> np.ndarray:
+    """The hypothesis's covariance: the members' spread about it (body frame) over their number, plus the floor."""
+    d = g.between(np.broadcast_to(wTs, members.shape), members).reshape(-1, 3)
+    d[:, 2] = g.wrap(d[:, 2])
+    n = max(len(d), 1)
+    spread = (d.T @ d) / n / n if len(d) > 1 else np.zeros((3, 3))
+    return spread + np.diag(np.square(cfg.floor_sigmas))
+
+
+# ---------------------------------------------------------------------------------------------- objects
+
+
+def object_hypothesis(session_xy: dict[str, np.ndarray], world_xy: dict[str, np.ndarray],
+                      cfg: RelocaliseConfig = RelocaliseConfig()) -> Hypothesis | None:
+    """The session transform from objects known to both (module docstring); None with fewer than two usable."""
+    common = sorted(set(session_xy) & set(world_xy))
+    if len(common) < 2:
+        return None
+    S = np.array([session_xy[k] for k in common], np.float64)
+    W = np.array([world_xy[k] for k in common], np.float64)
+    best: tuple[int, float, np.ndarray] | None = None
+    for a, b in combinations(range(len(common)), 2):
+        if np.hypot(*(S[a] - S[b])) < cfg.min_pair_separation_m or np.hypot(*(W[a] - W[b])) < cfg.min_pair_separation_m:
+            continue
+        T = fit_se2(S[[a, b]], W[[a, b]])
+        r = np.hypot(*(g.transform_points(T, S) - W).T)
+        n, cost = int(np.sum(r < cfg.object_inlier_m)), float(np.sum(np.minimum(r, cfg.object_inlier_m)))
+        if best is None or (n, -cost) > (best[0], -best[1]):
+            best = (n, cost, T)
+    if best is None:
+        return None
+    T = best[2]
+    for _ in range(3):  # refit over the inliers until they settle
+        r = np.hypot(*(g.transform_points(T, S) - W).T)
+        inl = r < cfg.object_inlier_m
+        if inl.sum() < 2:
+            break
+        T = fit_se2(S[inl], W[inl])
+    r = np.hypot(*(g.transform_points(T, S) - W).T)
+    inl = r < cfg.object_inlier_m
+    n = int(inl.sum())
+    # covariance: the residuals' spread over the inliers, propagated as a translation sigma and, over the
+    # inliers' extent, a heading sigma
+    sig = max(float(np.sqrt(np.mean(r[inl] ** 2))) if n else cfg.object_inlier_m, cfg.floor_sigmas[0])
+    extent = max(float(np.max(np.hypot(*(S[inl] - S[inl].mean(0)).T))) if n else 1.0, 0.5)
+    cov = np.diag([sig**2 / max(n, 1), sig**2 / max(n, 1), (sig / extent) ** 2 / max(n - 1, 1)])
+    ok = n >= cfg.min_object_inliers
+    why = (f"{n} of {len(common)} objects known to the store agree within {cfg.object_inlier_m} m" +
+           ("" if ok else f" (needs {cfg.min_object_inliers})"))
+    return Hypothesis(T, cov, n, ok, why, tuple(k for k, i in zip(common, inl, strict=True) if i))
+
+
+# ---------------------------------------------------------------------------------------------- laser
+
+
+def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
+    """The pose of a session submap (its ``points`` (M, 2) in its anchor frame) in a stored submap (``prob``,
+    ``origin``, ``resolution`` in the stored anchor's frame), searched over the whole stored submap and every
+    heading: branch and bound on points thinned to ``search_voxel_m`` (``holoslam.submaps.bnb``), refined by
+    the continuous matcher on every point. Returns (oTn (3,), cov (3, 3), score) or None. The one place that
+    calls the global search: another global search (a dedicated one over whole maps) replaces this body."""
+    from holoslam.submaps import bnb
+    from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
+    from holoslam.submaps.scanmatch import MatchConfig, match_scan
+
+    prob, origin, res = stored.prob, stored.origin, float(stored.resolution)
+    if pre is None:
+        pre = bnb.precompute(prob, cfg.depth, origin=origin, res=res)
+    h, w = prob.shape
+    half = np.array([w * res / 2.0, h * res / 2.0])
+    centre = np.array(origin) + half
+    pts = np.asarray(points, np.float64)
+    near = pts[np.hypot(pts[:, 0], pts[:, 1]) <= cfg.search_max_range_m]
+    pts = adaptive_voxel_filter(near if len(near) >= cfg.search_min_points else pts,
+                                ScanFilterConfig(cfg.search_voxel_m, cfg.search_min_points))
+    win = (float(half[0]) + cfg.window_margin_m, float(half[1]) + cfg.window_margin_m)
+    hit = bnb.search(pre, pts, np.array([centre[0], centre[1], 0.0]), win, math.pi, cfg.min_score)
+    if hit is None:
+        return None
+    refine = MatchConfig(linear_window=0.5, angular_window_deg=3.0, translation_delta_weight=1e3,
+                         rotation_delta_weight=1e3, min_score=0.0)
+    ref = match_scan(prob, origin, res, np.asarray(points, np.float64), hit.aTb, refine)
+    if ref.score < cfg.min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * res:
+        return None
+    return ref.aTb, ref.cov_aTb, float(ref.score)
+
+
+def query_points(submap) -> np.ndarray:
+    """What a session submap is searched with: the scan taken at its anchor (its first keyframe's points, in the
+    anchor frame), as a loop closure searches one scan. A scan sees from one place what a stored submap of that
+    place holds; the submap's own points reach beyond any one stored submap's explored area, and on the real logs
+    (30 m lasers, partial overlaps) those points scoring 0.1 kept every match under the score. A record without
+    scans (a stored submap: ``points`` is its anchor scan) gives its ``points``."""
+    scans = getattr(submap, "scan_points", None)
+    if scans:
+        return g.transform_points(np.asarray(submap.aTb, np.float64).reshape(-1, 3)[0], np.asarray(scans[0], float))
+    return np.asarray(submap.points, np.float64).reshape(-1, 2)
+
+
+def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
+                  cfg: RelocaliseConfig = RelocaliseConfig(), guide: Hypothesis | None = None
+                  ) -> tuple[list[LaserMatch], int]:
+    """Every session submap (``query_points``: its anchor scan; the fullest first) against every stored submap (``StoredSubmap`` with
+    grids): the matches above ``min_score`` and the number of searches. The search stops early once the matches
+    hold a verified group of ``enough_consistent`` (``laser_hypothesis``). ``guide``: a hypothesis (the objects')
+    that chooses where to search from the start (``_candidates``)."""
+    from holoslam.submaps import bnb
+
+    out: list[LaserMatch] = []
+    searches = 0
+    pre: dict[int, object] = {}
+    queries = [query_points(sm) for sm in session_submaps]
+    order = sorted(range(len(session_submaps)), key=lambda k: -len(queries[k]))
+    for k in order:
+        if len(queries[k]) < cfg.min_query_points:
+            continue
+        for st in _candidates(stored_submaps, guide, session_sTa[k], cfg):
+            if searches >= cfg.max_searches:
+                break
+            if st.id not in pre:
+                pre[st.id] = bnb.precompute(st.prob, cfg.depth, origin=st.origin, res=st.resolution)
+            searches += 1
+            m = global_match(st, queries[k], cfg, pre[st.id])
+            if m is None:
+                continue
+            oTn, cov, score = m
+            wTs = g.compose(g.compose(st.wTa, oTn), g.inverse(session_sTa[k]))
+            out.append(LaserMatch(k, st.id, oTn, cov, score, wTs))
+        h = laser_hypothesis(out, cfg)
+        if cfg.enough_consistent and h is not None and h.verified and h.support >= cfg.enough_consistent:
+            break
+        if h is not None and h.support >= cfg.guide_support:
+            guide = h
+    return out, searches
+
+
+def _candidates(stored_submaps, guide: Hypothesis | None, sTa: np.ndarray, cfg: RelocaliseConfig) -> list:
+    """The stored submaps a session submap is searched in: all of them, or, once ``guide_support`` matches agree
+    on a transform, those whose anchor lies within ``guide_radius_m`` of where it puts the session submap, nearest
+    first. Each search is still global (whole submap, every heading): the guide only chooses where to look."""
+    if guide is None:
+        return list(stored_submaps)
+    p = g.compose(guide.wTs, sTa)[:2]
+    d = np.array([np.hypot(*(np.asarray(s.wTa[:2]) - p)) for s in stored_submaps])
+    return [stored_submaps[i] for i in np.argsort(d, kind="stable") if d[i] <= cfg.guide_radius_m]
+
+
+def _consistent(a: np.ndarray, b: np.ndarray, cfg: RelocaliseConfig) -> np.ndarray:
+    """Pairwise agreement of session transforms a (N, 3) and b (M, 3): (N, M) bool."""
+    dxy = np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])
+    dth = np.abs(g.wrap(a[:, None, 2] - b[None, :, 2]))
+    return (dxy <= cfg.consistent_xy_m) & (dth <= math.radians(cfg.consistent_deg))
+
+
+def _group(T: np.ndarray, cfg: RelocaliseConfig) -> list[int]:
+    """The largest set of pairwise consistent transforms, greedily: seeded by the transform with most consistent
+    others, members added in order of their own support while consistent with every member so far."""
+    C = _consistent(T, T, cfg)
+    support = C.sum(axis=1)
+    best: list[int] = []
+    for s in np.argsort(-support, kind="stable")[: min(len(T), 20)].tolist():
+        members = [s]
+        for k in np.argsort(-support, kind="stable").tolist():
+            if k != s and C[s, k] and all(C[k, m] for m in members):
+                members.append(k)
+        if len(members) > len(best):
+            best = members
+    return best
+
+
+def laser_hypothesis(matches: list[LaserMatch], cfg: RelocaliseConfig = RelocaliseConfig()) -> Hypothesis | None:
+    """The verified laser hypothesis of the matches (module docstring), or the best unverified one, or None."""
+    if not matches:
+        return None
+    T = np.array([m.wTs for m in matches])
+    members = _group(T, cfg)
+    rest = [k for k in range(len(T)) if not _consistent(T[k : k + 1], T[members], cfg).any()]
+    runner = len(_group(T[rest], cfg)) if rest else 0
+    M = T[members]
+    w = np.array([matches[k].score for k in members])
+    th0 = M[0, 2]
+    wTs = np.array([*(w @ M[:, :2] / w.sum()), g.wrap(th0 + float(w @ g.wrap(M[:, 2] - th0) / w.sum()))])
+    n_new = len({matches[k].new for k in members})
+    ok = (len(members) >= cfg.min_consistent and n_new >= cfg.min_session_submaps
+          and runner <= cfg.runner_up_ratio * len(members))
+    why = (f"{len(members)} consistent laser matches from {n_new} session submaps (of {len(matches)} matches; "
+           f"the best other group {runner})")
+    if not ok:
+        why += (f"; needs {cfg.min_consistent} from {cfg.min_session_submaps} submaps and no other group over "
+                f"{cfg.runner_up_ratio:g}x its size")
+    return Hypothesis(wTs, _spread_cov(wTs, M, cfg), len(members), ok, why, tuple(matches[k] for k in members))
+
+
+def _agree(a: Hypothesis, b: Hypothesis, cfg: RelocaliseConfig) -> bool:
+    return bool(_consistent(a.wTs[None], b.wTs[None], cfg)[0, 0])
+
+
+def relocalise(session_submaps, session_sTa: np.ndarray, session_objects: dict[str, np.ndarray],
+               stored_submaps, stored_objects: dict[str, np.ndarray],
+               cfg: RelocaliseConfig = RelocaliseConfig()) -> Relocalisation:
+    """Both sources, verified and combined: laser and objects verified and agreeing -> "both"; one verified and
+    the other absent, unverified but agreeing, or unverified and disagreeing -> that one; both verified but
+    disagreeing -> not placed (said why); neither verified -> not placed."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    obj = object_hypothesis(session_objects, stored_objects, cfg)
+    # a verified object hypothesis only chooses where the laser looks first; the laser's matches stay global
+    matches, searches = laser_matches(session_submaps, session_sTa, stored_submaps, cfg,
+                                      obj if obj is not None and obj.verified else None)
+    las = laser_hypothesis(matches, cfg)
+    lv, ov = las is not None and las.verified, obj is not None and obj.verified
+    chosen: Hypothesis | None = None
+    if lv and ov:
+        assert las is not None and obj is not None
+        if _agree(las, obj, cfg):
+            chosen, by, why = las, "both", f"laser: {las.why}; objects: {obj.why}"
+        else:
+            chosen, by, why = None, "none", (f"the laser and the objects disagree (laser: {las.why}; objects: "
+                                             f"{obj.why}): not joined")
+    elif lv:
+        assert las is not None
+        by = "both" if obj is not None and obj.support >= 2 and _agree(las, obj, cfg) else "laser"
+        chosen, why = las, f"laser: {las.why}" + ("" if obj is None else f"; objects: {obj.why}")
+    elif ov:
+        assert obj is not None
+        chosen, by, why = obj, "objects", f"objects: {obj.why}" + ("" if las is None else f"; laser: {las.why}")
+    else:
+        by = "none"
+        why = "no verified hypothesis: " + "; ".join(
+            [f"laser: {las.why}" if las is not None else "laser: no match above the score",
+             f"objects: {obj.why}" if obj is not None else "objects: fewer than two known to the store"])
+    consistent: tuple[LaserMatch, ...] = ()
+    if chosen is not None:
+        T = np.array([m.wTs for m in matches]).reshape(-1, 3)
+        consistent = tuple(m for m, ok in zip(matches, _consistent(T, chosen.wTs[None], cfg)[:, 0], strict=True)
+                           if ok)
+    return Relocalisation(by, chosen, las, obj, consistent, searches, time.perf_counter() - t0, why,
+                          tuple(matches), time.process_time() - c0)

@@ -1,0 +1,217 @@
+"""The map store: round trip of a session, schema version and migration, refusals with one-line errors, one
+transaction per session (an exception or a SIGKILL anywhere inside leaves the previous state), and the committed
+fixture store of schema 1 opening and extending."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from store_updates import make_update
+
+from holoslam.errors import StoreError
+from holoslam.store import schema
+from holoslam.store.codec import pack, pack_prob, unpack, unpack_prob
+from holoslam.store.db import MapStore
+
+FIXTURE = Path(__file__).with_name("fixture_v1.holomap")
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_codec_round_trip():
+    a = np.arange(12, dtype=np.float64).reshape(3, 4)
+    assert np.array_equal(unpack(pack(a)), a) and unpack(pack(a)).dtype == np.float64
+    p = np.array([[0.1, 0.5], [0.9, 0.33]], np.float32)
+    prob, known = unpack_prob(pack_prob(p, np.array([[False, True], [True, True]])))
+    assert not known[0, 0] and known[1, 1] and prob[0, 0] == pytest.approx(0.1)
+    assert np.abs(prob[known] - p[known]).max() <= 0.5 / 255 + 1e-7
+    with pytest.raises(StoreError, match="damaged"):
+        unpack(b"HAf8\x01garbage", "test blob")
+
+
+def test_a_session_round_trips(tmp_path):
+    u = make_update(1)
+    with MapStore.open(tmp_path / "h.holomap") as st:
+        sid = st.add_session(u)
+        s = st.sessions()[0]
+        assert (sid, s.log_name, s.joined_by, s.summary) == (1, "log1.mcap", "laser", {"seed": 1})
+        np.testing.assert_allclose(s.wTs, u.wTs)
+        subs = st.submaps(grids=True)
+        assert [m.idx for m in subs] == [0, 1, 2, 3]
+        np.testing.assert_allclose(subs[2].wTa, u.submaps[2].wTa)
+        assert np.array_equal(subs[1].known, u.submaps[1].known)
+        k = subs[1].known
+        assert np.abs(subs[1].prob[k] - u.submaps[1].prob[k]).max() <= 0.5 / 255 + 1e-7
+        f = st.factors()
+        assert len(f) == 3 and list(f.kind) == ["scan_match"] * 3
+        assert list(f.i) == [subs[0].id, subs[1].id, subs[2].id]
+        sg = st.sightings()
+        assert sg.placement == ("O05#1", "O07#2") and np.isnan(sg.z[1])
+        h = st.object_history(object_id="O07")
+        assert len(h) == 1 and h[0].status == "moved"
+        np.testing.assert_allclose(h[0].displacement, [0.5, 0.1])
+        t = st.trajectory(1)
+        assert np.array_equal(t.stamps_ns, u.trajectory.stamps_ns)
+        np.testing.assert_allclose(t.aTb, u.trajectory.aTb, atol=1e-6)
+        assert st.latest_objects()["O05"].placement == "O05#1"
+
+
+def test_later_sessions_refer_to_stored_submaps_and_update_them(tmp_path):
+    with MapStore.open(tmp_path / "h.holomap") as st:
+        st.add_session(make_update(1))
+        old = st.submaps()
+        u = make_update(2, stored_ids=(old[0].id, old[3].id), expected_id=2)
+        u = type(u)(**{**u.__dict__, "wTa_updates": {old[1].id: (np.array([9.0, 8.0, 0.1]), None)},
+                       "retire": (old[2].id,)})
+        st.add_session(u)
+        assert st.counts()["working_submaps"] == 4 + 3
+        f = st.factors()
+        cross = f.kind == "cross"
+        assert sorted(f.i[cross].tolist()) == [old[0].id, old[3].id]
+        moved = [m for m in st.submaps(working=False) if m.id == old[1].id][0]
+        np.testing.assert_allclose(moved.wTa, [9.0, 8.0, 0.1])
+        with pytest.raises(StoreError, match="changed while this session ran"):
+            st.add_session(make_update(3, expected_id=2))
+        assert len(st.sessions()) == 2
+
+
+def test_an_exception_inside_the_update_rolls_it_back(tmp_path):
+    with MapStore.open(tmp_path / "h.holomap") as st:
+        st.add_session(make_update(1))
+        before = st.counts()
+
+        def fail(step: str) -> None:
+            if step == "objects":
+                raise RuntimeError("disk on fire")
+
+        with pytest.raises(RuntimeError):
+            st.add_session(make_update(2), progress=fail)
+        assert st.counts() == before
+
+
+def test_refusals_are_one_line_store_errors(tmp_path):
+    junk = tmp_path / "junk.holomap"
+    junk.write_bytes(b"not a database at all" * 100)
+    with pytest.raises(StoreError, match="not a holoslam map store"):
+        MapStore.open(junk)
+    other = tmp_path / "other.sqlite"
+    sqlite3.connect(other).execute("CREATE TABLE t (x)").connection.commit()
+    with pytest.raises(StoreError, match="no meta table"):
+        MapStore.open(other)
+    with pytest.raises(StoreError, match="does not exist"):
+        MapStore.open(tmp_path / "absent.holomap", create=False)
+    newer = tmp_path / "newer.holomap"
+    MapStore.open(newer).close()
+    con = sqlite3.connect(newer)
+    con.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'")
+    con.commit()
+    con.close()
+    with pytest.raises(StoreError, match="schema 99, newer"):
+        MapStore.open(newer)
+
+
+def test_the_fixture_store_of_schema_1_opens_and_extends(tmp_path):
+    p = tmp_path / "home.holomap"
+    shutil.copy(FIXTURE, p)
+    with MapStore.open(p) as st:
+        assert st.schema_version == schema.SCHEMA_VERSION
+        sessions = st.sessions()
+        assert len(sessions) == 2 and all(s.joined for s in sessions)
+        assert st.latest_objects(), "the fixture's objects"
+        before = st.counts()
+        working = st.submaps(grids=True)
+        assert all(m.prob is not None and m.prob.shape == m.known.shape for m in working)
+        st.add_session(make_update(7, stored_ids=(working[0].id,), expected_id=3))
+        after = st.counts()
+        assert after["sessions"] == before["sessions"] + 1 and after["submaps"] == before["submaps"] + 4
+
+
+def test_a_migration_runs_once_when_a_later_schema_opens_an_older_store(tmp_path, monkeypatch):
+    p = tmp_path / "home.holomap"
+    shutil.copy(FIXTURE, p)
+
+    def v1_to_v2(con: sqlite3.Connection) -> None:
+        con.execute("ALTER TABLE sessions ADD COLUMN operator TEXT")
+
+    monkeypatch.setattr(schema, "SCHEMA_VERSION", 2)
+    monkeypatch.setitem(schema.MIGRATIONS, 1, v1_to_v2)
+    import holoslam.store.db as db
+
+    monkeypatch.setattr(db, "SCHEMA_VERSION", 2)
+    with MapStore.open(p) as st:
+        assert st.schema_version == 2 and len(st.sessions()) == 2
+    cols = [r[1] for r in sqlite3.connect(p).execute("PRAGMA table_info(sessions)")]
+    assert "operator" in cols
+    monkeypatch.delitem(schema.MIGRATIONS, 1)
+    q = tmp_path / "again.holomap"
+    shutil.copy(FIXTURE, q)
+    with pytest.raises(StoreError, match="no migration from map store schema 1"):
+        MapStore.open(q)
+    assert sqlite3.connect(q).execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()[0] == "1"
+
+
+def _child_env() -> dict[str, str]:
+    here = Path(__file__).parent
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), str(here), os.environ.get("PYTHONPATH", "")])}
+
+
+_CHILD = """
+import sys, time
+from holoslam.store.db import MapStore
+from store_updates import make_update
+target = sys.argv[2]
+def step(s):
+    print(s, flush=True)
+    if s == target:
+        time.sleep(60)
+with MapStore.open(sys.argv[1]) as st:
+    st.add_session(make_update(5, n_submaps=6, n_poses=5000, expected_id=2), progress=step)
+"""
+
+
+@pytest.mark.parametrize("step", ["session", "submaps", "factors", "sightings", "objects", "trajectory", "graph"])
+def test_a_session_killed_inside_its_update_leaves_the_previous_state(tmp_path, step):
+    p = tmp_path / "h.holomap"
+    with MapStore.open(p) as st:
+        st.add_session(make_update(1))
+        before = st.counts()
+    env = _child_env()
+    child = subprocess.Popen([sys.executable, "-c", _CHILD, str(p), step], stdout=subprocess.PIPE, text=True,
+                             cwd=REPO, env=env)
+    assert child.stdout is not None
+    for line in child.stdout:
+        if line.strip() == step:
+            break
+    os.kill(child.pid, signal.SIGKILL)
+    child.wait(timeout=30)
+    assert Path(str(p) + "-journal").exists(), "the kill left a hot journal to roll back"
+    with MapStore.open(p) as st:
+        assert st.counts() == before
+        assert st._con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+        st.add_session(make_update(6, expected_id=2))
+        assert st.counts()["sessions"] == 2
+
+
+def test_a_session_killed_after_its_commit_is_kept(tmp_path):
+    p = tmp_path / "h.holomap"
+    MapStore.open(p).close()
+    env = _child_env()
+    code = _CHILD.replace("expected_id=2", "expected_id=1")
+    child = subprocess.Popen([sys.executable, "-c", code, str(p), "committed"], stdout=subprocess.PIPE, text=True,
+                             cwd=REPO, env=env)
+    assert child.stdout is not None
+    for line in child.stdout:
+        if line.strip() == "committed":
+            break
+    os.kill(child.pid, signal.SIGKILL)
+    child.wait(timeout=30)
+    with MapStore.open(p) as st:
+        assert st.counts()["sessions"] == 1 and st.counts()["submaps"] == 6
+        assert len(st.trajectory(1).stamps_ns) == 5000
