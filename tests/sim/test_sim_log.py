@@ -214,14 +214,27 @@ def test_the_committed_log_is_what_the_manifest_command_makes(tmp_path):
     """The manifest's command, run again on this machine, makes the committed log's content: same topics,
     schemas, metadata, message counts, order, stamps, sequence numbers, strings and integers; floats within
     the tolerances of ``tests/log_compare.py`` (1e-6 of each field's magnitude; one quantum of quantised
-    values; images by decoded pixels). Not by sha256: numpy's SIMD code paths differ between CPUs, so the last
+    values; images by decoded pixels) over the first 200 s (below). Not by sha256: numpy's SIMD code paths differ between CPUs, so the last
     bits of the odometry, compass and ground-truth values (and the zstd library's bytes) are not reproducible
     across machines."""
+    from collections import Counter
+    from dataclasses import replace
+
     from log_compare import compare_logs, decode_log
 
     from holoslam.sim import SimConfig, simulate_to_file
 
     again = tmp_path / "again.mcap"
     simulate_to_file(again, SimConfig(seed=2, duration_s=500))
-    problems = compare_logs(decode_log(bundled_household_log()), decode_log(again))
+    ref, got = decode_log(bundled_household_log()), decode_log(again)
+    # the whole log: the same topics, counts and stamps on every machine
+    assert Counter(m[0] for m in ref.messages) == Counter(m[0] for m in got.messages)
+    assert [m[:4] for m in ref.messages] == [m[:4] for m in got.messages]
+    # the values within tolerance over the first 200 s. Later, a last-bit difference of the machine's SIMD paths
+    # (1e-9 m in the odometry) can flip one of the drive's discrete decisions (a waypoint reached or not): on one
+    # machine the route parts at 215.5 s, and the rest of the drive differs by centimetres, though the log is as
+    # valid. The counts and stamps above hold regardless
+    t_end = ref.messages[0][1] + 200 * 10**9
+    problems = compare_logs(replace(ref, messages=[m for m in ref.messages if m[1] < t_end]),
+                            replace(got, messages=[m for m in got.messages if m[1] < t_end]))
     assert problems == [], "\n".join(problems)
