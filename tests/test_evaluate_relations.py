@@ -317,6 +317,9 @@ def test_evaluate_scores_the_laser_frame_of_a_run_folder(tmp_path, capsys):
     run.mkdir()
     write_tum(run / "trajectory.tum", stamps, wTb)
     (run / "report.json").write_text(json.dumps({"frames": {"base": "base_link", "poses": {"laser": bTl.tolist()}}}))
+    from holoslam.io.run_manifest import build_manifest, write_manifest
+
+    write_manifest(run, build_manifest(run, version="test", log_fingerprint=None, config_hash=None))
     write_relations(tmp_path / "r.relations", rel)
     assert main(["evaluate", str(run), "--relations", str(tmp_path / "r.relations"), "--json"]) == 0
     base = json.loads(capsys.readouterr().out)["relation_errors"]["translation_m"]["mean"]
