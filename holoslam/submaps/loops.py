@@ -27,105 +27,19 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from holoslam import geometry as g
-from holoslam.submaps.loop_consistency import ConsistencyConfig, LoopConsistency
+from holoslam.submaps.loop_config import LoopConfig
+from holoslam.submaps.loop_consistency import LoopConsistency
 from holoslam.submaps.probgrid import ProbGrid
 from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
 from holoslam.submaps.scanmatch import MatchConfig, match_scan
 
 __all__ = ["LoopConfig", "LoopCandidate", "LoopSearch"]
-
-
-@dataclass(frozen=True, slots=True)
-class LoopConfig:
-    every_nodes: int = 3  # search from every k-th node (Cartographer samples 30 % of pairs)
-    max_constraint_distance: float = 15.0  # m between the node and an old submap's anchor (windowed searches)
-    base_window_xy: float = 1.0  # m, window half-width right after a closure
-    window_rate: float = 0.05  # m of window per m travelled since the last closure
-    # m and deg: the largest window searched at the map's resolution, whose match is accepted on its own
-    # (Cartographer's +-7 m, +-30 deg). A wider window (the drift since the last closure, or ``window_sigmas`` of
-    # the node's covariance relative to the old submap, says the estimate may be further off) has no cap: it is
-    # searched by the global search (``global_search``: the whole submap if need be, every heading) and its match
-    # must agree with another (``consistency``)
-    max_window_xy: float = 7.0
-    base_window_deg: float = 10.0
-    window_deg_rate: float = 1.0  # deg per m travelled since the last closure
-    max_window_deg: float = 30.0
-    window_sigmas: float = 3.0  # the window covers this many sigmas of the node's pose relative to the old submap
-    min_score: float = 0.55
-    min_score_wide: float = 0.6
-    wide_window_xy: float = 3.0  # m
-    depth: int = 7
-    skip_recent: int = 2  # the submaps this many before the current one are its chain neighbours
-    max_per_pair: int = 4  # closures kept between one old submap and one new submap
-    wide_search_spacing: float = 2.0  # m travelled between two wide searches of one old submap
-    precomputed_cache: int = 64  # submaps whose max-pooled grids stay in memory (a few ms to rebuild one)
-    max_searches_per_node: int = 3  # narrow searches per node, nearest old submaps first (cost where many overlap)
-    # m; > 0: the branch and bound searches a scan's points thinned by an adaptive voxel filter (scan_filter:
-    # voxels up to search_voxel_m, at least search_min_points; the refinement uses every point). Off by default:
-    # 0.1 m halves fr079's loop search (12.3 -> 6.4 s CPU) and maps the three real logs as well or a little
-    # better (intel 0.0190 -> 0.0188 m, aces 0.0367 -> 0.0366, fr079 0.0662 -> 0.0660), but the ambiguity
-    # test's margin was measured on whole scans and flags far fewer second peaks on thinned ones (fr079 57 -> 4):
-    # the loops' protection against aliases would rest on the final solve. Cartographer's 0.9 m broke aces (a
-    # 0.96 m relation error)
-    search_voxel_m: float = 0.0
-    search_min_points: int = 100  # points kept at least (Cartographer's loop-closure filter: 100)
-    # Ambiguity (an alias along a corridor, a similar room): after the best match, the best pose of the same window
-    # *outside* a box around it is sought (the same branch and bound with the box cut out: exact; when rejecting
-    # it stops at the first pose above the threshold). One scoring within ``ambiguity_margin`` of the best is a
-    # second peak: the scan fits two places about equally well and the score cannot tell which is right, while
-    # the refinement's covariance only describes the surface within +-0.5 m of one of them. The defaults were
-    # measured on the three real logs, a loop counted wrong when it lies > 0.3 m or d^2 > 21 from the final
-    # solution (``benchmarks/bench_loops_realdata.py``; with score alone aces held 29 wrong of 189, fr079 45 of
-    # 367, intel 214 of 1057): 0.15 m / 2 deg / 0.03 flag 29 of aces' 29 wrong loops (24 of its 160 right ones),
-    # fr079 25 of 45 (27 of 322), intel 174 of 214 (130 of 843), and no loop of the drifting two-room test is
-    # wrong. Most wrong loops have a flat score surface: a pose 0.2-0.3 m away scores within 0.01.
-    ambiguity: str = "reject"  # "reject": no closure; "span": kept, with the peaks' spread added to its
-    # covariance (``spanning_covariance``); "off": accepted on score alone (the rule before)
-    # score units (mean probability of the points, 0.1-0.9): 0.02 misses 4 of aces' 29 wrong loops, 0.04 flags 9
-    # more right ones there for none more wrong (fr079 +3 wrong / +11 right, intel +20 / +40)
-    ambiguity_margin: float = 0.03
-    # m, half-width of the box around the best in x and y: 3 cells at 5 cm, the best's own peak (its refinement
-    # may move it by 2 cells); 0.1 m / 1 deg takes the peak's own slope for a second one (aces: 48 right loops
-    # flagged instead of 24), 0.25 m / 3 deg lets wrong ones through (aces 1, intel 28 more; 2 of the drifting test)
-    ambiguity_exclude_xy: float = 0.15
-    ambiguity_exclude_deg: float = 2.0  # deg, half-width of the box in angle (measured with the 0.15 m above)
-    ambiguity_peaks: int = 1  # second peaks sought, each outside the boxes of the ones before ("span")
-    # The global search (``global_search``) for windows beyond max_window_xy / max_window_deg. Coarse grid: 4x the
-    # map's 5 cm (measured on aces' submaps: 20-70 ms per whole submap and every heading instead of 0.3-1.2 s)
-    global_resolution_m: float = 0.2
-    global_max_range_m: float = 15.0  # m, points the coarse search uses (the fine steps use every point)
-    # mean probability of the node's bundle (``global_bundle_m``) on the coarse grid. Measured on aces (first 900 s,
-    # the 15 nodes of its windowed closures searched over whole submaps at every heading): the right submap's best
-    # scores 0.535-0.60 (10-90 %) and lies at the right pose every time; two wrong submaps' best 0.31-0.36. A
-    # single scan does not separate them (right 0.64-0.77, wrong 0.49-0.61): hence the bundle
-    global_coarse_min_score: float = 0.45
-    # the node's own scan at the map's resolution within global_check_xy / _deg of the coarse best: right 0.58-0.73,
-    # wrong 0.40-0.51 in the same measurement; a windowed closure's min_score
-    global_min_score: float = 0.55
-    global_per_node: int = 2  # global searches per searching node, the least recently searched submaps first
-    global_every_m: float = 3.0  # m travelled between two nodes that run global searches (each costs 20-70 ms)
-    global_check_xy: float = 1.0  # m, the fine window around the coarse best (5 coarse cells)
-    global_check_deg: float = 5.0  # deg (a few coarse angular steps)
-    global_ambiguity_peaks: int = 3  # second peaks of a global match: kept with their spread ("span")
-    # m of the robot's path behind the node whose scans (in the node's frame, by local SLAM's poses) the global
-    # search matches together with the node's: one 180-beam scan fits many places of a building, a few metres of
-    # them few; thinned by the adaptive voxel filter to voxels up to bundle_voxel_m, at least 300 points
-    global_bundle_m: float = 4.0
-    global_bundle_voxel_m: float = 0.15
-    consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
-    # Every score threshold above (and the ambiguity margin, and the keyframe stage's) was measured on lasers whose
-    # scans match into their own submaps at a median score of 0.67-0.75 (aces 0.666, intel 0.729, fr079 0.745;
-    # 300 s of each). A sparser laser fills the grids' cells less: the same logs decimated to 1.4 Hz with every
-    # second beam match at 0.505-0.562, below the loops' 0.55, and aces then closed 8 loops of 550 searches. The
-    # thresholds are scaled by min(1, median / score_reference): unchanged on the full-rate logs, 0.78-0.86 of
-    # themselves on the sparse ones
-    score_reference: float = 0.65
 
 
 @dataclass(frozen=True, slots=True)
