@@ -96,7 +96,7 @@ def child(log: str, out: str, variant: str = "full") -> None:
 
     if variant == "full":
         summary = run_log_to_folder(log, out, RunConfig())
-        Path(out, "bench_child.json").write_text(json.dumps({"seconds": summary["seconds"]}))
+        Path(out).parent.joinpath("bench_child.json").write_text(json.dumps({"seconds": summary["seconds"]}))
         return
     from holoslam.io.mcap import read_log
     from holoslam.io.trajectory import write_tum
@@ -107,15 +107,15 @@ def child(log: str, out: str, variant: str = "full") -> None:
     result = run_data(data, ingest, RunConfig())
     write_tum(Path(out, "trajectory.tum"), result.stamps_ns, result.wTb)
     Path(out, "report.json").write_text(json.dumps(result.report.to_dict(), default=str))
-    Path(out, "bench_child.json").write_text(json.dumps({"seconds": result.report.timings_s.get("total", math.nan),
+    Path(out).parent.joinpath("bench_child.json").write_text(json.dumps({"seconds": result.report.timings_s.get("total", math.nan),
                                                          "kidnap_ns": at}))
 
 
 def run_child(log: Path, out: Path, variant: str = "full") -> tuple[float, float, float, int]:
     """(wall s, CPU s (user + system), peak RSS MB, exit code) of one child running the log into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)  # the child's log and timings go beside the run folder, not in it
     cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(log), str(out), variant]
-    with open(out / "bench_child.log", "wb") as log_file:
+    with open(out.parent / "bench_child.log", "wb") as log_file:
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=log_file, stderr=subprocess.STDOUT)
         _, status, usage = os.wait4(proc.pid, 0)
@@ -171,7 +171,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
     run_dir = work / "run"
     wall, cpu, rss_mb, code = run_child(log, run_dir, variant)
     if code != 0:
-        tail = (run_dir / "bench_child.log").read_text(errors="replace").strip().splitlines()[-3:]
+        tail = (run_dir.parent / "bench_child.log").read_text(errors="replace").strip().splitlines()[-3:]
         raise SystemExit(f"{name}: the run failed (exit {code}): {' | '.join(tail)}")
     tum = run_dir / "trajectory.tum"
     stamps, wTb = read_tum(tum)
@@ -183,7 +183,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
     mounting = json.loads((run_dir / "report.json").read_text())["submaps"].get("laser_mounting") or {}
     centre_x = float(mounting.get("centre_in_base_x_m", math.nan))
     e_centre = relation_errors(stamps, _moved(wTb, centre_x), rel) if math.isfinite(centre_x) else None
-    child_json = json.loads((run_dir / "bench_child.json").read_text())
+    child_json = json.loads((run_dir.parent / "bench_child.json").read_text())
     pipeline_s = child_json["seconds"]
     across = math.nan
     if child_json.get("kidnap_ns") is not None:
