@@ -35,6 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -461,7 +462,7 @@ def _local_slam(
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
                                  graph.graph_distance(node.submap), float(travelled[k]),
                                  graph.relative_covariances(node.submap), np.array(graph.travel),
-                                 _bundle(slam, node, cfg.loops.global_bundle_m))
+                                 partial(_bundle, slam, node, cfg.loops.global_bundle_m))
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -119,15 +120,16 @@ class LoopSearch:
 
     def search(self, n: int, nTr: np.ndarray, cov_nTr: np.ndarray, b_pts: np.ndarray, est_wTa: np.ndarray,
                graph_distance: np.ndarray, travelled: float = 0.0, rel_cov: np.ndarray | None = None,
-               travel: np.ndarray | None = None, bundle: np.ndarray | None = None) -> list[LoopCandidate]:
+               travel: np.ndarray | None = None,
+               bundle: Callable[[], np.ndarray] | None = None) -> list[LoopCandidate]:
         """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps;
         ``graph_distance[m]`` is the graph path length from m to n (see the module docstring); ``travelled``
         the odometer reading, which spaces wide searches of one old submap ``wide_search_spacing`` apart (a
         wide window costs ~10 ms; one every couple of metres finds a revisit as surely as one per node).
         ``rel_cov[m]`` (optional): the covariance of anchor n relative to anchor m (n's frame), which widens the
         window to ``window_sigmas`` of it; ``travel[m]`` the odometer at each anchor (the consistency test's
-        drift allowance); ``bundle`` the points of the node and those behind it (``global_bundle_m``, node frame)
-        that the global search matches. Closures of windowed searches are returned at once; those of global ones
+        drift allowance); ``bundle`` makes the points of the node and those behind it (``global_bundle_m``, node
+        frame) that the global search matches, called only when a global round runs. Closures of windowed searches are returned at once; those of global ones
         when another agrees (``loop_consistency``)."""
         c = self.cfg
         wTr = g.compose(est_wTa[n], nTr)
@@ -170,7 +172,7 @@ class LoopSearch:
         if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
             self.last_global_round = travelled
             g_pts = b_pts if bundle is None else adaptive_voxel_filter(
-                bundle, ScanFilterConfig(c.global_bundle_voxel_m, 300))
+                bundle(), ScanFilterConfig(c.global_bundle_voxel_m, 300))
             found.extend(self._global_round(n, nTr, cov_nTr, b_pts, g_pts, globals_, est_wTa, travel, travelled))
         return found
 
