@@ -202,7 +202,8 @@ class _Graph:
         """(N, 3, 3): the covariance of anchor n relative to each anchor m (right perturbation, n's frame) along
         the most certain path between them (Dijkstra over the relative poses, the parallel ones fused by their
         information), propagated at the current estimates. One path ignores the others, so this is an upper
-        bound of the marginal covariance of mTn where the graph has loops. Cached until the graph grows."""
+        bound of the marginal covariance of mTn where the graph has loops; anchors reached only across a break of
+        local SLAM get (1e12 m², 1e12 m², pi²). Cached until the graph grows."""
         key = (n, len(self.i))
         if self._rel is not None and self._rel[:2] == key:
             return self._rel[2]
@@ -212,7 +213,9 @@ class _Graph:
         N = len(self.est)
         meas = self.measurements()
         info: dict[tuple[int, int], np.ndarray] = {}
-        for i, j, C in zip(meas.i.tolist(), meas.j.tolist(), meas.cov_iTj, strict=True):
+        for i, j, C, kind in zip(meas.i.tolist(), meas.j.tolist(), meas.cov_iTj, meas.kind, strict=True):
+            if kind == "lost":  # a break says nothing the window could use: the other part is anywhere
+                continue
             info[(i, j)] = info.get((i, j), np.zeros((3, 3))) + np.linalg.inv(C)
         pairs = list(info)
         covs = {e: np.linalg.inv(info[e]) for e in pairs}
@@ -445,6 +448,7 @@ def _local_slam(
             dr = dead_reckon(ost, opose, slam.anchor_stamps[m], slam.anchor_stamps[n], **run.hargs)
             if mTn is None:  # a break: the odometry alone, as uncertain as the building is large
                 graph.add(m, n, dr.end, dr.cov_aTb_end + lost, "lost")
+                loops.add_break(n)
                 graph.est.append(g.compose(graph.est[m], dr.end))
             else:
                 graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from holoslam.submaps.loop_consistency import ConsistencyConfig
+from holoslam.submaps.loop_verify import VerifyConfig
 
 __all__ = ["LoopConfig"]
 
@@ -77,8 +78,17 @@ class LoopConfig:
     # the node's own scan at the map's resolution within global_check_xy / _deg of the coarse best: right 0.58-0.73,
     # wrong 0.40-0.51 in the same measurement; a windowed closure's min_score
     global_min_score: float = 0.55
-    global_per_node: int = 2  # global searches per searching node, the least recently searched submaps first
-    global_every_m: float = 3.0  # m travelled between two nodes that run global searches (each costs 20-70 ms)
+    # global searches per searching node, the least recently searched submaps first (those the window reaches);
+    # global_per_node_lost where the old submap is reached only across a break of local SLAM (the robot carried,
+    # the log cut): then every old submap is a candidate and the join is worth more searches. Kidnapped aces
+    # (35 old submaps) gathered no three agreeing closures at 2 a round and joined at 6
+    global_per_node: int = 2
+    global_per_node_lost: int = 6
+    # m travelled between two nodes that run global searches (each costs 20-70 ms): the bundle's length, so that the
+    # closures of two rounds in a row match disjoint scans and may vouch for each other (consistency's
+    # min_separation_m). At 3 m, kidnapped aces found four right closures, from rounds 3.1-3.5 m apart, and no
+    # three of them could form a clique: the parts stayed apart
+    global_every_m: float = 4.0
     global_check_xy: float = 1.0  # m, the fine window around the coarse best (5 coarse cells)
     global_check_deg: float = 5.0  # deg (a few coarse angular steps)
     global_ambiguity_peaks: int = 3  # second peaks of a global match: kept with their spread ("span")
@@ -88,6 +98,7 @@ class LoopConfig:
     global_bundle_m: float = 4.0
     global_bundle_voxel_m: float = 0.15
     consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
+    verify: VerifyConfig = field(default_factory=VerifyConfig)  # the map check of a global closure (loop_verify)
     # Every score threshold above (and the ambiguity margin, and the keyframe stage's) was measured on lasers whose
     # scans match into their own submaps at a median score of 0.67-0.75 (aces 0.666, intel 0.729, fr079 0.745;
     # 300 s of each). A sparser laser fills the grids' cells less: the same logs decimated to 1.4 Hz with every

@@ -42,7 +42,8 @@ class ConsistencyConfig:
     min_agreeing: int = 3
     # m of travel between the nodes of two closures that may vouch for each other: nodes closer than this see the
     # same walls, and a place that aliases one of them aliases the other alike (two nodes 0.6 m apart of one aces
-    # submap both put it 30 m from where it is, identically)
+    # submap both put it 30 m from where it is, identically). The global search's bundle length
+    # (``LoopConfig.global_bundle_m``): closer nodes' bundles share scans
     min_separation_m: float = 4.0
     sigma_m: float = 0.2  # m, floor of the allowance (two 5 cm grids' lattices and their refinements)
     sigma_deg: float = 1.0  # deg
