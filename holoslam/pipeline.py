@@ -12,7 +12,7 @@ run folder and the other jobs around runs are in ``holoslam.run_jobs``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -121,23 +121,23 @@ def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
 
     from holoslam.objects import located_objects
     from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
-    from holoslam.sightings import object_features, see_objects, triangulate_objects
+    from holoslam.sightings import see_objects, triangulate_objects
     from holoslam.solve import solve
     from holoslam.submaps.frontend import build_problem
     from holoslam.trajectory import run_trajectory
 
-    seen = see_objects(log, cfg.vision, clock, features=False)
-    # the object features (Eq. 13) read only the images and the sightings: computed in a thread while the front
-    # end runs (OpenCV and the front end's kernels release the GIL; the results are the same either way)
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-features") as pool:
-        features = pool.submit(object_features, log, seen, cfg.vision, clock)
+    # the vision stages read only the log (images, tag messages): they run in a thread while the front end does,
+    # which needs their observations only once its local SLAM is done (OpenCV, zxing-cpp and the front end's
+    # kernels release the GIL; the results are the same either way)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-vision") as pool:
+        sightings = pool.submit(see_objects, log, cfg.vision, clock.background())
         with clock.stage(FRONT_END):
-            fe = build_problem(log, seen.observations, cfg.frontend, clock.progress_of(FRONT_END),
-                               optimize=reestimate_anchors)
-        with clock.stage("optimise"):
-            options = solve_options(cfg.solver)
-            sol = solve(fe.problem, options)
-        seen = replace(seen, features=features.result())
+            fe = build_problem(log, lambda: sightings.result().observations, cfg.frontend,
+                               clock.progress_of(FRONT_END), optimize=reestimate_anchors)
+        seen = sightings.result()
+    with clock.stage("optimise"):
+        options = solve_options(cfg.solver)
+        sol = solve(fe.problem, options)
     fe, sol, seen = triangulate_objects(seen, fe, sol, log, cfg, options, clock)
     with clock.stage("keyframes (revisits)"):
         revisits = revisit_nodes(fe, sol, cfg.frontend, clock.progress_of("keyframes (revisits)"))

@@ -35,11 +35,10 @@ class Sightings:
     extra_sightings: dict[str, int] = field(default_factory=dict)
 
 
-def see_objects(log: LogData, cfg: VisionConfig, clock: StageClock, features: bool = True) -> Sightings:
+def see_objects(log: LogData, cfg: VisionConfig, clock: StageClock) -> Sightings:
     """The stages ``vision`` (sightings located by PnP, ``holoslam.vision.observe.locate_from_log``) and
-    ``object features (Eq. 13)`` (``holoslam.vision.features``, ``with_features``; skipped when ``features`` is
-    False: the caller computes them itself, e.g. while the front end runs); nothing when the log has neither
-    images nor tag sightings."""
+    ``object features (Eq. 13)`` (``object_features``); nothing when the log has neither images nor tag
+    sightings. Reads the log only: the run calls it in a thread beside the front end."""
     from holoslam.vision.observe import locate_from_log
     from holoslam.vision.stream import frames_per_second
 
@@ -59,13 +58,12 @@ def see_objects(log: LogData, cfg: VisionConfig, clock: StageClock, features: bo
         report = dataclasses.asdict(vision.report)
         report["problems"] = list(report.get("problems", ()))[:_PROBLEMS_KEPT]
     seen = Sightings(vision.observations, {}, vision, report)
-    return dataclasses.replace(seen, features=object_features(log, seen, cfg, clock)) if features else seen
+    return dataclasses.replace(seen, features=object_features(log, seen, cfg, clock))
 
 
 def object_features(log: LogData, seen: Sightings, cfg: VisionConfig, clock: StageClock) -> dict[str, Any]:
     """The stage ``object features (Eq. 13)``: each sighted object's feature set from the log's images ({} when
-    ``cfg.features`` is off or nothing was sighted in an image). Reads the log and ``seen`` only: it may run in a
-    thread beside the front end (its OpenCV calls release the GIL)."""
+    ``cfg.features`` is off or nothing was sighted in an image)."""
     if not (cfg.features and log.images and seen.vision is not None and seen.vision.sightings):
         return {}
     from holoslam.vision.features import object_features_from_log

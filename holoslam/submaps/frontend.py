@@ -350,7 +350,7 @@ class _Graph:
 
 def build_problem(
     log: LogData,
-    observations: Sequence[ObjectObservation] = (),
+    observations: Sequence[ObjectObservation] | Callable[[], Sequence[ObjectObservation]] = (),
     config: FrontEndConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
     optimize: Callable[[object], np.ndarray] | None = None,
@@ -358,11 +358,15 @@ def build_problem(
     """Run the front end over a log (see the module docstring). Raises IngestError when the log lacks
     odometry or scans. ``progress(done, total)`` is called with the scans walked, about every 2% of them.
     ``optimize(problem) -> wTa`` re-estimates the anchors after loop closures (without it the front end keeps
-    its chained estimate, and loop windows grow with the distance since the start)."""
+    its chained estimate, and loop windows grow with the distance since the start). ``observations`` may be a
+    callable returning them, called once local SLAM is done (the run's vision stage, still running in a
+    thread)."""
     cfg = config or FrontEndConfig()
     run = _dead_reckoning(log, cfg)  # step 1
     closed, graph, loops = _local_slam(run, cfg, progress, optimize)  # steps 2-3
     anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
+    if callable(observations):  # still being made (the vision stage in a thread): needed from step 4 on
+        observations = observations()
     problem, skipped, drop = _problem(run, closed, anchors, graph, observations, cfg)  # steps 4-6
     return FrontEnd(tuple(closed), problem, run.dr_stamps_ns, run.dr_wTb, anchors, run.bTs, skipped,
                     loops.tried, tuple(sorted(drop)), graph.dead_reckoning_inflation(), run.noise,
