@@ -134,6 +134,14 @@ def _nearest_owners(owners: np.ndarray, dists: np.ndarray, count: int) -> list[i
     return [int(k) for k in ks[np.argsort(nearest, kind="stable")[:count]]]
 
 
+def _cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # no affinity call (macOS, Windows)
+        return os.cpu_count() or 1
+
+
 def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: RevisitConfig | None = None,
                 match_cfg: MatchConfig | None = None,
                 progress: Callable[[int, int], None] | None = None) -> NodeMatches:
@@ -166,7 +174,7 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
         return match_scan(grid.prob, grid.origin, grid.resolution, nodes.b_points[n], pred, mcfg)
 
     # the matches are independent and their kernels run without the GIL: a thread per core, results in order
-    workers = max(1, min(cfg.threads or os.cpu_count() or 1, len(tasks)))
+    workers = max(1, min(cfg.threads or _cores(), len(tasks)))
     out: list[tuple[int, int, np.ndarray, np.ndarray, float]] = []
     with ThreadPoolExecutor(max_workers=workers) as pool:
         for done, ((k, n, pred), m) in enumerate(zip(tasks, pool.map(one, tasks), strict=True)):
