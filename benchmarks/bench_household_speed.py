@@ -30,12 +30,14 @@ REPO = Path(__file__).resolve().parents[1]
 LOG = REPO / "datasets" / "household_small.mcap"
 
 
-def run(checkout: Path, out: Path, env: dict[str, str] | None = None) -> dict:
-    """One whole ``holoslam run`` of the bundled log with ``checkout`` on the path: wall, CPU, accuracy."""
+def run(checkout: Path, out: Path, env: dict[str, str] | None = None, quiet: bool = True) -> dict:
+    """One whole ``holoslam run`` of the bundled log with ``checkout`` on the path: wall, CPU, accuracy.
+    ``quiet`` False: without ``--quiet``, so that the run's notice of compiling (stderr) can be checked."""
     env = {**os.environ, **(env or {}), "PYTHONPATH": str(checkout)}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    p = subprocess.run([sys.executable, "-m", "holoslam.cli", "run", str(LOG), "-o", str(out), "--quiet"],
+    p = subprocess.run([sys.executable, "-m", "holoslam.cli", "run", str(LOG), "-o", str(out)]
+                       + (["--quiet"] if quiet else []),
                        env=env, cwd=out.parent, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -99,7 +101,7 @@ def main() -> None:
             cache = t / f"numba{k}"
             cache.mkdir()
             env = {"NUMBA_CACHE_DIR": str(cache)}
-            first.append(run(REPO, t / "f", env))
+            first.append(run(REPO, t / "f", env, quiet=False))
             warm.append(run(REPO, t / "f", env))
         print(f"\n## first run after an install (empty numba cache) against a warm one, medians of {a.repeats}")
         print(HEAD)

@@ -117,6 +117,8 @@ class SlamStages:
 
 def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     """The stages of a run from vision to the located objects (``run`` without the maps and the report)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from holoslam.objects import located_objects
     from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
     from holoslam.sightings import see_objects, triangulate_objects
@@ -124,10 +126,15 @@ def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     from holoslam.submaps.frontend import build_problem
     from holoslam.trajectory import run_trajectory
 
-    seen = see_objects(log, cfg.vision, clock)
-    with clock.stage(FRONT_END):
-        fe = build_problem(log, seen.observations, cfg.frontend, clock.progress_of(FRONT_END),
-                           optimize=reestimate_anchors)
+    # the vision stages read only the log (images, tag messages): they run in a thread while the front end does,
+    # which needs their observations only once its local SLAM is done (OpenCV, zxing-cpp and the front end's
+    # kernels release the GIL; the results are the same either way)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-vision") as pool:
+        sightings = pool.submit(see_objects, log, cfg.vision, clock.background())
+        with clock.stage(FRONT_END):
+            fe = build_problem(log, lambda: sightings.result().observations, cfg.frontend,
+                               clock.progress_of(FRONT_END), optimize=reestimate_anchors)
+        seen = sightings.result()
     with clock.stage("optimise"):
         options = solve_options(cfg.solver)
         sol = solve(fe.problem, options)

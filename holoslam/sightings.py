@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from holoslam.types import LogData
     from holoslam.vision.observe import VisionResult
 
-__all__ = ["Sightings", "see_objects", "triangulate_objects"]
+__all__ = ["Sightings", "see_objects", "object_features", "triangulate_objects"]
 
 _PROBLEMS_KEPT = 50  # problems listed in the report (the counts cover all of them)
 
@@ -37,8 +37,8 @@ class Sightings:
 
 def see_objects(log: LogData, cfg: VisionConfig, clock: StageClock) -> Sightings:
     """The stages ``vision`` (sightings located by PnP, ``holoslam.vision.observe.locate_from_log``) and
-    ``object features (Eq. 13)`` (``holoslam.vision.features``); nothing when the log has neither images nor tag
-    sightings."""
+    ``object features (Eq. 13)`` (``object_features``); nothing when the log has neither images nor tag
+    sightings. Reads the log only: the run calls it in a thread beside the front end."""
     from holoslam.vision.observe import locate_from_log
     from holoslam.vision.stream import frames_per_second
 
@@ -57,13 +57,19 @@ def see_objects(log: LogData, cfg: VisionConfig, clock: StageClock) -> Sightings
         )
         report = dataclasses.asdict(vision.report)
         report["problems"] = list(report.get("problems", ()))[:_PROBLEMS_KEPT]
-    features: dict[str, Any] = {}
-    if cfg.features and log.images and vision.sightings:
-        from holoslam.vision.features import object_features_from_log
+    seen = Sightings(vision.observations, {}, vision, report)
+    return dataclasses.replace(seen, features=object_features(log, seen, cfg, clock))
 
-        with clock.stage("object features (Eq. 13)"):
-            features = object_features_from_log(log, vision.sightings)
-    return Sightings(vision.observations, features, vision, report)
+
+def object_features(log: LogData, seen: Sightings, cfg: VisionConfig, clock: StageClock) -> dict[str, Any]:
+    """The stage ``object features (Eq. 13)``: each sighted object's feature set from the log's images ({} when
+    ``cfg.features`` is off or nothing was sighted in an image)."""
+    if not (cfg.features and log.images and seen.vision is not None and seen.vision.sightings):
+        return {}
+    from holoslam.vision.features import object_features_from_log
+
+    with clock.stage("object features (Eq. 13)"):
+        return object_features_from_log(log, seen.vision.sightings)
 
 
 def triangulate_objects(

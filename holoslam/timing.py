@@ -42,6 +42,13 @@ class StageClock:
         """The ``(done, total)`` callback of stage ``name``."""
         return lambda done, total: self.progress(name, done, total)
 
+    def background(self) -> StageClock:
+        """A clock for stages run in a thread beside this clock's: the same timings, its stages announced, but
+        not their ``(done, total)`` progress (two stages updating one progress line would garble it)."""
+        clock = StageClock(lambda name, *_a, **_k: None if _a or _k else self.progress(name))
+        clock.timings, clock._t0 = self.timings, self._t0
+        return clock
+
     def total(self) -> dict[str, float]:
         """The stage timings with ``total``: wall seconds since the clock started."""
         self.timings["total"] = round(time.perf_counter() - self._t0, 4)

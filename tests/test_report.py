@@ -138,3 +138,18 @@ def test_the_stage_clock_times_stages_in_order_and_reports_progress():
     assert list(timings) == ["first", "second", "total"]
     assert all(v >= 0 for v in timings.values()) and timings["total"] >= timings["first"]
     assert calls == [("first",), ("first", 1, 2), ("second",)]
+
+
+def test_a_background_clock_times_into_the_same_timings_and_announces_stages_without_progress():
+    """The run's vision stages run in a thread beside the front end (``pipeline.slam_stages``): their stages are
+    announced and timed in the run's timings, but their ``(done, total)`` progress would fight the front end's
+    progress line, so it is dropped."""
+    calls = []
+    clock = StageClock(lambda *a: calls.append(a))
+    bg = clock.background()
+    with bg.stage("vision"):
+        bg.progress_of("vision")(3, 10)
+    with clock.stage("front end"):
+        clock.progress_of("front end")(1, 2)
+    assert list(clock.total()) == ["vision", "front end", "total"]
+    assert calls == [("vision",), ("front end",), ("front end", 1, 2)]

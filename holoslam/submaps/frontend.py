@@ -32,7 +32,6 @@ Steps (seed 002 §2, SPEC §4 and §8), each a named function or class:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import partial
@@ -179,6 +178,7 @@ class _Graph:
         self._dist: tuple[int, int, np.ndarray] | None = None
         self._infl: tuple[int, float] | None = None
         self._rel: tuple[int, int, np.ndarray] | None = None
+        self._meas: tuple[int, Any] | None = None
 
     def graph_distance(self, n: int) -> np.ndarray:
         """Shortest path length from every anchor to anchor n: chain edges weigh the distance travelled
@@ -211,18 +211,19 @@ class _Graph:
         from scipy.sparse.csgraph import dijkstra
 
         N = len(self.est)
-        meas = self.measurements()
-        info: dict[tuple[int, int], np.ndarray] = {}
-        for i, j, C, kind in zip(meas.i.tolist(), meas.j.tolist(), meas.cov_iTj, meas.kind, strict=True):
-            if kind == "lost":  # a break says nothing the window could use: the other part is anywhere
-                continue
-            info[(i, j)] = info.get((i, j), np.zeros((3, 3))) + np.linalg.inv(C)
-        pairs = list(info)
-        covs = {e: np.linalg.inv(info[e]) for e in pairs}
-        w = [math.sqrt(covs[e][0, 0] + covs[e][1, 1]) + 5.0 * math.sqrt(covs[e][2, 2]) + 1e-9 for e in pairs]
-        A = coo_matrix((w, ([e[0] for e in pairs], [e[1] for e in pairs])), shape=(N, N)).tocsr()
+        pairs, covs = self._fused_pairs()
+        w = np.sqrt(covs[:, 0, 0] + covs[:, 1, 1]) + 5.0 * np.sqrt(covs[:, 2, 2]) + 1e-9
+        A = coo_matrix((w, (pairs[:, 0], pairs[:, 1])), shape=(N, N)).tocsr()
         dist, pred = dijkstra(A, directed=False, indices=n, return_predecessors=True)
+        edge = {(int(a), int(b)): e for e, (a, b) in enumerate(pairs.tolist())}
         est = np.array(self.est)
+        # Ad(nTp) of every anchor p at once (geometry.adjoint's matrix, between's arithmetic)
+        nTp = g.between(np.broadcast_to(est[n], est.shape), est)
+        c, s = np.cos(nTp[:, 2]), np.sin(nTp[:, 2])
+        Ad = np.zeros((N, 3, 3))
+        Ad[:, 0, 0], Ad[:, 0, 1], Ad[:, 0, 2] = c, -s, nTp[:, 1]
+        Ad[:, 1, 0], Ad[:, 1, 1], Ad[:, 1, 2] = s, c, -nTp[:, 0]
+        Ad[:, 2, 2] = 1.0
         out = np.full((N, 3, 3), np.nan)
         out[n] = 0.0
         for m in np.argsort(dist, kind="stable")[1:].tolist():
@@ -230,16 +231,31 @@ class _Graph:
             if p < 0:
                 break
             # mTn = mTp ∘ pTn: cov(mTn) = Ad(nTp) cov(mTp) Ad(nTp)^T + cov(pTn)
-            C = covs[(m, p)] if (m, p) in covs else covs[(p, m)]
-            if (m, p) not in covs:  # the edge measures pTm (covariance at m): mTp = its inverse, at p
+            e = edge.get((m, p))
+            if e is None:  # the edge measures pTm (covariance at m): mTp = its inverse, at p
                 J = g.adjoint(g.between(est[p], est[m]))
-                C = J @ C @ J.T
-            Ad = g.adjoint(g.between(est[n], est[p]))
-            out[m] = Ad @ C @ Ad.T + out[p]
+                C = J @ covs[edge[(p, m)]] @ J.T
+            else:
+                C = covs[e]
+            out[m] = Ad[p] @ C @ Ad[p].T + out[p]
         unreached = ~np.isfinite(out[:, 0, 0])
         out[unreached] = np.diag([1e12, 1e12, np.pi ** 2])
         self._rel = (*key, out)
         return out
+
+    def _fused_pairs(self) -> tuple[np.ndarray, np.ndarray]:
+        """The anchor pairs (P, 2) the relative poses join, in the order first measured, and the covariance (P, 3,
+        3) of their fused measurements (the parallel ones' information summed, in the order measured)."""
+        meas = self.measurements()
+        keep = meas.kind != "lost"  # a break says nothing the window could use: the other part is anywhere
+        ij = np.stack([meas.i[keep], meas.j[keep]], axis=1)
+        pairs, first, which = np.unique(ij, axis=0, return_index=True, return_inverse=True)
+        order = np.argsort(first, kind="stable")  # pairs by first measurement
+        rank = np.empty_like(order)
+        rank[order] = np.arange(len(order))
+        info = np.zeros((len(pairs), 3, 3))
+        np.add.at(info, rank[which.reshape(-1)], np.linalg.inv(meas.cov_iTj[keep]))
+        return pairs[order], np.linalg.inv(info)
 
     def add(self, i: int, j: int, T, cov, kind: str) -> None:
         self.i.append(i)
@@ -308,6 +324,8 @@ class _Graph:
 
         if not self.i:
             return RelativePoseMeasurements.empty()
+        if self._meas is not None and self._meas[0] == len(self.i):  # the edges only grow: cached until they do
+            return self._meas[1]
         cov = np.array(self.cov)
         kinds = np.array(self.kind, dtype=object)
         cov[kinds == "dead_reckoning"] *= self.dead_reckoning_inflation()
@@ -317,7 +335,9 @@ class _Graph:
         for n, (i, j, k) in enumerate(zip(self.i, self.j, self.kind, strict=True)):
             if k == "loop":
                 cov[n] *= groups[(i, j)]
-        return RelativePoseMeasurements(np.array(self.i), np.array(self.j), np.array(self.T), cov, kinds)
+        meas = RelativePoseMeasurements(np.array(self.i), np.array(self.j), np.array(self.T), cov, kinds)
+        self._meas = (len(self.i), meas)
+        return meas
 
     def reoptimise(self, optimize: Callable[[object], np.ndarray] | None) -> None:
         if optimize is None:
@@ -332,7 +352,7 @@ class _Graph:
 
 def build_problem(
     log: LogData,
-    observations: Sequence[ObjectObservation] = (),
+    observations: Sequence[ObjectObservation] | Callable[[], Sequence[ObjectObservation]] = (),
     config: FrontEndConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
     optimize: Callable[[object], np.ndarray] | None = None,
@@ -340,11 +360,15 @@ def build_problem(
     """Run the front end over a log (see the module docstring). Raises IngestError when the log lacks
     odometry or scans. ``progress(done, total)`` is called with the scans walked, about every 2% of them.
     ``optimize(problem) -> wTa`` re-estimates the anchors after loop closures (without it the front end keeps
-    its chained estimate, and loop windows grow with the distance since the start)."""
+    its chained estimate, and loop windows grow with the distance since the start). ``observations`` may be a
+    callable returning them, called once local SLAM is done (the run's vision stage, still running in a
+    thread)."""
     cfg = config or FrontEndConfig()
     run = _dead_reckoning(log, cfg)  # step 1
     closed, graph, loops = _local_slam(run, cfg, progress, optimize)  # steps 2-3
     anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
+    if callable(observations):  # still being made (the vision stage in a thread): needed from step 4 on
+        observations = observations()
     problem, skipped, drop = _problem(run, closed, anchors, graph, observations, cfg)  # steps 4-6
     return FrontEnd(tuple(closed), problem, run.dr_stamps_ns, run.dr_wTb, anchors, run.bTs, skipped,
                     loops.tried, tuple(sorted(drop)), graph.dead_reckoning_inflation(), run.noise,

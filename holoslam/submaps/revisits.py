@@ -16,7 +16,9 @@ lies within ``max_shift_m`` of the seed (the anchors are solved: a larger shift 
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -59,13 +61,16 @@ class RevisitConfig:
     huber_k: float = 1.0  # whitened residual where a node match's cost turns linear (a match may be an alias)
     match_floor_m: float = 0.01  # m, floor of a node match's sigma (the score surface's lattice floor is 1.4 cm)
     match_floor_deg: float = 0.2
+    # threads matching nodes at once (0: one per core). The matches are independent and the matcher's kernels
+    # release the GIL, so the result is the same for any count (it sets the stage's wall time, not its result)
+    threads: int = 0
 
     def __post_init__(self) -> None:
         from holoslam.errors import ConfigError
 
-        if self.sample_every < 1 or self.max_submaps < 1 or self.skip_recent < 0:
-            raise ConfigError(f"frontend.revisits: sample_every and max_submaps must be >= 1 and skip_recent >= 0, got "
-                              f"{self.sample_every}, {self.max_submaps}, {self.skip_recent}")
+        if self.sample_every < 1 or self.max_submaps < 1 or self.skip_recent < 0 or self.threads < 0:
+            raise ConfigError(f"frontend.revisits: sample_every and max_submaps must be >= 1, skip_recent and threads "
+                              f">= 0, got {self.sample_every}, {self.max_submaps}, {self.skip_recent}, {self.threads}")
         positive = {"keyframe_distance_m": self.keyframe_distance_m, "angular_window_deg": self.angular_window_deg,
                     "max_shift_m": self.max_shift_m, "step_sigma_m": self.step_sigma_m,
                     "step_sigma_deg": self.step_sigma_deg, "huber_k": self.huber_k,
@@ -129,6 +134,14 @@ def _nearest_owners(owners: np.ndarray, dists: np.ndarray, count: int) -> list[i
     return [int(k) for k in ks[np.argsort(nearest, kind="stable")[:count]]]
 
 
+def _cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # no affinity call (macOS, Windows)
+        return os.cpu_count() or 1
+
+
 def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: RevisitConfig | None = None,
                 match_cfg: MatchConfig | None = None,
                 progress: Callable[[int, int], None] | None = None) -> NodeMatches:
@@ -143,25 +156,33 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
                                       np.asarray(by_index[k].aTb))[:, :2] for k in order]) if order else np.zeros((0, 2))
     owner = np.concatenate([np.full(len(by_index[k].aTb), k) for k in order]) if order else np.zeros(0, np.int64)
     wTn = g.compose(wTa[nodes.host], nodes.aTb) if len(nodes) else np.zeros((0, 3))
-    out: list[tuple[int, int, np.ndarray, np.ndarray, float]] = []
-    tried = 0
+    tasks: list[tuple[int, int, np.ndarray]] = []  # (submap, node, the node's predicted pose in the submap)
     sample = range(0, len(nodes), cfg.sample_every)
-    for done, n in enumerate(sample):
-        if progress is not None and done % 200 == 0:
-            progress(done, len(sample))
+    for n in sample:
         d = np.hypot(keyframes[:, 0] - wTn[n, 0], keyframes[:, 1] - wTn[n, 1])
         near = (d <= cfg.keyframe_distance_m) & (np.abs(owner - nodes.host[n]) > cfg.skip_recent)
         if not near.any():
             continue
         for k in _nearest_owners(owner[near], d[near], cfg.max_submaps):
             grid = by_index[k].grid
-            if grid is None or not hasattr(grid, "prob"):
-                continue
-            tried += 1
-            pred = g.compose(g.inverse(wTa[k]), wTn[n])
-            m = match_scan(grid.prob, grid.origin, grid.resolution, nodes.b_points[n], pred, mcfg)
+            if grid is not None and hasattr(grid, "prob"):
+                tasks.append((k, n, g.compose(g.inverse(wTa[k]), wTn[n])))
+
+    def one(task: tuple[int, int, np.ndarray]):
+        k, n, pred = task
+        grid = by_index[k].grid
+        return match_scan(grid.prob, grid.origin, grid.resolution, nodes.b_points[n], pred, mcfg)
+
+    # the matches are independent and their kernels run without the GIL: a thread per core, results in order
+    workers = max(1, min(cfg.threads or _cores(), len(tasks)))
+    out: list[tuple[int, int, np.ndarray, np.ndarray, float]] = []
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for done, ((k, n, pred), m) in enumerate(zip(tasks, pool.map(one, tasks), strict=True)):
+            if progress is not None and done % 400 == 0:
+                progress(done, len(tasks))
             if m.ok and m.score >= cfg.min_score and np.hypot(*(m.aTb[:2] - pred[:2])) <= cfg.max_shift_m:
                 out.append((k, n, m.aTb, m.cov_aTb, m.score))
+    tried = len(tasks)
     if not out:
         return NodeMatches(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
                            np.zeros(0), tried)
