@@ -399,13 +399,16 @@ def segment_regions(
     clr: np.ndarray,
     res: float,
     merge_round,
+    room_clr: np.ndarray | None = None,
 ) -> RegionSegmentation:
     """Region merging on the robot space ``nav`` (bool (H, W)) cut by the candidates ``cands``
     [(cell, direction)] (``cut_lines``: the obstacle-to-obstacle line of each oriented cell): every round,
     ``merge_round(a, b, active, area, mx)`` is given the region (union-find root, 0 = none) on each side of the
     cuts still drawn (``active``: their indices in ``cands``) with every region's area (cells) and largest
     clearance (m), and returns which of them stay (bool per active cut), or None when no rule drops anything
-    (the rules are :func:`holoslam.maps.rooms.merge_round`)."""
+    (the rules are :func:`holoslam.maps.rooms.merge_round`). ``room_clr`` (m, (H, W), default ``clr``): the
+    clearance a region's largest clearance is taken from (the rooms' width between walls, furniture not
+    counted); ``clr`` draws the cuts."""
     import cv2
 
     h, w = nav.shape
@@ -423,14 +426,15 @@ def segment_regions(
     for cc in cut_cells:
         cover[cc] += 1
     total = int(sum(cc.shape[0] for cc in cut_cells))
-    regions = _Regions(nav, cover, clr_flat, total)
+    width_flat = clr_flat if room_clr is None else np.ascontiguousarray(room_clr, dtype=np.float64).reshape(-1)
+    regions = _Regions(nav, cover, width_flat, total)
     side_walks = _Walks(walks, regions.lab)
 
     def drop(j: int) -> None:
         cc = cut_cells[j]
         cover[cc] -= 1
         back = cc[(cover[cc] == 0) & nav_flat[cc]]
-        regions.restore(back, clr_flat)
+        regions.restore(back, width_flat)
         side_walks.restored(back)
 
     active = np.arange(n_cuts)
