@@ -107,14 +107,29 @@ def child(log_path: str, times: int, out: str, write: bool) -> None:
            "loops": {"tried": sub.loops_tried, "pairs": sub.loop_pairs, "search": sub.loop_search},
            "accuracy": _accuracy(result.report), "cells": list(result.grid.shape)}
     if write:  # the run folder as holoslam run writes it (pictures and results MCAP included)
+        from holoslam.io import atomic_folder
         from holoslam.io.run_folder import write_run
 
         folder = Path(out).parent / "run"
         peaks("writing the folder")
+        files: dict[str, float] = {}
+        checkpoint = atomic_folder._checkpoint
+
+        def file_peak(kind: str, name: str) -> None:  # each written file's own resident peak
+            files[name or kind] = round(_vm_mb("VmHWM"), 1)
+            peaks.close()
+            StagePeaks._reset()
+            checkpoint(kind, name)
+
         t0 = time.perf_counter()
-        write_run(result, folder)
+        atomic_folder._checkpoint = file_peak
+        try:
+            write_run(result, folder)
+        finally:
+            atomic_folder._checkpoint = checkpoint
         row["write_s"] = time.perf_counter() - t0
         peaks.close()
+        row["file_peak_mb"] = files
         row["files_mb"] = {p.name: round(p.stat().st_size / 2**20, 2) for p in sorted(folder.iterdir())}
     row["stage_peak_mb"] = peaks.peaks
     Path(out).write_text(json.dumps(row))
@@ -171,6 +186,8 @@ def main(argv: list[str] | None = None) -> int:
         print("    stages (s):", ", ".join(f"{k} {v}" for k, v in r["stages_s"].items())
               + (f", writing the folder {r['write_s']:.1f}" if "write_s" in r else ""))
         print("    stage peaks (MB RSS):", ", ".join(f"{k} {v:.0f}" for k, v in r["stage_peak_mb"].items()))
+        if "file_peak_mb" in r:
+            print("    writing, peak per file (MB RSS):", ", ".join(f"{k} {v:.0f}" for k, v in r["file_peak_mb"].items()))
         if "files_mb" in r:
             print("    files (MB):", ", ".join(f"{k} {v}" for k, v in r["files_mb"].items()))
         print(f"    map {r['cells'][1]} x {r['cells'][0]} cells; loops: {r['loops']}")

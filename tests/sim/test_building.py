@@ -86,3 +86,13 @@ def test_a_drive_needs_a_duration():
         simulate_building(SimConfig(duration_s=None))
     with pytest.raises(ConfigError, match="laser_dropout"):
         SimConfig(laser_dropout=1.0)
+
+
+def test_the_cli_writes_a_building_log(tmp_path, capsys):
+    from holoslam.cli import main
+
+    out = tmp_path / "b.mcap"
+    assert main(["simulate", "--building", "--seed", "26", "--duration", "20", "-o", str(out)]) == 0
+    assert out.is_file() and "scans: 28" in capsys.readouterr().out
+    assert main(["simulate", "--building", "--duration", "0", "-o", str(out)]) == 2
+    assert "--duration" in capsys.readouterr().err
