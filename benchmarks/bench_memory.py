@@ -119,7 +119,7 @@ def child(log_path: str, times: int, out: str, write: bool) -> None:
         files: dict[str, float] = {}
         checkpoint = atomic_folder._checkpoint
 
-        def file_peak(kind: str, name: str) -> None:  # each written file's own resident peak
+        def file_peak(kind: str, name: str = "") -> None:  # each written file's own resident peak
             files[name or kind] = round(_vm_mb("VmHWM"), 1)
             peaks.close()
             StagePeaks._reset()

@@ -128,13 +128,12 @@ def _reuse(kind: str, source: np.ndarray, key, compute):
     return out
 
 
-def clearance_map(free: np.ndarray, resolution: float = 1.0, reuse: bool = True) -> np.ndarray:
+def clearance_map(free: np.ndarray, resolution: float = 1.0) -> np.ndarray:
     """(H, W) float64, read-only: Euclidean distance (metres) from each free cell's centre to the nearest
     non-free cell (cells outside the grid count as non-free); 0 on non-free cells. One exact
     cv2.distanceTransform (DIST_MASK_PRECISE) on a zero-bordered uint8 copy, scaled to metres in the same pass as
-    the float64 conversion (the last result is reused for the same ``free`` array object; ``reuse`` False: a
-    one-off map that neither uses nor replaces the kept one)."""
-    if reuse and isinstance(free, np.ndarray) and free.dtype == bool:
+    the float64 conversion (the last result is reused for the same ``free`` array object)."""
+    if isinstance(free, np.ndarray) and free.dtype == bool:
         return _reuse("clearance", free, float(resolution), lambda: _clearance(free, resolution))
     return _clearance(free, resolution)
 
