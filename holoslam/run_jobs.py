@@ -190,6 +190,18 @@ def simulate(
     return simulate_to_file(out, cfg)
 
 
+def simulate_building(output: str | Path, seed: int = 26, duration_s: float | None = None) -> dict[str, Any]:
+    """A simulated drive through a large building (``holoslam.sim.building``: a 350 m floor, long corridors,
+    many rooms, the sparse laser of a hospital's log) written to ``output``; ``duration_s`` default 80 minutes."""
+    from holoslam.sim.building import simulate_building_to_file
+
+    if duration_s is not None and not duration_s > 0:
+        raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
+    summary = simulate_building_to_file(output, duration_s=4800.0 if duration_s is None else duration_s, seed=seed)
+    del summary["plan"]
+    return summary
+
+
 def simulate_days(output: str | Path, days: int, seed: int = 0, duration_s: float | None = None,
                   changes: tuple[int, ...] = (5, 10)) -> dict[str, Any]:
     """``days`` simulated days of the household into the folder ``output`` (``holoslam.sim.days``)."""

@@ -33,6 +33,7 @@ __all__ = [
     "trajectory_figure",
     "draw_rooms",
     "store_figure",
+    "map_figsize",
 ]
 
 PLACE_COLOURS = {"room": "tab:red", "doorway": "tab:green", "crossing": "tab:blue", "dead_end": "tab:purple"}
@@ -52,6 +53,16 @@ def _extent(grid: OccupancyGrid) -> tuple[float, float, float, float]:
 #: picture stays as sharp as its figure can show at up to twice the figure's dpi); a 7,000 x 5,000-cell
 #: floor would otherwise be resampled by matplotlib in float RGBA at full size (1.1 GB per layer, issue 26).
 IMAGE_PIXELS_PER_DISPLAY_PIXEL = 2.0
+
+
+def map_figsize(shape: tuple[int, int], size_in: float) -> tuple[float, float]:
+    """Inches of a map's figure: the map's longer side ``size_in`` long (a tall map is not drawn ``size_in``
+    wide, which made a 350 m building drawn north-south 24 inches tall: every layer resampled at full size,
+    1.5 GB per picture), plus room for the axes' labels."""
+    h, w = max(int(shape[0]), 1), max(int(shape[1]), 1)
+    if h <= w:
+        return (size_in, size_in * h / w + 0.5)
+    return (max(size_in * w / h, 2.0) + 1.0, size_in + 0.5)
 
 
 def _stride(ax: Axes, shape: tuple[int, int]) -> int:
@@ -331,7 +342,7 @@ def map_figure(
     from matplotlib.figure import Figure
 
     h, w = grid.shape
-    fig = Figure(figsize=(size_in, size_in * h / max(w, 1) + 0.5))
+    fig = Figure(figsize=map_figsize((h, w), size_in))
     ax = fig.add_subplot(1, 1, 1)
     draw_grid(ax, grid)
     if rooms is not None:
@@ -390,7 +401,7 @@ def store_figure(ex: Any, object_ids: tuple[str, ...] = (), title: str | None = 
 
     grid = ex.grid
     h, w = grid.shape
-    fig = Figure(figsize=(size_in, size_in * h / max(w, 1) + 0.5))
+    fig = Figure(figsize=map_figsize((h, w), size_in))
     ax = fig.add_subplot(1, 1, 1)
     draw_grid(ax, grid)
     colours = [f"C{k % 10}" for k in range(len(ex.trajectories))]

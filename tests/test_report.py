@@ -153,3 +153,18 @@ def test_a_background_clock_times_into_the_same_timings_and_announces_stages_wit
         clock.progress_of("front end")(1, 2)
     assert list(clock.total()) == ["vision", "front end", "total"]
     assert calls == [("vision",), ("front end",), ("front end", 1, 2)]
+
+
+def test_each_stage_gives_its_freed_memory_back(monkeypatch):
+    """Issue 26: at the end of every stage the C heap's free pages go back to the OS (glibc malloc_trim): an
+    80-minute building log's front end left 0.63 GB of freed heap resident otherwise."""
+    from holoslam import timing
+
+    calls: list[int] = []
+    monkeypatch.setattr(timing, "_TRIM", calls.append)
+    clock = timing.StageClock()
+    with clock.stage("a"):
+        pass
+    with pytest.raises(RuntimeError), clock.stage("b"):
+        raise RuntimeError("a failing stage gives its memory back too")
+    assert calls == [0, 0] and set(clock.timings) == {"a", "b"}

@@ -99,3 +99,19 @@ def test_covariance_ellipse_axes():
     e = viz.covariance_ellipse(np.array([1.0, 2.0, 0.0]), np.diag([4.0, 1.0, 0.1]), n_sigma=1.0, n_points=400)
     assert np.allclose(e.mean(axis=0), [1.0, 2.0], atol=0.02)
     assert np.ptp(e[:, 0]) == pytest.approx(4.0, rel=1e-3) and np.ptp(e[:, 1]) == pytest.approx(2.0, rel=1e-3)
+
+
+def test_a_tall_map_is_drawn_as_large_as_a_wide_one():
+    """Issue 26: a 350 m building drawn north-south (7,072 x 2,439 cells) made a 24-inch tall figure whose
+    axes showed every cell: each picture resampled the grid at full size (1.5 GB). The longer side is
+    ``size_in``, so the grid is pooled to the figure's pixels (the picture's peak: +60 MB)."""
+    assert viz.map_figsize((2439, 7072), 8.0) == pytest.approx((8.0, 8.0 * 2439 / 7072 + 0.5))
+    w, h = viz.map_figsize((7072, 2439), 8.0)
+    assert h == 8.5 and w == pytest.approx(8.0 * 2439 / 7072 + 1.0)
+    assert viz.map_figsize((10_000, 10), 8.0) == (3.0, 8.5)  # a corridor: room for the axes
+    free = np.ones((3000, 300), dtype=bool)
+    free[[0, -1], :] = free[:, [0, -1]] = False
+    fig = viz.map_figure(OccupancyGrid.from_free_mask(free, 0.05))
+    assert fig.get_size_inches()[1] == 8.5
+    (im,) = fig.axes[0].get_images()
+    assert im.get_array().shape[0] <= 1500  # pooled: the axes are less than 750 pixels tall

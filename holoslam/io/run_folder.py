@@ -170,31 +170,37 @@ def _pictures(
     out: Path, wTb, dr, wTa, cov_wTa, grid, topology, holographic, planning, gt=None, rooms=None
 ) -> list[Path]:
     from holoslam import viz
+    from holoslam.timing import release_free_memory
 
-    written = []
     trajs = {"dead reckoning": dr, "optimised": wTb}
     if gt is not None:
         trajs["ground truth"] = gt
-    fig = viz.trajectory_figure(trajs, grid=grid, title="trajectory", every=max(1, len(wTb) // 60))
-    if cov_wTa is not None and np.all(np.isfinite(cov_wTa)):
-        viz.draw_trajectory(
-            fig.axes[0], wTa, cov_wTa, every=1, colour="black", label="anchors (2-sigma ellipses)", points=True
-        )
-        fig.axes[0].legend(fontsize=7)
-    for name, f in (
-        ("trajectory.png", fig),
-        (
-            "map_topology.png",
-            viz.map_figure(grid, topology=topology, title="occupancy grid and thinning topology"),
-        ),
-        (
-            "holographic.png",
-            viz.map_figure(grid, holographic=holographic, rooms=rooms, title="holographic graph and rooms"),
-        ),
-        ("planning.png", viz.map_figure(grid, planning=planning, title="two-layer planning graph (regions)")),
-    ):
+
+    def trajectory() -> Any:
+        fig = viz.trajectory_figure(trajs, grid=grid, title="trajectory", every=max(1, len(wTb) // 60))
+        if cov_wTa is not None and np.all(np.isfinite(cov_wTa)):
+            viz.draw_trajectory(
+                fig.axes[0], wTa, cov_wTa, every=1, colour="black", label="anchors (2-sigma ellipses)", points=True
+            )
+            fig.axes[0].legend(fontsize=7)
+        return fig
+
+    figures: tuple[tuple[str, Callable[[], Any]], ...] = (
+        ("trajectory.png", trajectory),
+        ("map_topology.png",
+         lambda: viz.map_figure(grid, topology=topology, title="occupancy grid and thinning topology")),
+        ("holographic.png",
+         lambda: viz.map_figure(grid, holographic=holographic, rooms=rooms, title="holographic graph and rooms")),
+        ("planning.png", lambda: viz.map_figure(grid, planning=planning, title="two-layer planning graph (regions)")),
+    )  # fmt: skip
+    written = []
+    for name, make in figures:  # one figure alive at a time: each holds its pooled images and artists
         p = out / name
-        f.savefig(p, dpi=110)
+        fig = make()
+        fig.savefig(p, dpi=110)
+        fig.clf()
+        del fig
+        release_free_memory()
         written.append(p)
     return written
 

@@ -108,6 +108,14 @@ def cast_counts(ox, oy, ex, ey, hit, h, w):
     finite) on an h x w grid; ``hit`` (bool) marks beams with a return (their end cell counts a hit)."""
     hits = np.zeros(h * w, np.int64)
     misses = np.zeros(h * w, np.int64)
+    cast_counts_into(ox, oy, ex, ey, hit, h, w, hits, misses)
+    return hits, misses
+
+
+@nb.njit(**JIT)
+def cast_counts_into(ox, oy, ex, ey, hit, h, w, hits, misses):
+    """``cast_counts`` added into the caller's flat (h * w,) count arrays ``hits`` and ``misses`` (any integer
+    type: a run's grid keeps int32 counts, 8 bytes a cell for both, and no full-size array per chunk)."""
     for b in range(ox.shape[0]):
         x0 = ox[b]
         y0 = oy[b]
@@ -135,4 +143,3 @@ def cast_counts(ox, oy, ex, ey, hit, h, w):
                 cs = int(math.floor(x0 + t1 * dx))
                 rs = int(math.floor(y0 + t1 * dy))
         _walk(misses, c, r, cs, rs, x0, y0, ax, ay, h, w)
-    return hits, misses

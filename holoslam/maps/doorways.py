@@ -399,13 +399,17 @@ def segment_regions(
     clr: np.ndarray,
     res: float,
     merge_round,
+    room_clr: np.ndarray | None = None,
 ) -> RegionSegmentation:
     """Region merging on the robot space ``nav`` (bool (H, W)) cut by the candidates ``cands``
     [(cell, direction)] (``cut_lines``: the obstacle-to-obstacle line of each oriented cell): every round,
     ``merge_round(a, b, active, area, mx)`` is given the region (union-find root, 0 = none) on each side of the
     cuts still drawn (``active``: their indices in ``cands``) with every region's area (cells) and largest
     clearance (m), and returns which of them stay (bool per active cut), or None when no rule drops anything
-    (the rules are :func:`holoslam.maps.rooms.merge_round`)."""
+    (the rules are :func:`holoslam.maps.rooms.merge_round`). ``room_clr`` (m, (H, W), default ``clr``): the
+    clearance a region's largest clearance is taken from (the rooms' width between walls, furniture not
+    counted; float32 will do: it is read when the regions are made and at the cuts' cells, and not kept); ``clr``
+    draws the cuts."""
     import cv2
 
     h, w = nav.shape
@@ -423,14 +427,23 @@ def segment_regions(
     for cc in cut_cells:
         cover[cc] += 1
     total = int(sum(cc.shape[0] for cc in cut_cells))
-    regions = _Regions(nav, cover, clr_flat, total)
+    # the rooms' width: read at the start and at the cuts' cells only, so that it need not stay in memory
+    width_flat = clr_flat if room_clr is None else np.ascontiguousarray(room_clr).reshape(-1)
+    regions = _Regions(nav, cover, width_flat, total)
+    cut_width = None if room_clr is None else [width_flat[cc] for cc in cut_cells]
+    del room_clr, width_flat
     side_walks = _Walks(walks, regions.lab)
 
     def drop(j: int) -> None:
         cc = cut_cells[j]
         cover[cc] -= 1
-        back = cc[(cover[cc] == 0) & nav_flat[cc]]
+        sel = (cover[cc] == 0) & nav_flat[cc]
+        back = cc[sel]
+        first = regions.next
         regions.restore(back, clr_flat)
+        if cut_width is not None and back.shape[0]:  # the regions' largest width: that of their walls
+            roots = regions.roots(np.arange(first, first + back.shape[0]))
+            np.maximum.at(regions.mx, roots, cut_width[j][sel])
         side_walks.restored(back)
 
     active = np.arange(n_cuts)

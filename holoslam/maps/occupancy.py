@@ -37,6 +37,8 @@ __all__ = ["build_grid", "beam_endpoints", "CHUNK_BEAMS"]
 # beams per chunk of ray casting: ~10 float64 arrays of this length live at once (~80 MB), enough to keep numpy's
 # per-call overhead negligible (a 5 Hz, 180-beam log casts ~5,500 scans per chunk)
 CHUNK_BEAMS = 1_000_000
+# cells per block when counts become occupancy: ~6 float64 arrays of this length live at once (~50 MB)
+CHUNK_CELLS = 1_000_000
 
 
 def _logit(p: float) -> float:
@@ -120,6 +122,18 @@ def _chunks(scans: Sequence[Scan], max_beams: int | None = None) -> list[slice]:
     return out
 
 
+def _occupancy(hits: np.ndarray, misses: np.ndarray, l_hit: float, l_miss: float, l_max: float) -> np.ndarray:
+    """Occupancy (int8, 0-100, -1 unknown) of flat hit / miss counts: the clipped log odds as a percentage,
+    in blocks of ``CHUNK_CELLS`` cells so that the float64 intermediates stay small on a building's grid."""
+    out = np.empty(hits.shape[0], np.int8)
+    for a in range(0, hits.shape[0], CHUNK_CELLS):
+        hb, mb = hits[a:a + CHUNK_CELLS], misses[a:a + CHUNK_CELLS]
+        L = np.clip(hb * l_hit + mb * l_miss, -l_max, l_max)
+        prob = 100.0 / (1.0 + np.exp(-L))
+        out[a:a + CHUNK_CELLS] = np.where((hb + mb) > 0, np.rint(prob), -1)
+    return out
+
+
 def build_grid(
     wTs: np.ndarray,
     scans: Sequence[Scan],
@@ -170,13 +184,14 @@ def build_grid(
     w = int(np.ceil((hi[0] - lo[0]) / resolution - 1e-9))
     h = int(np.ceil((hi[1] - lo[1]) / resolution - 1e-9))
     w, h = max(w, 1), max(h, 1)
-    hits = np.zeros(h * w, np.int64)
-    misses = np.zeros(h * w, np.int64)
+    # int32 counts (a cell would need 2^31 beams through it to overflow), accumulated in place chunk by chunk
+    hits = np.zeros(h * w, np.int32)
+    misses = np.zeros(h * w, np.int32)
     for sl in chunks:
         origins, ends, hit = only if only is not None else beams_of(sl)
         u0 = (origins - lo) / resolution  # cell units: cell (row, col) = (floor(u[1]), floor(u[0]))
         u1 = (ends - lo) / resolution
-        ch, cm = _kernel().cast_counts(
+        _kernel().cast_counts_into(
             np.ascontiguousarray(u0[:, 0]),
             np.ascontiguousarray(u0[:, 1]),
             np.ascontiguousarray(u1[:, 0]),
@@ -184,13 +199,10 @@ def build_grid(
             np.ascontiguousarray(hit),
             h,
             w,
+            hits,
+            misses,
         )
-        hits += ch
-        misses += cm
-
-    L = np.clip(hits * _logit(p_hit) + misses * _logit(p_miss), -l_max, l_max)
-    prob = 100.0 / (1.0 + np.exp(-L))
-    occ = np.where((hits + misses) > 0, np.rint(prob), -1).astype(np.int8).reshape(h, w)
+    occ = _occupancy(hits, misses, _logit(p_hit), _logit(p_miss), l_max).reshape(h, w)
     return OccupancyGrid(
         occ,
         float(resolution),

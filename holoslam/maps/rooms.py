@@ -25,7 +25,10 @@ setting of :class:`RoomRules` in metres or m^2, set by how buildings are built, 
    then the narrowest.
 3. **Regions**: the space where a disc of half the narrowest door fits (gaps narrower than any door join
    nothing), with the cuts drawn in, 4-connected.
-4. **Merging**, one rule per round, in this order (:func:`merge_round`):
+4. **Merging**, one rule per round, in this order (:func:`merge_round`). A region's *largest clearance* is
+   measured between walls: the free-standing furniture of step 2 counts as floor (a table, a desk or a bed in a
+   room does not make the room narrower, so a furnished room is no more a fragment or a narrowing than an
+   empty one); the cuts' own clearance is the free space's.
 
    a. a cut with the same region (or none) on both sides separates nothing;
    b. a *fragment* (less than ``min_room_area_m2``, the smallest room, a WC compartment of about 0.9 x 1.4 m,
@@ -191,6 +194,25 @@ def _furniture_islands(free: np.ndarray, res: float, rules: RoomRules):
     return lab, furn
 
 
+def _wall_clearance(free: np.ndarray, res: float, islands) -> np.ndarray | None:
+    """The clearance (m, float32 (H, W)) of the free space with the free-standing furniture (``islands``:
+    :func:`_furniture_islands`) counted as floor: a room's width between its walls, which the merging rules
+    compare (a table or a desk in a room does not make the room narrower, nor a room with one a fragment).
+    None when there is no such furniture (then it is the clearance itself)."""
+    import cv2
+
+    olab, furn = islands
+    if not furn[1:].any():
+        return None
+    floor = furn[olab]
+    floor |= free
+    pad = cv2.copyMakeBorder(floor.view(np.uint8), 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    del floor
+    out = np.ascontiguousarray(cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1])
+    out *= np.float32(res)  # float32: 4 bytes a cell on a building's map (the clearance_map's float64 is 8)
+    return out
+
+
 def _label_stats(labels: np.ndarray, values: np.ndarray, n: int):
     """Per label 0..n-1: the largest value (>= 0), the last flat index (raster order) holding it (-1 for an
     empty label) and the number of cells."""
@@ -326,7 +348,7 @@ def _grow(labels: np.ndarray, free: np.ndarray, *, in_place: bool = False) -> np
     return out
 
 
-def _cuts(free: np.ndarray, clr: np.ndarray, res: float, r: RoomRules, skeleton):
+def _cuts(free: np.ndarray, clr: np.ndarray, res: float, r: RoomRules, skeleton, islands):
     """Steps 1 and 2 of the module docstring: the candidate cuts left after the wall and constriction tests and
     one per opening, as ([(cell, direction)], kind per cut (door / opening), {cell: (p1, p2)} cut lines)."""
     from holoslam.maps.doorways import doorway_candidates, opening_candidates, orient_cuts
@@ -342,7 +364,7 @@ def _cuts(free: np.ndarray, clr: np.ndarray, res: float, r: RoomRules, skeleton)
     if with_line.shape[0]:
         p1 = np.array([lines[keys[i]][0] for i in with_line], dtype=np.float64)
         p2 = np.array([lines[keys[i]][1] for i in with_line], dtype=np.float64)
-        olab, furn = _furniture_islands(free, res, r)
+        olab, furn = islands
         i1, i2 = p1.astype(np.int64), p2.astype(np.int64)
         ok[with_line] &= ~(furn[olab[i1[:, 0], i1[:, 1]]] | furn[olab[i2[:, 0], i2[:, 1]]])
         sel = np.flatnonzero(kind[with_line] == OPENING)
@@ -376,7 +398,8 @@ def segment_rooms(
         raise MapError(f"free space must be a 2-D mask, got shape {free.shape}")
     clr = clearance_map(free, res) if clearance is None else clearance
 
-    cands, kind, lines = _cuts(free, clr, res, r, skeleton)  # 1, 2
+    islands = _furniture_islands(free, res, r)
+    cands, kind, lines = _cuts(free, clr, res, r, skeleton, islands)  # 1, 2
     # 3. regions: the space a disc of half the narrowest door fits, cut
     rad = max(int(np.floor(0.5 * r.door_width_min_m / res)), 1)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * rad + 1, 2 * rad + 1))
@@ -387,7 +410,10 @@ def segment_rooms(
     def rules_round(a, b, active, area, mx):
         return merge_round(a, b, cut_clr[active], area, mx, r, res)
 
-    seg = segment_regions(cands, lines, nav, free, clr, res, rules_round)
+    width = [_wall_clearance(free, res, islands)]
+    del islands
+    # handed over (popped: no reference left here), so segment_regions frees it once it has read what it needs
+    seg = segment_regions(cands, lines, nav, free, clr, res, rules_round, room_clr=width.pop())
     # 5. rooms
     return _rooms(seg, cands, kind, lines, free, clr, res, r)
 

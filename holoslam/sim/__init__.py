@@ -8,7 +8,8 @@ Entry points::
 
 Modules: ``world`` (floor plan, furniture, 35 labelled objects, ray casting, free space), ``route`` (the
 teleoperated-looking tour and its true trajectory), ``sensors`` (noise models), ``render`` (camera images),
-``writer`` (MCAP), ``core`` (config and run).
+``writer`` (MCAP), ``core`` (config and run). ``building``: another world, a 350 m building of long corridors
+and 300+ rooms driven for 80 minutes with a hospital robot's sparse laser (``holoslam simulate --building``).
 
 The world (``holoslam.sim.world``): 9.5 m x 10.5 m; living room, dining room, kitchen, study, two bedrooms,
 balcony; six doorways 0.95-1.2 m wide; 25 pieces of furniture; 35 objects ``O01``..``O35`` with QR labels

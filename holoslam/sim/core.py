@@ -50,6 +50,7 @@ class SimConfig:
     laser_beams: int = 181  # evenly over laser_fov_deg, the first at -fov / 2
     laser_fov_deg: float = 180.0
     laser_range_max_m: float = 8.0
+    laser_dropout: float = 0.0  # share of beams that return nothing at random (glass, dark or shiny surfaces)
     image_rate_hz: float = 0.25  # most snapshots per second
     resnap_s: float = 60.0  # the operator does not photograph the same label again within this time
     image_width: int = 640
@@ -90,6 +91,7 @@ class SimConfig:
             ("laser_beams", 2 <= self.laser_beams <= 10_000, "2..10000 beams"),
             ("laser_fov_deg", 0 < self.laser_fov_deg <= 360, "a field of view in (0, 360] degrees"),
             ("laser_range_max_m", 0 < self.laser_range_max_m <= 200, "(0, 200] metres"),
+            ("laser_dropout", 0 <= self.laser_dropout < 1, "a share of beams in [0, 1)"),
             ("wall_codes", 0 <= self.wall_codes <= 12, "0..12"),
             ("sizeless_labels", 0 <= self.sizeless_labels <= 8, "0..8"),
             ("camera_rate_hz", 0 <= self.camera_rate_hz <= 60, "0 (no stream) or up to 60 frames per second"),
@@ -131,7 +133,8 @@ class SimConfig:
             for extra in ("camera_rate_hz", "camera_exposure_ms", "camera_dwell_s"):
                 del d[extra]
         for name, default in (("odom_lateral_sigma", 0.0), ("odom_covariance", "propagated"), ("laser_beams", 181),
-                              ("laser_fov_deg", 180.0), ("laser_range_max_m", 8.0)):
+                              ("laser_fov_deg", 180.0), ("laser_range_max_m", 8.0),
+                              ("laser_dropout", 0.0)):
             if getattr(self, name) == default:  # likewise: absent from a differential-drive profile's metadata
                 del d[name]
         d["generator"] = "holoslam.sim.simulate_household"
@@ -198,6 +201,7 @@ def simulate_household(config: SimConfig = SimConfig(), world: World | None = No
     scans = laser_scans(
         world, traj.stamps_ns, traj.wTb, rng(3), rate_hz=config.laser_rate_hz, sigma=config.laser_sigma,
         beams=config.laser_beams, fov_deg=config.laser_fov_deg, range_max=config.laser_range_max_m,
+        dropout=config.laser_dropout,
     )
     snaps: list = []
     if config.camera_rate_hz > 0:

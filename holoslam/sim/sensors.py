@@ -271,7 +271,12 @@ def laser_scans(
     range_max: float = 8.0,
     beams: int = 181,
     fov_deg: float = 180.0,
+    dropout: float = 0.0,
 ) -> ScanStream:
+    """Scans at ``rate_hz`` along the trajectory: ``beams`` over ``fov_deg`` cast against the world's walls and
+    furniture (only the segments within ``range_max`` of a block of scans' origins, which gives the same
+    ranges), noise ``sigma``, 1 mm steps, no return (+inf) beyond ``range_max`` and, with ``dropout`` > 0, on
+    that share of beams at random (drawn after the range noise, so the noise is that of a run without)."""
     period = int(round(1e9 / rate_hz))
     at = np.arange(stamps_ns[0] + offset_ns, stamps_ns[-1], period, dtype=np.int64)
     P = interpolate_poses(stamps_ns, wTb, at)
@@ -279,13 +284,19 @@ def laser_scans(
     step_deg = fov_deg / (beams - 1) if fov_deg < 360 else fov_deg / beams  # a full turn does not repeat a beam
     beam_angles = np.radians(-fov_deg / 2 + step_deg * np.arange(beams, dtype=np.float64))
     segs = world.obstacle_segments()
+    lo_xy, hi_xy = np.minimum(segs[:, :2], segs[:, 2:]), np.maximum(segs[:, :2], segs[:, 2:])
     true = np.empty((len(at), beams))
     for i in range(0, len(at), 64):
         sl = slice(i, i + 64)
-        true[sl] = raycast(segs, wTl[sl, :2], wTl[sl, 2:3] + beam_angles[None, :], range_max)
+        o = wTl[sl, :2]
+        near = np.all((hi_xy >= o.min(axis=0) - range_max) & (lo_xy <= o.max(axis=0) + range_max), axis=1)
+        true[sl] = (raycast(segs[near], o, wTl[sl, 2:3] + beam_angles[None, :], range_max) if near.any()
+                    else np.inf)
     noisy = true + sigma * rng.standard_normal(true.shape)
     noisy = np.round(noisy * 1000.0) / 1000.0
     noisy[~np.isfinite(true) | (noisy > range_max)] = np.inf
+    if dropout > 0:
+        noisy[rng.random(noisy.shape) < dropout] = np.inf
     return ScanStream(
         at, noisy.astype(np.float32), true, wTl, float(beam_angles[0]), float(math.radians(step_deg)), 0.05,
         range_max

@@ -111,11 +111,13 @@ def _messages(run) -> list[tuple[int, str, str, dict]]:
     return out
 
 
-def write_household_log(run, path: str | Path, chunk_size: int = 1024 * 1024) -> dict[str, int]:
+def write_household_log(run, path: str | Path, chunk_size: int = 1024 * 1024,
+                        metadata: dict[str, str] | None = None) -> dict[str, int]:
     """Write ``run`` to ``path`` (MCAP, ROS 2 profile) through ``holoslam.io.ros2_messages``; returns the message
-    count per topic."""
+    count per topic. ``metadata`` replaces entries of the ``holoslam`` record (another generator and world)."""
     path = Path(path)
     meta = run.config.metadata()
+    meta.update(metadata or {})
     meta["duration_s"] = repr(round(float((run.stamps_ns[-1] - run.stamps_ns[0]) * 1e-9), 6))
     meta["t0_ns"] = str(int(run.stamps_ns[0]))
     try:

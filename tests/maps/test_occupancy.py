@@ -270,3 +270,30 @@ def test_casting_in_chunks_gives_the_same_grid_and_names_the_scan_at_fault(monke
     bad = Scan(0, "laser", 0.0, 0.1, 0.05, np.inf, np.array([np.inf, 1.0], np.float32), np.array([False, True]))
     with pytest.raises(MapError, match=r"scans \[3\] have beams without a return"):
         build_grid(np.vstack([poses, np.zeros((1, 3))]), [*scans, bad])
+
+
+def test_occupancy_in_blocks_of_cells_equals_the_whole(monkeypatch):
+    """Issue 26: counts become occupancy in blocks of ``CHUNK_CELLS`` cells (a building's grid would otherwise
+    hold several full-size float64 arrays at once); blocks of 7 cells, which split rows, give the same grid."""
+    from holoslam.maps import occupancy
+
+    poses = np.array([[1.0, 1.0, 0.3], [3.0, 2.0, -1.0]])
+    scans = [scan_at(p, n=361) for p in poses]
+    whole = build_grid(poses, scans, 0.1)
+    assert whole.occupancy.size > 7 and {-1, 0}.issubset(set(np.unique(whole.occupancy).tolist()))
+    monkeypatch.setattr(occupancy, "CHUNK_CELLS", 7)
+    np.testing.assert_array_equal(build_grid(poses, scans, 0.1).occupancy, whole.occupancy)
+
+
+def test_counts_added_into_int32_arrays_equal_the_int64_counts():
+    from holoslam.maps._raycast_fast import cast_counts_into
+
+    rng = np.random.default_rng(3)
+    o, e = rng.uniform(-2, 9, (200, 2)), rng.uniform(-2, 9, (200, 2))
+    hit = rng.random(200) < 0.7
+    h64, m64 = cast_counts(o[:, 0].copy(), o[:, 1].copy(), e[:, 0].copy(), e[:, 1].copy(), hit, 6, 7)
+    h32, m32 = np.ones(42, np.int32), np.ones(42, np.int32)  # added into: start from 1
+    cast_counts_into(o[:, 0].copy(), o[:, 1].copy(), e[:, 0].copy(), e[:, 1].copy(), hit, 6, 7, h32, m32)
+    np.testing.assert_array_equal(h32, h64 + 1)
+    np.testing.assert_array_equal(m32, m64 + 1)
+    assert m64.sum() > 500 and h64.sum() > 30  # beams in and out of the grid, hits among them
