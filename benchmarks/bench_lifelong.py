@@ -81,9 +81,50 @@ def _photographable_s(world, oid: str, log_path: Path, step_s: float = 0.5) -> f
     return total
 
 
-def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:  # noqa: PLR0915 (one table)
+def _positions(r, d: dict, w2m) -> tuple[dict, dict]:
+    """The day's unchanged objects: object -> (x, y in the map, true x, y), in the store (seen where expected;
+    world -> map by day 1's true start) and in the day's own run (its frame -> map by the day's true start)."""
+    changed = {c["id"] for c in d["changes"]}
+    p_life, p_single = {}, {}
+    for o in r.update.objects:
+        if o.status == "seen" and o.object_id not in changed and o.object_id in d["objects"]:
+            p_life[o.object_id] = (*_map_xy(w2m, o.w_xy)[0], *d["objects"][o.object_id][:2])
+    for o in r.stages.objects:
+        if o.object_id in d["objects"] and o.object_id not in changed:
+            p_single[o.object_id] = (*_map_xy(d["start_pose"], o.w_position[:2])[0], *d["objects"][o.object_id][:2])
+    return p_life, p_single
+
+
+def _score_gone(det: dict, tru: dict, d: dict, world_before, log: Path, acc: list) -> None:
+    """Adds to ``acc`` (detected and absent, detected, removed and in view, of those detected, late): "gone" by
+    what the robot could know (``sim_part``)."""
+    absent = [o for o, v in det.items() if v == "gone" and o not in d["objects"]]
+    acc[0] += len(absent)
+    acc[1] += sum(1 for v in det.values() if v == "gone")
+    acc[4] += sum(1 for o in absent if tru.get(o) != "gone")
+    for o, v in tru.items():
+        if v == "gone" and _photographable_s(world_before, o, log) >= 8.0:
+            acc[2] += 1
+            acc[3] += det.get(o) == "gone"
+
+
+def _print_changes(counts: dict, gone_fair: list, unseen_new: int) -> None:
+    print("\nchange detection  precision  recall  (detected / true)")
+    for k, (tp, nd, nt) in counts.items():
+        print(f"  {k:<6}          {tp / nd if nd else float('nan'):9.3f} {tp / nt if nt else float('nan'):7.3f}  "
+              f"({nd} / {nt})")
+    print(f"  gone, by what could be known: precision {gone_fair[0] / max(gone_fair[1], 1):.3f} (absent that day; "
+          f"{gone_fair[4]} of them removed a day or more before), recall {gone_fair[3] / max(gone_fair[2], 1):.3f} "
+          f"of the {gone_fair[2]} removals whose place the camera could have photographed for 8 s")
+    tp, nd, _nt = counts["new"]
+    if unseen_new:
+        print(f"  new, not counting the {unseen_new} objects there from day 1 that no earlier session had located: "
+              f"precision {tp / max(nd - unseen_new, 1):.3f}")
+
+
+def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:
     from holoslam.lifelong.session import run_session
-    from holoslam.sim.days import simulate_days
+    from holoslam.sim.days import household_days, simulate_days
 
     if not (out / "days.json").exists():
         simulate_days(out, days, seed=seed, duration_s=duration)
@@ -91,15 +132,12 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:  
     store = out / "home.holomap"
     store.unlink(missing_ok=True)
     w2m = truth["days"][0]["start_pose"]
-    from holoslam.sim.days import household_days
-
     worlds = [d.world for d in household_days(len(truth["days"]), truth["seed"])]
     counts = {k: [0, 0, 0] for k in KINDS.values()}  # true positives, detected, true
     # "gone" scored by what the robot could know: a detected gone is right when the object is not in the home
     # that day (removed that day or before, and not yet detected); a removal counts for recall when the simulated
     # camera could have photographed its place for two snapshot periods (8 s) of the day (else nothing tells it)
-    gone_fair = [0, 0, 0, 0]  # detected and absent, detected, removed and in view, of those detected
-    late = 0
+    gone_fair = [0, 0, 0, 0, 0]  # detected and absent, detected, removed and in view, of those detected, late
     errs_life, errs_single, relocs, last = [], [], [], None
     detail = []  # per day: truth, detected, the unseen objects' camera s in view, the unchanged objects' errors
     ever_located: set[str] = set()
@@ -120,46 +158,22 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:  
             counts[k][2] += sum(1 for v in tru.values() if v == k)
         print(f"{d['day']:>3}  {str(s.joined):<6} {s.joined_by:<8} {s.relocalisation_s:7.1f} {run_s:6.1f}   "
               f"{sorted(tru.items())} | {sorted(det.items())}")
-        absent = [o for o, v in det.items() if v == "gone" and o not in d["objects"]]
-        gone_fair[0] += len(absent)
-        gone_fair[1] += sum(1 for v in det.values() if v == "gone")
-        late += sum(1 for o in absent if tru.get(o) != "gone")
-        for o, v in tru.items():
-            if v == "gone" and _photographable_s(worlds[d["day"] - 2], o, out / d["log"]) >= 8.0:
-                gone_fair[2] += 1
-                gone_fair[3] += det.get(o) == "gone"
+        if d["day"] > 1:
+            _score_gone(det, tru, d, worlds[d["day"] - 2], out / d["log"], gone_fair)
         unseen_new += sum(1 for o, v in det.items() if v == "new" and o not in tru and o not in ever_located
                           and o in truth["days"][0]["objects"])
         ever_located |= {o.object_id for o in r.stages.objects}
-        changed = set(tru)
-        e_life, e_single = {}, {}
-        p_life, p_single = {}, {}  # object -> (x, y in the map by the start pose, true x, y)
-        for o in r.update.objects:
-            if o.status == "seen" and o.object_id not in changed and o.object_id in d["objects"]:
-                p_life[o.object_id] = (*_map_xy(w2m, o.w_xy)[0], *d["objects"][o.object_id][:2])
-        for o in r.stages.objects:
-            if o.object_id in d["objects"] and o.object_id not in changed:
-                p_single[o.object_id] = (*_map_xy(d["start_pose"], o.w_position[:2])[0], *d["objects"][o.object_id][:2])
+        p_life, p_single = _positions(r, d, w2m)
         e_life = {k: float(np.hypot(v[0] - v[2], v[1] - v[3])) for k, v in p_life.items()}
         e_single = {k: float(np.hypot(v[0] - v[2], v[1] - v[3])) for k, v in p_single.items()}
         errs_life += list(e_life.values())
         errs_single += list(e_single.values())
         detail.append({"day": d["day"], "truth": tru, "detected": det, "unseen_in_view_s": s.unseen_in_view_s,
-                       "err_store_m": e_life, "err_single_m": e_single, "xy_store": p_life, "xy_single": p_single, "reloc_s": s.relocalisation_s,
-                       "run_s": run_s, "joined_by": s.joined_by})
+                       "err_store_m": e_life, "err_single_m": e_single, "xy_store": p_life, "xy_single": p_single,
+                       "reloc_s": s.relocalisation_s, "run_s": run_s, "joined_by": s.joined_by})
         (out / "sim_detail.json").write_text(json.dumps(detail, indent=1))
         last = r
-    print("\nchange detection  precision  recall  (detected / true)")
-    for k, (tp, nd, nt) in counts.items():
-        print(f"  {k:<6}          {tp / nd if nd else float('nan'):9.3f} {tp / nt if nt else float('nan'):7.3f}  "
-              f"({nd} / {nt})")
-    print(f"  gone, by what could be known: precision {gone_fair[0] / max(gone_fair[1], 1):.3f} (absent that day; "
-          f"{late} of them removed a day or more before), recall {gone_fair[3] / max(gone_fair[2], 1):.3f} of the "
-          f"{gone_fair[2]} removals whose place the camera could have photographed for 8 s")
-    tp, nd, _nt = counts["new"]
-    if unseen_new:
-        print(f"  new, not counting the {unseen_new} objects there from day 1 that no earlier session had located: "
-              f"precision {tp / max(nd - unseen_new, 1):.3f}")
+    _print_changes(counts, gone_fair, unseen_new)
     rm = lambda e: float(np.sqrt(np.mean(np.square(e)))) if e else float("nan")  # noqa: E731
     per_day = [(x["day"], rm(list(x["err_store_m"].values())), rm(list(x["err_single_m"].values()))) for x in detail]
     print("unchanged objects per day, RMSE mm (store | that day alone): " +
