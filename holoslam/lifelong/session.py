@@ -178,8 +178,11 @@ def _located(st: Any, sobj: dict, wTs: np.ndarray, cov_wTs: np.ndarray) -> dict[
     obs = st.seen.observations
     views = view_directions(np.array([o.stamp_ns for o in obs], np.int64), tuple(o.object_id for o in obs),
                             st.traj.stamps_ns, _robot_world(st, wTs), {k: v[0] for k, v in w.items()})
+    reads: dict[str, list[int]] = {}
+    for ob in obs:
+        reads.setdefault(ob.object_id, []).append(int(ob.stamp_ns))
     return {k: Located(k, w[k][0], w[k][1], float(o.w_position[2]), int(o.sightings), views.get(k),
-                       o.object_type, o.payload) for k, (_xy, _c, o) in sobj.items()}
+                       o.object_type, o.payload, tuple(sorted(reads.get(k, ())))) for k, (_xy, _c, o) in sobj.items()}
 
 
 def _placements(statuses: dict[str, str], latest: dict[str, ObjectState], all_placements: set[str]
