@@ -97,6 +97,7 @@ class JointSolution:
     iterations: int
     method: str
     rejected: int
+    covariances_failed: str = ""  # why GTSAM gave no marginal covariances ("" when it did, or none were asked)
 
 
 def joint_problem(stored, factors, sightings, new_sTa: np.ndarray, new_relative, new_landmarks,
@@ -141,7 +142,7 @@ def joint_problem(stored, factors, sightings, new_sTa: np.ndarray, new_relative,
         np.concatenate([sightings.z, new_landmarks.z]))
     init = np.vstack([np.array([s.wTa for s in stored]).reshape(-1, 3),
                       g.compose(np.broadcast_to(wTs, (K, 3)), new_sTa)])
-    pri: tuple[PosePrior, ...] = ()
+    pri: tuple[PosePrior, ...] = _orphan_priors(stored, relative, M + K)
     n_prior = 0
     live = set(landmarks.landmark)
     if priors is not None and len(priors):
@@ -155,19 +156,51 @@ def joint_problem(stored, factors, sightings, new_sTa: np.ndarray, new_relative,
                 np.vstack([landmarks.cov_a_position, priors.cov_w_xy[keep]]),
                 np.concatenate([landmarks.z, np.full(len(keep), np.nan)]))
             init = np.vstack([init, vT])
-            pri = (default_prior(0, init[0]), default_prior(M + K, vT))
+            pri = (default_prior(0, init[0]), *pri, default_prior(M + K, vT))
             n_prior = len(keep)
+    if pri and pri[0].i != 0:
+        pri = (default_prior(0, init[0]), *pri)  # the gauge stays the oldest working anchor's
     problem = SlamProblem(num_poses=len(init), relative=relative, landmarks=landmarks, initial_wTa=init,
                           initial_landmarks=placements_init, priors=pri)
     return JointGraph(problem, ids, K, n_prior)
 
 
+# sigmas (m, m, rad) of the prior that holds a stored anchor cut off from the rest by retirement, when its stored
+# covariance is unknown: a grid cell and the relocalisation's resolution (RelocaliseConfig.floor_sigmas)
+ORPHAN_SIGMAS = (0.05, 0.05, 0.0087)
+
+
+def _orphan_priors(stored, relative, n: int) -> tuple:
+    """Priors on the stored anchors that retirement cut off from the oldest working anchor's part of the graph
+    (their relative poses led to submaps now retired): one per cut-off part, on its oldest anchor, at its stored
+    pose with its stored covariance. Without it such a part floats, held by object sightings at most."""
+    import networkx as nx
+
+    from holoslam.graph.problem import PosePrior
+
+    G = nx.Graph()
+    G.add_nodes_from(range(n))
+    G.add_edges_from(zip(np.asarray(relative.i).tolist(), np.asarray(relative.j).tolist(), strict=True))
+    out = []
+    for comp in nx.connected_components(G):
+        k = min(comp)
+        if 0 in comp or k >= len(stored):
+            continue
+        s = stored[k]
+        cov = np.diag(np.square(ORPHAN_SIGMAS)) if s.cov_wTa is None else np.asarray(s.cov_wTa) + np.eye(3) * 1e-9
+        out.append(PosePrior(k, np.asarray(s.wTa, np.float64), cov))
+    return tuple(out)
+
+
 def solve_joint(jg: JointGraph, method: str = "batch", covariances: bool = True) -> JointSolution:
     """Solve the joint problem (batch Levenberg-Marquardt or iSAM2 over the whole graph; the run's kernels and
-    chi-square rounds; no moved-object splitting: placements are decided before, ``holoslam.lifelong.changes``)."""
+    chi-square rounds; no moved-object splitting: placements are decided before, ``holoslam.lifelong.changes``).
+    When GTSAM finds the solved system too poorly conditioned for marginal covariances (an anchor held only by
+    down-weighted closures), the solve is kept without them (``covariances_failed`` says why; covariances None)."""
     import dataclasses
 
     from holoslam.choices import Method
+    from holoslam.errors import SolverError
     from holoslam.optimise import run_build_options
     from holoslam.solve import CovarianceScope, SolveOptions, solve
 
@@ -175,7 +208,14 @@ def solve_joint(jg: JointGraph, method: str = "batch", covariances: bool = True)
     opts = SolveOptions(method=Method(method), reject_outliers=True, detect_moved=False,
                         covariances=CovarianceScope.ALL if covariances else CovarianceScope.NONE,
                         build=dataclasses.replace(run_build_options(), robust_kinds=("loop", "cross")))
-    sol = solve(jg.problem, opts)
+    failed = ""
+    try:
+        sol = solve(jg.problem, opts)
+    except SolverError as e:
+        if "marginal covariances failed" not in str(e):
+            raise
+        failed = str(e).split("\n")[0].strip() + " " + " ".join(str(e).split("\n")[1:3]).strip()
+        sol = solve(jg.problem, dataclasses.replace(opts, covariances=CovarianceScope.NONE))
     M = len(jg.stored_ids)
     cov = sol.cov_wTa
     placements = {name: (sol.w_landmarks[k], None if sol.cov_w_landmarks is None else sol.cov_w_landmarks[k])
@@ -183,4 +223,5 @@ def solve_joint(jg: JointGraph, method: str = "batch", covariances: bool = True)
     K = jg.new_count
     return JointSolution(sol.wTa[:M], None if cov is None else cov[:M], sol.wTa[M:M + K],
                          None if cov is None else cov[M:M + K],
-                         placements, time.perf_counter() - t0, int(sol.iterations), str(method), len(sol.rejected))
+                         placements, time.perf_counter() - t0, int(sol.iterations), str(method), len(sol.rejected),
+                         failed)

@@ -330,7 +330,8 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
     counts = store.counts()
     js = p.joint
     joint = {} if js is None else {"method": js.method, "seconds": round(js.seconds, 4), "iterations": js.iterations,
-                                   "anchors": int(len(js.stored_wTa) + len(js.new_wTa)), "rejected": js.rejected}
+                                   "anchors": int(len(js.stored_wTa) + len(js.new_wTa)), "rejected": js.rejected,
+                                   "covariances_failed": js.covariances_failed}
     return SessionSummary(
         store=str(store.path), session_id=sid, joined=joined, joined_by=("none" if reloc is None else reloc.joined_by),
         founded=founded, relocalisation_s=0.0 if reloc is None else round(reloc.seconds, 4),
