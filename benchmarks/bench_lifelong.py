@@ -251,7 +251,7 @@ def _window(log, t0: int, t1: int, hidden):
                                headings=tuple(h for h in log.headings if inside(h)), ground_truth=())
 
 
-def real_part(out: Path, logs: list[str]) -> None:
+def real_part(out: Path, logs: list[str], compare: bool = False) -> None:
     from holoslam.evaluate import relation_errors
     from holoslam.io.mcap import read_log
     from holoslam.io.relations import read_relations
@@ -282,7 +282,7 @@ def real_part(out: Path, logs: list[str]) -> None:
             t0 = time.perf_counter()
             r = run_session_data(w, rep, store, f"{name}-{k + 1}", f"{name}-{k + 1}")
             s = r.summary
-            if before is not None:
+            if before is not None and compare:
                 search_rows.append((name, k + 1, _compare_searches(r, before)))
             print(f"{name:<7} {k + 1:>7} {str(s.joined):<6} {s.joined_by:<8} {s.relocalisation_s:7.1f} "
                   f"{time.perf_counter() - t0:6.1f}   {s.why[:90]}")
@@ -304,14 +304,15 @@ def real_part(out: Path, logs: list[str]) -> None:
         cross = f"{ec.translation_mean_m:.4f} ({ec.n_matched})" if ec is not None else "-"
         print(f"{name:<7} {nj}/3    {ref.translation_mean_m:.4f}       {e.translation_mean_m:.4f} "
               f"(x{e.translation_mean_m / ref.translation_mean_m:.2f})   {cross:<22} {np.median(reloc):.1f}")
-    print("\nrelocalisation search (the session against the store before it; median of 3, interleaved): coarse to "
-          "fine (0.2 m, the loop search's) | full-resolution branch and bound")
-    print("log     session  placed       matches   searches  cpu s            ratio")
-    for name, k, res in search_rows:
-        c, f = res["coarse"], res["full"]
-        print(f"{name:<7} {k:>7}  {c['placed']!s:<5}|{f['placed']!s:<5} {c['matches']:>3}|{f['matches']:<3}  "
-              f"{c['searches']:>4}|{f['searches']:<4}  {c['cpu']:6.2f}|{f['cpu']:<6.2f}  x{c['cpu'] / f['cpu']:.2f}  "
-              f"wTs differ {res['dxy'] * 1000:.0f} mm")
+    if search_rows:
+        print("\nrelocalisation search (the session against the store before it; median of 3, interleaved): coarse to "
+              "fine (0.2 m, the loop search's) | full-resolution branch and bound")
+        print("log     session  placed       matches   searches  cpu s            ratio")
+        for name, k, res in search_rows:
+            c, f = res["coarse"], res["full"]
+            print(f"{name:<7} {k:>7}  {c['placed']!s:<5}|{f['placed']!s:<5} {c['matches']:>3}|{f['matches']:<3}  "
+                  f"{c['searches']:>4}|{f['searches']:<4}  {c['cpu']:6.2f}|{f['cpu']:<6.2f}  x{c['cpu'] / f['cpu']:.2f}  "
+                  f"wTs differ {res['dxy'] * 1000:.0f} mm")
     false = tried = 0
     for a in logs:
         with MapStore.open(out / f"{a}.holomap") as s:
@@ -411,6 +412,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=None, help="s of each simulated day (default: a whole tour)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--logs", nargs="+", default=["intel", "aces", "fr079"])
+    ap.add_argument("--compare-search", action="store_true",
+                    help="real: each session's relocalisation also by the full-resolution search (3 runs each, slow)")
     ap.add_argument("--growth-days", type=int, default=30)
     ap.add_argument("--growth-duration", type=float, default=150.0)
     ap.add_argument("--out", type=Path, default=None)
@@ -423,7 +426,7 @@ def main() -> None:
         if part == "sim":
             sim_part(d, a.days, a.duration, a.seed)
         elif part == "real":
-            real_part(d, a.logs)
+            real_part(d, a.logs, a.compare_search)
         elif part == "wrong":
             wrong_part(d)
         else:
