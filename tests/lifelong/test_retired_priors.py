@@ -66,3 +66,25 @@ def test_the_joint_solve_uses_the_retired_sightings():
     assert np.hypot(*(without.placements["A#1"][0] - (2.1, 1.0))) < 0.01
     assert np.hypot(*(with_.placements["A#1"][0] - (2.0, 1.0))) < 0.01
     assert with_.new_wTa.shape == (2, 3) and np.allclose(with_.stored_wTa[0], 0.0, atol=1e-3)
+
+
+def test_a_stored_part_cut_off_by_retirement_is_held_at_its_stored_pose():
+    """Stored anchors 0 and 1 lost the factor between them (the submaps between were retired); the new session
+    matches only anchor 0: anchor 1 gets a prior at its stored pose (else it floats and GTSAM's marginals fail)."""
+    from holoslam.relocalise import LaserMatch
+
+    stored = (_submap(1, (0.0, 0.0, 0.0)), _submap(2, (5.0, 1.0, 0.4), np.diag([4e-4, 4e-4, 1e-5])))
+    factors = StoredFactors(*(np.zeros(0, np.int64),) * 4, np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, object))
+    none = _sightings([])
+    new_rel = RelativePoseMeasurements(np.array([0]), np.array([1]), np.array([[1.0, 0.0, 0.0]]),
+                                       np.array([np.diag([1e-4, 1e-4, 1e-6])]), np.array(["scan_match"], object))
+    new_lm = LandmarkMeasurements(np.zeros(0, np.int64), (), np.zeros((0, 2)), np.zeros((0, 2, 2)))
+    cross = (LaserMatch(0, 1, np.zeros(3), np.diag([1e-4, 1e-4, 1e-6]), 0.8, np.zeros(3)),)
+    jg = joint_problem(stored, factors, none, np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), new_rel, new_lm, {},
+                       np.zeros(3), cross, {})
+    pri = {p.i: p for p in jg.problem.priors}
+    assert set(pri) == {0, 1} and np.allclose(pri[1].wTa, (5.0, 1.0, 0.4))
+    assert np.allclose(pri[1].cov_wTa, np.diag([4e-4, 4e-4, 1e-5]), atol=1e-8)
+    js = solve_joint(jg)  # with covariances: no indeterminate anchor
+    assert js.covariances_failed == "" and js.stored_cov is not None
+    assert np.allclose(js.stored_wTa[1], (5.0, 1.0, 0.4), atol=1e-6)
