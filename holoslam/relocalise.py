@@ -33,7 +33,7 @@ import numpy as np
 from holoslam import geometry as g
 
 __all__ = ["RelocaliseConfig", "LaserMatch", "Hypothesis", "Relocalisation", "global_match", "precompute_stored", "laser_matches",
-           "laser_hypothesis", "object_hypothesis", "relocalise", "fit_se2"]
+           "laser_hypothesis", "object_hypothesis", "relocalise", "fit_se2", "local_matches"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,6 +83,13 @@ class RelocaliseConfig:
     coarse_resolution_m: float = 0.2
     coarse_check_xy_m: float = 1.0  # m: the loop search's global_check_xy (5 coarse cells)
     coarse_check_deg: float = 5.0  # deg: the loop search's global_check_deg (a few coarse angular steps)
+    # Once placed, every session submap is matched locally (``local_matches``) into the stored submaps whose
+    # anchors lie within close_radius_m of where the hypothesis puts it, the nearest close_per_submap of them: the
+    # few global matches that verified the join are too few to align two sessions to the centimetre (3
+    # sessions of intel: 6-10 of them, relations across sessions 0.2-0.3 m). A window of the consistency's
+    # 0.3 m / 3 deg around the prediction; accepted at min_score and consistent with the hypothesis
+    close_radius_m: float = 6.0
+    close_per_submap: int = 3
     object_inlier_m: float = 0.3  # m: an object this close to its stored place agrees (the "moved" threshold)
     min_object_inliers: int = 3  # objects agreeing with an object hypothesis for it to be verified
     min_pair_separation_m: float = 1.0  # m: two objects nearer fix the heading poorly (5 cm in 1 m = 3 deg)
@@ -253,6 +260,38 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     if ref.score < cfg.min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * res:
         return None
     return ref.aTb, ref.cov_aTb, float(ref.score)
+
+
+def local_matches(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs: np.ndarray,
+                  cfg: RelocaliseConfig = RelocaliseConfig()) -> list[LaserMatch]:
+    """Cross-session matches once the session is placed by ``wTs`` (``close_radius_m`` and the settings beside
+    it): each session submap's anchor scan registered by the continuous matcher around its predicted pose in the
+    nearest stored submaps."""
+    from holoslam.submaps.scanmatch import MatchConfig, match_scan
+
+    if cfg.close_per_submap <= 0:
+        return []
+    mc = MatchConfig(linear_window=cfg.consistent_xy_m, angular_window_deg=cfg.consistent_deg, min_score=0.0)
+    anchors = np.array([s.wTa for s in stored_submaps]).reshape(-1, 3)
+    out: list[LaserMatch] = []
+    for k, sm in enumerate(session_submaps):
+        q = query_points(sm)
+        if len(q) < cfg.min_query_points or not len(anchors):
+            continue
+        w = g.compose(wTs, session_sTa[k])
+        d = np.hypot(anchors[:, 0] - w[0], anchors[:, 1] - w[1])
+        for j in np.argsort(d, kind="stable")[: cfg.close_per_submap].tolist():
+            st = stored_submaps[j]
+            if d[j] > cfg.close_radius_m or st.prob is None:
+                break
+            pred = g.compose(g.inverse(np.asarray(st.wTa, np.float64)), w)
+            m = match_scan(st.prob, st.origin, float(st.resolution), q, pred, mc)
+            if m.score < cfg.min_score:
+                continue
+            implied = g.compose(g.compose(st.wTa, m.aTb), g.inverse(session_sTa[k]))
+            if _consistent(implied[None], np.asarray(wTs)[None], cfg)[0, 0]:
+                out.append(LaserMatch(k, int(st.id), m.aTb, m.cov_aTb, float(m.score), implied))
+    return out
 
 
 def query_points(submap) -> np.ndarray:

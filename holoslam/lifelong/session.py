@@ -22,7 +22,7 @@ from holoslam import geometry as g
 from holoslam.lifelong.changes import ChangeConfig, Located, classify, to_world, view_directions
 from holoslam.lifelong.frustum import FrustumConfig
 from holoslam.lifelong.summary import ObjectChange, SessionSummary
-from holoslam.relocalise import RelocaliseConfig, fit_se2, query_points
+from holoslam.relocalise import RelocaliseConfig, fit_se2, local_matches, query_points
 from holoslam.store.records import (
     NewSubmap,
     ObjectState,
@@ -245,15 +245,18 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     live = set(sightings.placement) | {placement[o] for o in lm.landmark}
     retired = tuple(s for s in store.submaps(working=False) if s.retired_by is not None)
     priors = retired_priors(retired, store.sightings(np.array([s.id for s in retired], np.int64)), live)
+    have = {(m.new, m.old) for m in reloc.matches}
+    cross = tuple(reloc.matches) + tuple(m for m in local_matches(st.fe.submaps, sTa, stored, h.wTs, lc.relocalise)
+                                         if (m.new, m.old) not in have)
     jg = joint_problem(stored, store.factors(ids), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
-                       reloc.matches, init, priors)
+                       cross, init, priors)
     js = solve_joint(jg, lc.joint_method)
     wTs = fit_se2(sTa[:, :2], js.new_wTa[:, :2]) if len(sTa) >= 2 else g.compose(js.new_wTa[0], g.inverse(sTa[0]))
     objs = _object_states(statuses, located, latest, placement, js)
     retire = _retire(stored, js, st, lc.retire_cover)
     updates = {int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
                for n, k in enumerate(ids.tolist())}
-    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, reloc.matches, js, jg,
+    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, cross, js, jg,
                    view_s, images or {})
 
 
@@ -331,7 +334,8 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
     js = p.joint
     joint = {} if js is None else {"method": js.method, "seconds": round(js.seconds, 4), "iterations": js.iterations,
                                    "anchors": int(len(js.stored_wTa) + len(js.new_wTa)), "rejected": js.rejected,
-                                   "covariances_failed": js.covariances_failed}
+                                   "covariances_failed": js.covariances_failed,
+                                   "cross_factors": len(p.cross)}
     return SessionSummary(
         store=str(store.path), session_id=sid, joined=joined, joined_by=("none" if reloc is None else reloc.joined_by),
         founded=founded, relocalisation_s=0.0 if reloc is None else round(reloc.seconds, 4),
