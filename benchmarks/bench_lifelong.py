@@ -48,10 +48,83 @@ def _map_xy(start, xy):
     return g.transform_points(np.asarray(start, float), np.asarray(xy, float).reshape(-1, 2))
 
 
+def _photographable_s(world, oid: str, log_path: Path, step_s: float = 0.5) -> float:
+    """Seconds of the day (its true trajectory, every ``step_s``) in which the simulated camera could have
+    photographed object ``oid`` of ``world`` (the day before's, where it still stood): the conditions of
+    ``holoslam.sim.sensors``' snapshot target (within 3.5 m, facing the camera within 60 deg, not behind a wall
+    or furniture, within the zoom range). The ground truth of "its place was in view" for a removed object."""
+    from holoslam.io.mcap import read_log
+    from holoslam.sim import sensors as S
+    from holoslam.sim.camera import camera_pose_world, qr_modules
+    from holoslam.sim.world import segments_block
+
+    log, _ = read_log(log_path, require=["odometry"])
+    gt = log.ground_truth
+    o = world.object(oid)
+    n = qr_modules(o.payload).shape[0]
+    walls = world.wall_segments()
+    cosmax = np.cos(np.radians(S.MAX_FACING_DEG))
+    t_last, total = None, 0.0
+    for p in gt:
+        if t_last is not None and p.stamp_ns - t_last < step_s * 1e9:
+            continue
+        t_last = p.stamp_ns
+        _, cam = camera_pose_world(np.array([p.wTb.x, p.wTb.y, p.wTb.theta]), 0.0, 0.0)
+        d = float(np.linalg.norm(np.asarray(o.position) - cam))
+        if d > S.MAX_SNAPSHOT_RANGE or S._facing_cos(o, cam) < cosmax + 0.05:
+            continue
+        if segments_block(walls, cam[None, :2], np.asarray(o.position)[None, :2])[0] or S._occluded(world, cam[:2], o):
+            continue
+        if S.TARGET_MODULE_PX * n * d / (S.F0 * o.label_size) > S.ZOOM_MAX * 1.25:
+            continue
+        total += step_s
+    return total
+
+
+def _positions(r, d: dict, w2m) -> tuple[dict, dict]:
+    """The day's unchanged objects: object -> (x, y in the map, true x, y), in the store (seen where expected;
+    world -> map by day 1's true start) and in the day's own run (its frame -> map by the day's true start)."""
+    changed = {c["id"] for c in d["changes"]}
+    p_life, p_single = {}, {}
+    for o in r.update.objects:
+        if o.status == "seen" and o.object_id not in changed and o.object_id in d["objects"]:
+            p_life[o.object_id] = (*_map_xy(w2m, o.w_xy)[0], *d["objects"][o.object_id][:2])
+    for o in r.stages.objects:
+        if o.object_id in d["objects"] and o.object_id not in changed:
+            p_single[o.object_id] = (*_map_xy(d["start_pose"], o.w_position[:2])[0], *d["objects"][o.object_id][:2])
+    return p_life, p_single
+
+
+def _score_gone(det: dict, tru: dict, d: dict, world_before, log: Path, acc: list) -> None:
+    """Adds to ``acc`` (detected and absent, detected, removed and in view, of those detected, late): "gone" by
+    what the robot could know (``sim_part``)."""
+    absent = [o for o, v in det.items() if v == "gone" and o not in d["objects"]]
+    acc[0] += len(absent)
+    acc[1] += sum(1 for v in det.values() if v == "gone")
+    acc[4] += sum(1 for o in absent if tru.get(o) != "gone")
+    for o, v in tru.items():
+        if v == "gone" and _photographable_s(world_before, o, log) >= 8.0:
+            acc[2] += 1
+            acc[3] += det.get(o) == "gone"
+
+
+def _print_changes(counts: dict, gone_fair: list, unseen_new: int) -> None:
+    print("\nchange detection  precision  recall  (detected / true)")
+    for k, (tp, nd, nt) in counts.items():
+        print(f"  {k:<6}          {tp / nd if nd else float('nan'):9.3f} {tp / nt if nt else float('nan'):7.3f}  "
+              f"({nd} / {nt})")
+    print(f"  gone, by what could be known: precision {gone_fair[0] / max(gone_fair[1], 1):.3f} (absent that day; "
+          f"{gone_fair[4]} of them removed a day or more before), recall {gone_fair[3] / max(gone_fair[2], 1):.3f} "
+          f"of the {gone_fair[2]} removals whose place the camera could have photographed for 8 s")
+    tp, nd, _nt = counts["new"]
+    if unseen_new:
+        print(f"  new, not counting the {unseen_new} objects there from day 1 that no earlier session had located: "
+              f"precision {tp / max(nd - unseen_new, 1):.3f}")
+
+
 def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:
-    from holoslam.lifelong.joint import solve_joint
     from holoslam.lifelong.session import run_session
-    from holoslam.sim.days import simulate_days
+    from holoslam.sim.days import household_days, simulate_days
 
     if not (out / "days.json").exists():
         simulate_days(out, days, seed=seed, duration_s=duration)
@@ -59,8 +132,16 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:
     store = out / "home.holomap"
     store.unlink(missing_ok=True)
     w2m = truth["days"][0]["start_pose"]
+    worlds = [d.world for d in household_days(len(truth["days"]), truth["seed"])]
     counts = {k: [0, 0, 0] for k in KINDS.values()}  # true positives, detected, true
+    # "gone" scored by what the robot could know: a detected gone is right when the object is not in the home
+    # that day (removed that day or before, and not yet detected); a removal counts for recall when the simulated
+    # camera could have photographed its place for two snapshot periods (8 s) of the day (else nothing tells it)
+    gone_fair = [0, 0, 0, 0, 0]  # detected and absent, detected, removed and in view, of those detected, late
     errs_life, errs_single, relocs, last = [], [], [], None
+    detail = []  # per day: truth, detected, the unseen objects' camera s in view, the unchanged objects' errors
+    ever_located: set[str] = set()
+    unseen_new = 0  # "new" objects there from the start that no earlier session had located (not a change)
     print("day  joined by       reloc s  run s   changes (truth | detected)")
     for d in truth["days"]:
         t0 = time.perf_counter()
@@ -77,36 +158,78 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:
             counts[k][2] += sum(1 for v in tru.values() if v == k)
         print(f"{d['day']:>3}  {str(s.joined):<6} {s.joined_by:<8} {s.relocalisation_s:7.1f} {run_s:6.1f}   "
               f"{sorted(tru.items())} | {sorted(det.items())}")
-        changed = set(tru)
-        for o in r.update.objects:
-            if o.status == "seen" and o.object_id not in changed and o.object_id in d["objects"]:
-                errs_life.append(np.hypot(*(_map_xy(w2m, o.w_xy)[0] - d["objects"][o.object_id][:2])))
-        for o in r.stages.objects:
-            if o.object_id in d["objects"] and o.object_id not in changed:
-                errs_single.append(np.hypot(*(_map_xy(d["start_pose"], o.w_position[:2])[0]
-                                              - d["objects"][o.object_id][:2])))
+        if d["day"] > 1:
+            _score_gone(det, tru, d, worlds[d["day"] - 2], out / d["log"], gone_fair)
+        unseen_new += sum(1 for o, v in det.items() if v == "new" and o not in tru and o not in ever_located
+                          and o in truth["days"][0]["objects"])
+        ever_located |= {o.object_id for o in r.stages.objects}
+        p_life, p_single = _positions(r, d, w2m)
+        e_life = {k: float(np.hypot(v[0] - v[2], v[1] - v[3])) for k, v in p_life.items()}
+        e_single = {k: float(np.hypot(v[0] - v[2], v[1] - v[3])) for k, v in p_single.items()}
+        errs_life += list(e_life.values())
+        errs_single += list(e_single.values())
+        detail.append({"day": d["day"], "truth": tru, "detected": det, "unseen_in_view_s": s.unseen_in_view_s,
+                       "err_store_m": e_life, "err_single_m": e_single, "xy_store": p_life, "xy_single": p_single,
+                       "reloc_s": s.relocalisation_s, "run_s": run_s, "joined_by": s.joined_by})
+        (out / "sim_detail.json").write_text(json.dumps(detail, indent=1))
         last = r
-    print("\nchange detection  precision  recall  (detected / true)")
-    for k, (tp, nd, nt) in counts.items():
-        print(f"  {k:<6}          {tp / nd if nd else float('nan'):9.3f} {tp / nt if nt else float('nan'):7.3f}  "
-              f"({nd} / {nt})")
+    _print_changes(counts, gone_fair, unseen_new)
     rm = lambda e: float(np.sqrt(np.mean(np.square(e)))) if e else float("nan")  # noqa: E731
+    per_day = [(x["day"], rm(list(x["err_store_m"].values())), rm(list(x["err_single_m"].values()))) for x in detail]
+    print("unchanged objects per day, RMSE mm (store | that day alone): " +
+          ", ".join(f"d{k} {a * 1000:.1f}|{b * 1000:.1f}" for k, a, b in per_day))
     print(f"unchanged objects seen, position RMSE: store world {rm(errs_life) * 1000:.1f} mm (n {len(errs_life)}), "
           f"single-day sessions {rm(errs_single) * 1000:.1f} mm (n {len(errs_single)})")
+    _aligned(detail)
     print(f"relocalisation s: median {np.median(relocs):.1f}, max {np.max(relocs):.1f} over {len(relocs)} sessions")
-    if last is not None and last.joint_graph is not None:
-        times = {"batch": [], "isam2": []}
-        sols = {}
-        for _ in range(3):
-            for m in times:
-                t0 = time.perf_counter()
-                sols[m] = solve_joint(last.joint_graph, m, covariances=False)
-                times[m].append(time.perf_counter() - t0)
-        d = np.hypot(*(sols["batch"].new_wTa[:, :2] - sols["isam2"].new_wTa[:, :2]).T).max()
-        n = last.joint_graph.problem.num_poses
-        print(f"joint solve of the last day ({n} anchors): batch {np.median(times['batch']):.3f} s, isam2 "
-              f"{np.median(times['isam2']):.3f} s (x{np.median(times['isam2']) / np.median(times['batch']):.2f}); "
-              f"new anchors differ by at most {d * 1000:.1f} mm")
+    _joint_methods(last)
+
+
+def _aligned(detail: list) -> None:
+    """The unchanged objects' RMSE with the map's frame taken out (the world is the first session's frame, a gauge:
+    its first anchor is not the true start to the millimetre): the store's positions of every day under one
+    best-fit SE(2) to the truth, and each single-day run under its own (as trajectory errors are aligned)."""
+    from holoslam.relocalise import fit_se2
+
+    def fit(rows):
+        a = np.array(rows, float).reshape(-1, 4)
+        if len(a) < 3:
+            return np.array([]), np.zeros(3)
+        T = fit_se2(a[:, :2], a[:, 2:])
+        return np.hypot(*(_map_xy(T, a[:, :2]) - a[:, 2:]).T), T
+
+    rm = lambda e: float(np.sqrt(np.mean(np.square(e)))) if len(e) else float("nan")  # noqa: E731
+    every = [v for x in detail for v in x["xy_store"].values()]
+    e_all, T = fit(every)
+    per_day = []
+    for x in detail:
+        a = np.array(list(x["xy_store"].values()), float).reshape(-1, 4)
+        es = np.hypot(*(_map_xy(T, a[:, :2]) - a[:, 2:]).T) if len(a) else np.array([])
+        per_day.append((x["day"], rm(es), rm(fit(list(x["xy_single"].values()))[0])))
+    print(f"unchanged objects, RMSE with the map's frame fitted (one SE(2) for the store: {T[0] * 1000:.0f} mm, "
+          f"{T[1] * 1000:.0f} mm, {np.degrees(T[2]):.2f} deg): store {rm(e_all) * 1000:.1f} mm (max "
+          f"{e_all.max(initial=0) * 1000:.0f}); per day (store | that day alone, its own fit): " +
+          ", ".join(f"d{k} {a * 1000:.1f}|{b * 1000:.1f}" for k, a, b in per_day))
+
+
+def _joint_methods(last) -> None:
+    """The last day's joint graph re-solved by batch LM and by iSAM2 (median of 3, interleaved)."""
+    from holoslam.lifelong.joint import solve_joint
+
+    if last is None or last.joint_graph is None:
+        return
+    times = {"batch": [], "isam2": []}
+    sols = {}
+    for _ in range(3):
+        for m in times:
+            t0 = time.perf_counter()
+            sols[m] = solve_joint(last.joint_graph, m, covariances=False)
+            times[m].append(time.perf_counter() - t0)
+    d = np.hypot(*(sols["batch"].new_wTa[:, :2] - sols["isam2"].new_wTa[:, :2]).T).max()
+    n = last.joint_graph.problem.num_poses
+    print(f"joint solve of the last day ({n} anchors): batch {np.median(times['batch']):.3f} s, isam2 "
+          f"{np.median(times['isam2']):.3f} s (x{np.median(times['isam2']) / np.median(times['batch']):.2f}); "
+          f"new anchors differ by at most {d * 1000:.1f} mm")
 
 
 def _window(log, t0: int, t1: int, hidden):
@@ -128,7 +251,7 @@ def _window(log, t0: int, t1: int, hidden):
                                headings=tuple(h for h in log.headings if inside(h)), ground_truth=())
 
 
-def real_part(out: Path, logs: list[str]) -> None:
+def real_part(out: Path, logs: list[str], compare: bool = False) -> None:
     from holoslam.evaluate import relation_errors
     from holoslam.io.mcap import read_log
     from holoslam.io.relations import read_relations
@@ -139,7 +262,7 @@ def real_part(out: Path, logs: list[str]) -> None:
 
     sessions: dict[str, list] = {}
     print("log     session joined by       reloc s  run s")
-    rows = []
+    rows, search_rows = [], []
     for name in logs:
         log, rep = read_log(DATA / f"{name}.mcap", require=["odometry", "scan"])
         rel = read_relations(DATA / f"{name}.relations")
@@ -152,9 +275,15 @@ def real_part(out: Path, logs: list[str]) -> None:
         st, reloc = [], []
         for k in range(3):
             w = _window(log, int(cuts[k]), int(cuts[k + 1]), HIDDEN[k])
+            before = None
+            if k:
+                with MapStore.open(store) as s0:
+                    before = s0.submaps(working=True, grids=True)
             t0 = time.perf_counter()
             r = run_session_data(w, rep, store, f"{name}-{k + 1}", f"{name}-{k + 1}")
             s = r.summary
+            if before is not None and compare:
+                search_rows.append((name, k + 1, _compare_searches(r, before)))
             print(f"{name:<7} {k + 1:>7} {str(s.joined):<6} {s.joined_by:<8} {s.relocalisation_s:7.1f} "
                   f"{time.perf_counter() - t0:6.1f}   {s.why[:90]}")
             sys.stdout.flush()
@@ -175,6 +304,15 @@ def real_part(out: Path, logs: list[str]) -> None:
         cross = f"{ec.translation_mean_m:.4f} ({ec.n_matched})" if ec is not None else "-"
         print(f"{name:<7} {nj}/3    {ref.translation_mean_m:.4f}       {e.translation_mean_m:.4f} "
               f"(x{e.translation_mean_m / ref.translation_mean_m:.2f})   {cross:<22} {np.median(reloc):.1f}")
+    if search_rows:
+        print("\nrelocalisation search (the session against the store before it; median of 3, interleaved): coarse to "
+              "fine (0.2 m, the loop search's) | full-resolution branch and bound")
+        print("log     session  placed       matches   searches  cpu s            ratio")
+        for name, k, res in search_rows:
+            c, f = res["coarse"], res["full"]
+            print(f"{name:<7} {k:>7}  {c['placed']!s:<5}|{f['placed']!s:<5} {c['matches']:>3}|{f['matches']:<3}  "
+                  f"{c['searches']:>4}|{f['searches']:<4}  {c['cpu']:6.2f}|{f['cpu']:<6.2f}  x{c['cpu'] / f['cpu']:.2f}  "
+                  f"wTs differ {res['dxy'] * 1000:.0f} mm")
     false = tried = 0
     for a in logs:
         with MapStore.open(out / f"{a}.holomap") as s:
@@ -187,6 +325,27 @@ def real_part(out: Path, logs: list[str]) -> None:
                 r = relocalise(subs, sTa, {}, stored, {})
                 false += r.placed
     print(f"wrong joins: {false} of {tried} sessions placed in another building's store")
+
+
+def _compare_searches(r, stored) -> dict:
+    """The session's relocalisation against ``stored`` by the coarse-to-fine search and by the full-resolution
+    branch and bound (median CPU s of 3 runs each, interleaved)."""
+    from holoslam.relocalise import RelocaliseConfig, relocalise
+
+    subs, sTa = r.stages.fe.submaps, np.asarray(r.stages.sol.wTa)
+    out: dict = {}
+    cpu: dict[str, list[float]] = {"coarse": [], "full": []}
+    for _ in range(3):
+        for m, cfg in (("coarse", RelocaliseConfig()), ("full", RelocaliseConfig(coarse_resolution_m=0.0))):
+            x = relocalise(subs, sTa, {}, stored, {}, cfg)
+            cpu[m].append(x.cpu_seconds)
+            out[m] = {"placed": x.placed, "matches": len(x.matches), "searches": x.searches,
+                      "wTs": None if x.hypothesis is None else x.hypothesis.wTs}
+    for m in cpu:
+        out[m]["cpu"] = float(np.median(cpu[m]))
+    a, b = out["coarse"]["wTs"], out["full"]["wTs"]
+    out["dxy"] = float("nan") if a is None or b is None else float(np.hypot(*(a[:2] - b[:2])))
+    return out
 
 
 def wrong_part(out: Path) -> None:
@@ -233,13 +392,14 @@ def growth_part(out: Path, days: int, duration: float, seed: int) -> None:
     truth = json.loads((out / "days.json").read_text())
     store = out / "home.holomap"
     store.unlink(missing_ok=True)
-    print("day  working anchors  run s   store MB  joined")
+    print("day  working anchors  run s  cpu s  reloc s  store MB  joined")
     for d in truth["days"]:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         r = run_session(out / d["log"], store)
         with MapStore.open(store) as s:
             n = s.counts()["working_submaps"]
-        print(f"{d['day']:>3}  {n:>15} {time.perf_counter() - t0:6.1f} {store.stat().st_size / 1e6:9.2f}  "
+        print(f"{d['day']:>3}  {n:>15} {time.perf_counter() - t0:6.1f} {time.process_time() - c0:6.1f} "
+              f"{r.summary.relocalisation_cpu_s:7.1f} {store.stat().st_size / 1e6:9.2f}  "
               f"{r.summary.joined} ({r.summary.joined_by})")
         sys.stdout.flush()
 
@@ -252,6 +412,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=None, help="s of each simulated day (default: a whole tour)")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--logs", nargs="+", default=["intel", "aces", "fr079"])
+    ap.add_argument("--compare-search", action="store_true",
+                    help="real: each session's relocalisation also by the full-resolution search (3 runs each, slow)")
     ap.add_argument("--growth-days", type=int, default=30)
     ap.add_argument("--growth-duration", type=float, default=150.0)
     ap.add_argument("--out", type=Path, default=None)
@@ -264,7 +426,7 @@ def main() -> None:
         if part == "sim":
             sim_part(d, a.days, a.duration, a.seed)
         elif part == "real":
-            real_part(d, a.logs)
+            real_part(d, a.logs, a.compare_search)
         elif part == "wrong":
             wrong_part(d)
         else:

@@ -199,6 +199,12 @@ def cmd_objects(a: argparse.Namespace) -> int:
     from holoslam.lifelong.export import object_history
 
     hist = object_history(a.store, object_id=a.id, at=a.at)
+    if a.now and a.id:
+        from holoslam.lifelong.export import store_export, where_now
+
+        now = where_now(store_export(a.store), a.id)
+        print(_json({**hist.to_dict(), "now": now}) if a.json else hist.text() + "\n" + now["text"])
+        return EXIT_OK
     print(_json(hist.to_dict()) if a.json else hist.text())
     return EXIT_OK
 
@@ -489,6 +495,8 @@ def _add_objects(sub: Any) -> None:
     s.add_argument("store", type=Path, help="a map store ('holoslam run LOG --map STORE')")
     s.add_argument("--id", help="one object (e.g. O05)")
     s.add_argument("--at", type=int, metavar="SESSION", help="one session (its id)")
+    s.add_argument("--now", action="store_true",
+                   help="with --id: where it is now in the store's holographic graph (the places it is handled from)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_objects)
 

@@ -32,8 +32,8 @@ import numpy as np
 
 from holoslam import geometry as g
 
-__all__ = ["RelocaliseConfig", "LaserMatch", "Hypothesis", "Relocalisation", "global_match", "laser_matches",
-           "laser_hypothesis", "object_hypothesis", "relocalise", "fit_se2"]
+__all__ = ["RelocaliseConfig", "LaserMatch", "Hypothesis", "Relocalisation", "global_match", "precompute_stored", "laser_matches",
+           "laser_hypothesis", "object_hypothesis", "relocalise", "fit_se2", "local_matches"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,6 +74,22 @@ class RelocaliseConfig:
     search_min_points: int = 150  # points kept at least by that thinning
     min_query_points: int = 50  # a session submap whose anchor scan has fewer returns is not searched
     depth: int = 7  # the branch and bound's precomputed levels (Cartographer's 7)
+    # m: the search is coarse to fine (``holoslam.submaps.global_search``, the loop search's): branch and bound
+    # over the stored grid max-pooled to this resolution first (an upper bound of the fine score: a right match
+    # is never pruned there), then the full-resolution branch and bound only within coarse_check_xy_m /
+    # coarse_check_deg of the coarse best; 0: the full-resolution branch and bound over the whole submap.
+    # 0.2 m is the loop search's (LoopConfig.global_resolution_m, measured on aces: 20-70 ms per whole submap
+    # instead of 0.3-1.2 s)
+    coarse_resolution_m: float = 0.2
+    coarse_check_xy_m: float = 1.0  # m: the loop search's global_check_xy (5 coarse cells)
+    coarse_check_deg: float = 5.0  # deg: the loop search's global_check_deg (a few coarse angular steps)
+    # Once placed, every session submap is matched locally (``local_matches``) into the stored submaps whose
+    # anchors lie within close_radius_m of where the hypothesis puts it, the nearest close_per_submap of them: the
+    # few global matches that verified the join are too few to align two sessions to the centimetre (3
+    # sessions of intel: 6-10 of them, relations across sessions 0.2-0.3 m). A window of the consistency's
+    # 0.3 m / 3 deg around the prediction; accepted at min_score and consistent with the hypothesis
+    close_radius_m: float = 6.0
+    close_per_submap: int = 3
     object_inlier_m: float = 0.3  # m: an object this close to its stored place agrees (the "moved" threshold)
     min_object_inliers: int = 3  # objects agreeing with an object hypothesis for it to be verified
     min_pair_separation_m: float = 1.0  # m: two objects nearer fix the heading poorly (5 cm in 1 m = 3 deg)
@@ -197,6 +213,18 @@ def object_hypothesis(session_xy: dict[str, np.ndarray], world_xy: dict[str, np.
 # ---------------------------------------------------------------------------------------------- laser
 
 
+def precompute_stored(stored, cfg: RelocaliseConfig) -> tuple:
+    """A stored submap's branch-and-bound grids: (full resolution, coarse or None) (``coarse_resolution_m``)."""
+    from holoslam.submaps import bnb
+    from holoslam.submaps.global_search import pool_grid
+
+    fine = bnb.precompute(stored.prob, cfg.depth, origin=stored.origin, res=stored.resolution)
+    f = int(round(cfg.coarse_resolution_m / float(stored.resolution))) if cfg.coarse_resolution_m > 0 else 1
+    coarse = None if f <= 1 else bnb.precompute(pool_grid(stored.prob, f), cfg.depth, origin=stored.origin,
+                                                res=float(stored.resolution) * f)
+    return fine, coarse
+
+
 def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     """The pose of a session submap (its ``points`` (M, 2) in its anchor frame) in a stored submap (``prob``,
     ``origin``, ``resolution`` in the stored anchor's frame), searched over the whole stored submap and every
@@ -208,8 +236,7 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     from holoslam.submaps.scanmatch import MatchConfig, match_scan
 
     prob, origin, res = stored.prob, stored.origin, float(stored.resolution)
-    if pre is None:
-        pre = bnb.precompute(prob, cfg.depth, origin=origin, res=res)
+    fine, coarse = pre if pre is not None else precompute_stored(stored, cfg)
     h, w = prob.shape
     half = np.array([w * res / 2.0, h * res / 2.0])
     centre = np.array(origin) + half
@@ -218,7 +245,13 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     pts = adaptive_voxel_filter(near if len(near) >= cfg.search_min_points else pts,
                                 ScanFilterConfig(cfg.search_voxel_m, cfg.search_min_points))
     win = (float(half[0]) + cfg.window_margin_m, float(half[1]) + cfg.window_margin_m)
-    hit = bnb.search(pre, pts, np.array([centre[0], centre[1], 0.0]), win, math.pi, cfg.min_score)
+    seed = np.array([centre[0], centre[1], 0.0])
+    if coarse is None:
+        hit = bnb.search(fine, pts, seed, win, math.pi, cfg.min_score)
+    else:
+        c = bnb.search(coarse, pts, seed, win, math.pi, cfg.min_score)
+        hit = None if c is None else bnb.search(fine, pts, c.aTb, cfg.coarse_check_xy_m,
+                                                math.radians(cfg.coarse_check_deg), cfg.min_score)
     if hit is None:
         return None
     refine = MatchConfig(linear_window=0.5, angular_window_deg=3.0, translation_delta_weight=1e3,
@@ -227,6 +260,38 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
     if ref.score < cfg.min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * res:
         return None
     return ref.aTb, ref.cov_aTb, float(ref.score)
+
+
+def local_matches(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs: np.ndarray,
+                  cfg: RelocaliseConfig = RelocaliseConfig()) -> list[LaserMatch]:
+    """Cross-session matches once the session is placed by ``wTs`` (``close_radius_m`` and the settings beside
+    it): each session submap's anchor scan registered by the continuous matcher around its predicted pose in the
+    nearest stored submaps."""
+    from holoslam.submaps.scanmatch import MatchConfig, match_scan
+
+    if cfg.close_per_submap <= 0:
+        return []
+    mc = MatchConfig(linear_window=cfg.consistent_xy_m, angular_window_deg=cfg.consistent_deg, min_score=0.0)
+    anchors = np.array([s.wTa for s in stored_submaps]).reshape(-1, 3)
+    out: list[LaserMatch] = []
+    for k, sm in enumerate(session_submaps):
+        q = query_points(sm)
+        if len(q) < cfg.min_query_points or not len(anchors):
+            continue
+        w = g.compose(wTs, session_sTa[k])
+        d = np.hypot(anchors[:, 0] - w[0], anchors[:, 1] - w[1])
+        for j in np.argsort(d, kind="stable")[: cfg.close_per_submap].tolist():
+            st = stored_submaps[j]
+            if d[j] > cfg.close_radius_m or st.prob is None:
+                break
+            pred = g.compose(g.inverse(np.asarray(st.wTa, np.float64)), w)
+            m = match_scan(st.prob, st.origin, float(st.resolution), q, pred, mc)
+            if m.score < cfg.min_score:
+                continue
+            implied = g.compose(g.compose(st.wTa, m.aTb), g.inverse(session_sTa[k]))
+            if _consistent(implied[None], np.asarray(wTs)[None], cfg)[0, 0]:
+                out.append(LaserMatch(k, int(st.id), m.aTb, m.cov_aTb, float(m.score), implied))
+    return out
 
 
 def query_points(submap) -> np.ndarray:
@@ -248,11 +313,10 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
     grids): the matches above ``min_score`` and the number of searches. The search stops early once the matches
     hold a verified group of ``enough_consistent`` (``laser_hypothesis``). ``guide``: a hypothesis (the objects')
     that chooses where to search from the start (``_candidates``)."""
-    from holoslam.submaps import bnb
 
     out: list[LaserMatch] = []
     searches = 0
-    pre: dict[int, object] = {}
+    pre: dict[int, tuple] = {}
     queries = [query_points(sm) for sm in session_submaps]
     order = sorted(range(len(session_submaps)), key=lambda k: -len(queries[k]))
     for k in order:
@@ -262,7 +326,7 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
             if searches >= cfg.max_searches:
                 break
             if st.id not in pre:
-                pre[st.id] = bnb.precompute(st.prob, cfg.depth, origin=st.origin, res=st.resolution)
+                pre[st.id] = precompute_stored(st, cfg)
             searches += 1
             m = global_match(st, queries[k], cfg, pre[st.id])
             if m is None:

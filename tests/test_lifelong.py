@@ -75,7 +75,15 @@ def test_objects_and_export_answer_from_the_store(home, capsys):
     assert oid in capsys.readouterr().out
     assert main(["export", str(d / "home.holomap"), "--to", str(d / "ex")]) == 0
     names = {p.name for p in (d / "ex").iterdir()}
-    assert {"map.yaml", "map.pgm", "session_1.tum", "session_2.tum", "objects.csv", "topology.graphml", "store.png"} <= names
+    assert {"map.yaml", "map.pgm", "session_1.tum", "session_2.tum", "objects.csv", "topology.graphml", "store.png",
+            "holographic.json", "planning.json"} <= names
+    holo = json.loads((d / "ex" / "holographic.json").read_text())
+    placed = [o for o in hist["states"] if o["session"] == 2 and o["status"] in ("seen", "new")]
+    node = next(n for n in holo["nodes"] if n["id"] == placed[0]["id"])  # the object where session 2 saw it
+    assert abs(node["x"] - placed[0]["x"]) < 1e-6 and abs(node["y"] - placed[0]["y"]) < 1e-6
+    capsys.readouterr()
+    assert main(["objects", str(d / "home.holomap"), "--id", placed[0]["id"], "--now"]) == 0
+    assert f"{placed[0]['id']} now: {placed[0]['status']} in session 2" in capsys.readouterr().out
     assert main(["objects", str(d / "absent.holomap")]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert main(["objects", str(d / "home.holomap"), "--id", "O99"]) == 2

@@ -101,3 +101,20 @@ def test_laser_matches_verify_a_session_and_refuse_another_building():
     other = [SimpleNamespace(points=g.transform_points(g.inverse(T), _wall_points(OTHER_ROOM))) for T in sTa]
     r = relocalise(other, sTa, {}, stored, {}, cfg)
     assert not r.placed and r.joined_by == "none" and "no verified hypothesis" in r.why
+
+
+def test_a_placed_session_is_matched_locally_into_the_nearest_stored_submaps():
+    from holoslam.relocalise import local_matches
+
+    stored = [_stored(L_ROOM, np.array([1.0, 0.5, 0.3]), 1), _stored(L_ROOM, np.array([4.0, 1.0, -1.0]), 2),
+              _stored(L_ROOM, np.array([30.0, 30.0, 0.0]), 3)]  # the third far away: not searched
+    wTs = np.array([2.0, 1.5, 1.1])
+    sTa = np.array([[0.0, 0.0, 0.0], [0.5, 0.2, 0.3]])
+    subs = [SimpleNamespace(points=g.transform_points(g.inverse(g.compose(wTs, T)), _wall_points(L_ROOM)))
+            for T in sTa]
+    off = g.compose(wTs, np.array([0.12, -0.08, math.radians(1.5)]))  # the hypothesis 14 cm / 1.5 deg off
+    ms = local_matches(subs, sTa, stored, off, RelocaliseConfig())
+    assert sorted((m.new, m.old) for m in ms) == [(0, 1), (0, 2), (1, 1), (1, 2)]
+    for m in ms:  # each match implies the true transform, not the hypothesis it started from
+        assert np.hypot(*(m.wTs[:2] - wTs[:2])) < 0.03 and abs(g.wrap(m.wTs[2] - wTs[2])) < math.radians(0.5)
+    assert local_matches(subs, sTa, stored, off, RelocaliseConfig(close_per_submap=0)) == []

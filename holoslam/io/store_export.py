@@ -1,7 +1,9 @@
 """Writing a map store's export (``holoslam export STORE --to DIR``): the merged map (map_server PGM + YAML and a
 PNG), its topology (GraphML + JSON), one TUM file per session (``session_<id>.tum`` in the world,
 ``session_<id>_unjoined.tum`` in its own frame), the objects now (``objects.csv``) and their history
-(``objects_history.csv``), and a picture of it all (``store.png``)."""
+(``objects_history.csv``), the holographic graph of the merged map with the objects where they are now
+(``holographic.graphml``/``.json``: ``holoslam.maps.holographic.where_is`` answers "where is X now") and its
+planning graph (``planning.json``), and a picture of it all (``store.png``)."""
 
 from __future__ import annotations
 
@@ -41,6 +43,12 @@ def write_store_export(ex: Any, to: str | Path, pictures: bool = True, follow: t
     out = prepare_output_folder(to)
     written = [write_grid(ex.grid, out / "map.yaml"), out / "map.yaml", write_grid_png(ex.grid, out / "map.png")]
     written += list(write_graph_files(to_graphml_ready(ex.topology), out, "topology"))
+    if ex.holographic is not None:
+        from holoslam.io.planning import write_planning
+        from holoslam.maps.polyline import compact_paths
+
+        written += list(write_graph_files(compact_paths(ex.holographic), out, "holographic"))
+        written.append(write_planning(ex.planning, out / "planning.json"))
     for sid, (stamps, wTb, joined) in sorted(ex.trajectories.items()):
         written.append(write_tum(out / (f"session_{sid}.tum" if joined else f"session_{sid}_unjoined.tum"), stamps,
                                  wTb))

@@ -13,7 +13,7 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.store.records import ObjectState, ObjectStatus
 
-__all__ = ["StoreExport", "ObjectHistory", "store_export", "object_history", "session_trajectories"]
+__all__ = ["StoreExport", "ObjectHistory", "store_export", "object_history", "session_trajectories", "where_now"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -28,6 +28,8 @@ class StoreExport:
     objects_now: tuple[ObjectState, ...]
     history: tuple[ObjectState, ...]
     counts: dict[str, int] = field(default_factory=dict)
+    holographic: Any = None  # the holographic graph of the merged map with the objects where they are now
+    planning: Any = None  # the two-layer planning graph of the merged map (``holoslam plan`` routes on it)
 
 
 def session_trajectories(store: Any) -> dict[int, tuple[np.ndarray, np.ndarray, bool]]:
@@ -46,8 +48,70 @@ def session_trajectories(store: Any) -> dict[int, tuple[np.ndarray, np.ndarray, 
     return out
 
 
-def store_export(store_path: str | Path) -> StoreExport:
-    """Everything ``holoslam export STORE`` writes, computed (nothing written here)."""
+def _objects_now(latest: dict[str, ObjectState]) -> tuple:
+    """The holographic graph's objects: every object placed in the world and not gone, at its latest position."""
+    from holoslam.maps.holographic import ObjectInfo
+
+    out = []
+    for k in sorted(latest):
+        o = latest[k]
+        if o.status in (ObjectStatus.GONE, ObjectStatus.UNPLACED) or o.w_xy is None:
+            continue
+        cov = np.full((3, 3), np.nan) if o.cov_w_xy is None else np.pad(np.asarray(o.cov_w_xy), ((0, 1), (0, 1)))
+        out.append(ObjectInfo(k, o.kind, np.array([o.w_xy[0], o.w_xy[1], o.z if np.isfinite(o.z) else 0.0]), cov,
+                              payload=o.payload, sightings=int(o.sightings)))
+    return tuple(out)
+
+
+def _maps(grid: Any, topology: Any, subs: tuple, latest: dict[str, ObjectState], config: Any) -> tuple[Any, Any]:
+    """The holographic graph (objects now) and the planning graph of the merged map, as a run builds them."""
+    from holoslam.config import RunConfig
+    from holoslam.mapping import configuration_space, reach_model
+    from holoslam.maps.holographic import build_holographic
+    from holoslam.maps.passages import EdgePaths
+    from holoslam.maps.rooms import rooms_of_grid
+    from holoslam.planning.twolayer import build_two_layer
+
+    cfg = config or RunConfig()
+    edge_paths = EdgePaths(topology)
+    rooms = rooms_of_grid(grid, topology, cfg.holographic.rooms, edge_paths)
+    holo = build_holographic(grid, topology, anchors_wTa=np.array([s.wTa for s in subs]).reshape(-1, 3),
+                             submap_ids=[int(s.id) for s in subs], objects=_objects_now(latest),
+                             reach_model=reach_model(cfg.robot), params=cfg.holographic.places, rooms=rooms,
+                             edge_paths=edge_paths)
+    planning = build_two_layer(configuration_space(grid, cfg.robot.radius_m), cfg.planning.min_block_cells)
+    return holo, planning
+
+
+def where_now(ex: StoreExport, object_id: str) -> dict[str, Any]:
+    """Where an object is now: its latest state in the store (status, position, the session that saw it so) and,
+    when it is in the map, its node of the store's holographic graph (the room and places it is handled from)."""
+    from holoslam.errors import StoreError
+    from holoslam.maps.holographic import where_is
+
+    last = [o for o in ex.history if o.object_id == object_id]
+    if not last:
+        known = sorted({o.object_id for o in ex.history})
+        raise StoreError(f"{ex.store} knows no object {object_id!r}; known: {', '.join(known) or 'none'}")
+    now = next(o for o in ex.objects_now if o.object_id == object_id)
+    nodes = where_is(ex.holographic, object_id) if ex.holographic is not None else []
+    out = {"id": object_id, "status": now.status, "session": now.session_id,
+           "x": None if now.w_xy is None else float(now.w_xy[0]), "y": None if now.w_xy is None else float(now.w_xy[1]),
+           "places": nodes[0]["places"] if nodes else [], "in_map": bool(nodes)}
+    where = "-" if now.w_xy is None else f"({now.w_xy[0]:.3f}, {now.w_xy[1]:.3f})"
+    text = f"{object_id} now: {now.status} in session {now.session_id} at {where}"
+    if nodes:
+        text += "; handled from " + (", ".join(f"{q['place']} ({q['relation']})" for q in out["places"]) or
+                                     "no place (out of the robot's reach)")
+    elif now.status == ObjectStatus.GONE:
+        text += " (its last place; not in the map now)"
+    out["text"] = text
+    return out
+
+
+def store_export(store_path: str | Path, maps: bool = True, config: Any = None) -> StoreExport:
+    """Everything ``holoslam export STORE`` writes, computed (nothing written here); ``maps``: with the
+    holographic and planning graphs of the merged map (``config``: their settings, a ``RunConfig``)."""
     from holoslam.lifelong.merge import merge_submaps, to_occupancy_grid
     from holoslam.maps.settings import TopologyConfig
     from holoslam.maps.topology import topology_from_settings
@@ -60,8 +124,10 @@ def store_export(store_path: str | Path) -> StoreExport:
         grid = to_occupancy_grid(merged)
         topology = topology_from_settings(grid, TopologyConfig(), anchors_wTa=np.array([s.wTa for s in subs]))
         latest = store.latest_objects()
+        holo, planning = _maps(grid, topology, subs, latest, config) if maps else (None, None)
         return StoreExport(str(store_path), grid, topology, session_trajectories(store),
-                           tuple(latest[k] for k in sorted(latest)), store.object_history(), store.counts())
+                           tuple(latest[k] for k in sorted(latest)), store.object_history(), store.counts(), holo,
+                           planning)
 
 
 @dataclass(frozen=True, eq=False)

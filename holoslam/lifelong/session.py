@@ -20,8 +20,9 @@ import numpy as np
 
 from holoslam import geometry as g
 from holoslam.lifelong.changes import ChangeConfig, Located, classify, to_world, view_directions
+from holoslam.lifelong.frustum import FrustumConfig
 from holoslam.lifelong.summary import ObjectChange, SessionSummary
-from holoslam.relocalise import RelocaliseConfig, fit_se2, query_points
+from holoslam.relocalise import RelocaliseConfig, fit_se2, local_matches, query_points
 from holoslam.store.records import (
     NewSubmap,
     ObjectState,
@@ -38,6 +39,7 @@ __all__ = ["LifelongConfig", "SessionRun", "run_session", "run_session_data", "p
 class LifelongConfig:
     relocalise: RelocaliseConfig = field(default_factory=RelocaliseConfig)
     changes: ChangeConfig = field(default_factory=ChangeConfig)
+    frustum: FrustumConfig = field(default_factory=FrustumConfig)
     joint_method: str = "batch"  # the joint solve: batch (LM) or isam2 (benchmarks/bench_lifelong.py measures both)
     # a stored submap leaves the working graph when the new session's submaps know this fraction of its known
     # cells (it stays in the store's history); the working graph then holds about one visit of each place
@@ -72,6 +74,8 @@ class _Placed:
     cross: tuple
     joint: Any
     graph: Any = None
+    view_s: dict[str, float] = field(default_factory=dict)  # stored objects not located: camera s in view
+    images: dict[str, int] = field(default_factory=dict)  # the same: images that held their place readable
 
 
 def run_session(log_path: str | Path, store_path: str | Path, config: Any = None,
@@ -112,7 +116,7 @@ def run_session_data(log: Any, ingest_report: Any, store_path: str | Path, log_n
     st = slam_stages(log, cfg, clock)
     with MapStore.open(store_path) as store:
         with clock.stage("session (relocalise, join)"):
-            placed, reloc, summary = place_session(store, st, lc)
+            placed, reloc, summary = place_session(store, st, lc, log)
             world = _in_world(st, placed, log)
         run = finish_run(log, ingest_report, world, cfg, clock, str(log.source), session=summary)
         update = _update(log_name, log_sha256, log, st, placed, reloc, summary)
@@ -126,8 +130,9 @@ def _session_objects(st: Any) -> dict[str, tuple[np.ndarray, np.ndarray, Any]]:
             for o in st.objects}
 
 
-def place_session(store: Any, st: Any, lc: LifelongConfig) -> tuple[_Placed, Any, SessionSummary]:
-    """Relocalise the session and join it (module docstring); nothing written yet."""
+def place_session(store: Any, st: Any, lc: LifelongConfig, log: Any = None) -> tuple[_Placed, Any, SessionSummary]:
+    """Relocalise the session and join it (module docstring); nothing written yet. ``log``: the session's log
+    (its images tell where the camera looked: ``frustum``; None judges "gone" by time in view alone)."""
     from holoslam.relocalise import relocalise
 
     sessions = store.sessions()
@@ -144,7 +149,7 @@ def place_session(store: Any, st: Any, lc: LifelongConfig) -> tuple[_Placed, Any
     if not reloc.placed:
         placed = _unjoined(st, sTa, sobj)
         return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=0)
-    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc)
+    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc, log)
     n_seen = sum(o.status == ObjectStatus.SEEN for o in placed.objects)
     return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=n_seen)
 
@@ -173,8 +178,11 @@ def _located(st: Any, sobj: dict, wTs: np.ndarray, cov_wTs: np.ndarray) -> dict[
     obs = st.seen.observations
     views = view_directions(np.array([o.stamp_ns for o in obs], np.int64), tuple(o.object_id for o in obs),
                             st.traj.stamps_ns, _robot_world(st, wTs), {k: v[0] for k, v in w.items()})
+    reads: dict[str, list[int]] = {}
+    for ob in obs:
+        reads.setdefault(ob.object_id, []).append(int(ob.stamp_ns))
     return {k: Located(k, w[k][0], w[k][1], float(o.w_position[2]), int(o.sightings), views.get(k),
-                       o.object_type, o.payload) for k, (_xy, _c, o) in sobj.items()}
+                       o.object_type, o.payload, tuple(sorted(reads.get(k, ())))) for k, (_xy, _c, o) in sobj.items()}
 
 
 def _placements(statuses: dict[str, str], latest: dict[str, ObjectState], all_placements: set[str]
@@ -189,10 +197,30 @@ def _placements(statuses: dict[str, str], latest: dict[str, ObjectState], all_pl
     return out
 
 
+def _unseen_images(latest: dict[str, ObjectState], located: dict, log: Any, st: Any, wTs: np.ndarray,
+                   merged: Any, cfg: Any) -> dict[str, int] | None:
+    """Per stored object not located, the session's images that held its place readable (``frustum``); None
+    when the log has no images with camera transforms."""
+    from holoslam.lifelong.frustum import camera_views, covering_images, world_cameras
+
+    views = camera_views(log) if log is not None else None
+    if views is None or not len(views):
+        return None
+    wTb = g.compose(np.broadcast_to(wTs, st.traj.wTb.shape), st.traj.wTb)
+    wTc = world_cameras(views, st.traj.stamps_ns, wTb)
+    out = {}
+    for k, o in latest.items():
+        if k in located or o.status == ObjectStatus.GONE or o.w_xy is None or not np.isfinite(o.z):
+            continue
+        out[k] = covering_images(np.array([o.w_xy[0], o.w_xy[1], o.z]), o.view, o.payload, views, wTc, merged,
+                                 cfg)
+    return out
+
+
 def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, latest: dict, reloc: Any,
-          lc: LifelongConfig) -> _Placed:
+          lc: LifelongConfig, log: Any = None) -> _Placed:
     """The joined session: object changes, the joint solve, the session transform it implies, retirements."""
-    from holoslam.lifelong.joint import joint_problem, solve_joint
+    from holoslam.lifelong.joint import joint_problem, retired_priors, solve_joint
     from holoslam.lifelong.merge import merge_submaps
 
     h = reloc.hypothesis
@@ -200,7 +228,10 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     merged = merge_submaps(np.array([s.wTa for s in stored]), [(s.prob, s.known, s.origin, s.resolution)
                                                                 for s in stored], [s.session_id for s in stored])
     located = _located(st, sobj, h.wTs, h.cov_wTs)
-    statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), merged, lc.changes)
+    view_s: dict[str, float] = {}
+    images = _unseen_images(latest, located, log, st, h.wTs, merged, lc.frustum)
+    statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), merged, lc.changes, view_s,
+                        images)
     sightings = store.sightings(ids)
     # every placement the store ever gave (retired submaps' sightings included): a new one never reuses a name
     ever = {o.placement for o in store.object_history() if o.placement}
@@ -211,15 +242,22 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     init = {p: latest[k].w_xy for k, p in placement.items() if k in latest and latest[k].w_xy is not None
             and statuses.get(k) == ObjectStatus.SEEN}
     init.update({placement[k]: v.w_xy for k, v in located.items() if placement[k] not in init})
+    live = set(sightings.placement) | {placement[o] for o in lm.landmark}
+    retired = tuple(s for s in store.submaps(working=False) if s.retired_by is not None)
+    priors = retired_priors(retired, store.sightings(np.array([s.id for s in retired], np.int64)), live)
+    have = {(m.new, m.old) for m in reloc.matches}
+    cross = tuple(reloc.matches) + tuple(m for m in local_matches(st.fe.submaps, sTa, stored, h.wTs, lc.relocalise)
+                                         if (m.new, m.old) not in have)
     jg = joint_problem(stored, store.factors(ids), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
-                       reloc.matches, init)
+                       cross, init, priors)
     js = solve_joint(jg, lc.joint_method)
     wTs = fit_se2(sTa[:, :2], js.new_wTa[:, :2]) if len(sTa) >= 2 else g.compose(js.new_wTa[0], g.inverse(sTa[0]))
     objs = _object_states(statuses, located, latest, placement, js)
     retire = _retire(stored, js, st, lc.retire_cover)
     updates = {int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
                for n, k in enumerate(ids.tolist())}
-    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, reloc.matches, js, jg)
+    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, cross, js, jg,
+                   view_s, images or {})
 
 
 def _kept_landmarks(st: Any) -> Any:
@@ -295,7 +333,9 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
     counts = store.counts()
     js = p.joint
     joint = {} if js is None else {"method": js.method, "seconds": round(js.seconds, 4), "iterations": js.iterations,
-                                   "anchors": int(len(js.stored_wTa) + len(js.new_wTa)), "rejected": js.rejected}
+                                   "anchors": int(len(js.stored_wTa) + len(js.new_wTa)), "rejected": js.rejected,
+                                   "covariances_failed": js.covariances_failed,
+                                   "cross_factors": len(p.cross)}
     return SessionSummary(
         store=str(store.path), session_id=sid, joined=joined, joined_by=("none" if reloc is None else reloc.joined_by),
         founded=founded, relocalisation_s=0.0 if reloc is None else round(reloc.seconds, 4),
@@ -305,7 +345,8 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
         laser_searches=0 if reloc is None else reloc.searches, objects_seen=n_seen, changes=changes, joint=joint,
         working_submaps=counts["working_submaps"] - len(p.retire) + (len(p.wTa) if joined else 0),
         retired_submaps=counts["submaps"] - counts["working_submaps"] + len(p.retire),
-        relocalisation_cpu_s=0.0 if reloc is None else round(reloc.cpu_seconds, 4))
+        relocalisation_cpu_s=0.0 if reloc is None else round(reloc.cpu_seconds, 4),
+        unseen_in_view_s=dict(sorted(p.view_s.items())), unseen_in_images=dict(sorted(p.images.items())))
 
 
 def _rehang(stamps_ns: np.ndarray, poses: np.ndarray, anchor_stamps_ns: np.ndarray, sTa: np.ndarray,

@@ -47,6 +47,12 @@ class SessionSummary:
     working_submaps: int = 0
     retired_submaps: int = 0
     relocalisation_cpu_s: float = 0.0  # the process's CPU time of the relocalisation
+    # the stored objects not located in this session, each with its share of the camera's time with its place in
+    # view (s): gone from ChangeConfig.view_min_s, else kept as it was (not seen, not in view long enough)
+    unseen_in_view_s: dict[str, float] = field(default_factory=dict)
+    # the same objects, each with the number of the session's images that held its place readable (gone from
+    # ChangeConfig.min_images; empty for a log without images)
+    unseen_in_images: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
