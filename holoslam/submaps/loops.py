@@ -183,12 +183,7 @@ class LoopSearch:
                 self.last_wide[m] = travelled
             searched += not wide
             t0 = time.perf_counter()
-            # the wide score where the pose is uncertain beyond the wide window, not merely searched that wide:
-            # aces at 1.4 Hz, a revisit 177 m of graph path on searched +-7 m (the drift rate's window) held the
-            # truth 0.8-1.0 m off, inside its covariance's 3.5 x 1.7 m, where it scored 0.42-0.48: below the wide
-            # score (0.47 scaled), above the narrow one (0.43); the window's ambiguity test still sees every peak
-            strict = max(cw[0], cw[1]) > c.wide_window_xy
-            cand = self._windowed(m, n, nTr, cov_nTr, b_pts, search_pts, seed, (wx, wy), wth, strict)
+            cand = self._windowed(m, n, nTr, cov_nTr, b_pts, search_pts, seed, (wx, wy), wth, wide)
             self.seconds["windowed"] += time.perf_counter() - t0
             if cand is not None:
                 found.append(cand)
@@ -203,11 +198,11 @@ class LoopSearch:
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
     def _windowed(self, m: int, n: int, nTr, cov_nTr, b_pts, search_pts, seed, wxy, wth: float,
-                  strict: bool) -> LoopCandidate | None:
+                  wide: bool) -> LoopCandidate | None:
         """One windowed search (at most max_window_xy / max_window_deg), accepted on its own (``min_score_wide``
-        when ``strict``)."""
+        when ``wide``)."""
         c = self.cfg
-        min_score = (c.min_score_wide if strict else c.min_score) * self.scale
+        min_score = (c.min_score_wide if wide else c.min_score) * self.scale
         margin = c.ambiguity_margin * self.scale
         self.tried += 1
         self._count("windowed searches")
