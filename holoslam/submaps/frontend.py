@@ -490,7 +490,7 @@ def _local_slam(
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
                                  graph.graph_distance(node.submap), float(travelled[k]),
                                  graph.relative_covariances(node.submap), np.array(graph.travel),
-                                 partial(_bundle, slam, node, cfg.loops.global_bundle_m))
+                                 partial(slam.bundle, node, cfg.loops.global_bundle_m))
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found:
@@ -499,20 +499,6 @@ def _local_slam(
     closed.extend(_submap_record(sm, cfg, "scans") for sm in slam.pop_finished())
     closed.sort(key=lambda sm: sm.index)
     return closed, graph, loops
-
-
-def _bundle(slam: LocalSlam, node, length_m: float) -> np.ndarray:
-    """The points of ``node`` and of the nodes of its submap within ``length_m`` of path behind it, in the
-    node's base frame (local SLAM's poses: accurate to centimetres over a few metres)."""
-    host = next((sm for sm in slam.active if sm.index == node.submap), None)
-    if host is None or not host.aTb:
-        return node.b_points
-    poses = np.array(host.aTb)
-    step = np.hypot(*np.diff(poses[::-1, :2], axis=0).T)
-    keep = int(np.searchsorted(np.cumsum(step), length_m, side="right")) + 1
-    bTa = g.inverse(node.aTb)
-    parts = [g.transform_points(g.compose(bTa, poses[-1 - q]), host.b_points[-1 - q]) for q in range(keep)]
-    return np.vstack(parts)
 
 
 def _problem(
