@@ -9,7 +9,9 @@ Variants (``holoslam.derive``, what a hospital's or a carried robot's log makes 
 scans after it removed, so only a global search can join the two parts (the row adds the largest error of a
 relation across the kidnap; relations with a stamp inside the 30 s gap are not scored: the robot was carried
 there, no scan says where it went, and the jumped odometry places it 30 m off); ``sparse`` scans decimated to 1.4 Hz with every second beam dropped (the Freiburg
-hospital log's laser), scored over the relations with a pose within 0.1 s. A variant runs in the child on the log
+hospital log's laser), scored over the relations whose two stamps have a kept scan within 0.1 s (the trajectory
+also holds a pose at every odometry stamp, which would match every relation; between scans it is the odometry's,
+and the relations of a 1.4 Hz log are at its scans). A variant runs in the child on the log
 in memory (``holoslam.pipeline.run_data``) and writes the trajectory and the report; the independent scorer
 checks the full rows.
 
@@ -88,6 +90,21 @@ def without_gap(rel, at_ns: int):
     return Relations(rel.t1_ns[keep], rel.t2_ns[keep], rel.T[keep])
 
 
+def near_scans(rel, scan_stamps_ns: np.ndarray, max_dt_ns: int):
+    """The relations whose two stamps have a scan within ``max_dt_ns``: the run's trajectory holds a pose at every
+    odometry stamp too, but only a scan's pose is the laser's (between scans it is the odometry's, corrected)."""
+    from holoslam.io.relations import Relations
+
+    sc = np.sort(np.asarray(scan_stamps_ns, np.int64))
+
+    def near(t: np.ndarray) -> np.ndarray:
+        i = np.clip(np.searchsorted(sc, t), 1, len(sc) - 1)
+        return np.minimum(np.abs(sc[i] - t), np.abs(sc[i - 1] - t)) <= max_dt_ns
+
+    keep = near(rel.t1_ns) & near(rel.t2_ns)
+    return Relations(rel.t1_ns[keep], rel.t2_ns[keep], rel.T[keep])
+
+
 def variant_log(data, variant: str):
     """The log in memory as the variant makes it, and the kidnap's stamp (None for the others)."""
     from holoslam import derive
@@ -117,6 +134,7 @@ def child(log: str, out: str, variant: str = "full") -> None:
     data, at = variant_log(data, variant)
     result = run_data(data, ingest, RunConfig())
     write_tum(Path(out, "trajectory.tum"), result.stamps_ns, result.wTb)
+    np.save(Path(out).parent / "scan_stamps.npy", np.array([sc.stamp_ns for sc in data.scans], np.int64))
     Path(out, "report.json").write_text(json.dumps(result.report.to_dict(), default=str))
     Path(out).parent.joinpath("bench_child.json").write_text(json.dumps({"seconds": result.report.timings_s.get("total", math.nan),
                                                          "kidnap_ns": at}))
@@ -190,6 +208,8 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
     if child_json.get("kidnap_ns") is not None:  # relations touching the gap are not scored (docstring)
         rel = without_gap(rel, int(child_json["kidnap_ns"]))
     max_dt = int(MAX_DT[variant] * 1e9)
+    if variant == "sparse":  # the relations at the sparse log's scans (docstring)
+        rel = near_scans(rel, np.load(run_dir.parent / "scan_stamps.npy"), max_dt)
     e = relation_errors(stamps, wTb, rel, max_dt)
     ok, check = (scorer_check(data / "score_relations.py", tum, rel_path, e, work) if variant == "full"
                  else (True, "variant: scored by holoslam only"))
