@@ -22,9 +22,11 @@ setting of :class:`RoomRules` in metres or m^2, set by how buildings are built, 
    least ``opening_widening`` times as wide along the opening's line (a cabinet narrowing a room is not). Two
    cuts closer than the sum of their half widths describe one opening. Of two such whose lines end on the same
    jamb (within ``wall_thickness_max_m`` of each other, a wall's thickness), the one at least
-   ``room_to_door_clearance`` times as wide as the other is not the opening: it runs from the door's jamb into
-   the space behind the door (to the corridor's far wall, a room's side wall or a cabinet against it), which
-   step 4 c would drop as a narrowing and so lose the door; it gives way. Of the rest, the one whose line
+   ``room_to_door_clearance`` times as wide as the other whose far end runs head-on into a wall (the wall's
+   face goes on to both sides of it, at least a wall's thickness each way in twice that) is not the opening:
+   it runs from the door's jamb into the space behind the door (to the corridor's far wall, a room's side
+   wall), which step 4 c would drop as a narrowing and so lose the door; it gives way (a line ending on the
+   end of another wall, a jamb, or at a corner is an opening of its own and does not). Of the rest, the one whose line
    continues into wall beyond both ends (a door set in a wall rather than a line from a jamb to a table in
    front of it) is kept, then the narrowest.
 3. **Regions**: the space where a disc of half the narrowest door fits (gaps narrower than any door join
