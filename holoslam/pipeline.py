@@ -154,7 +154,7 @@ def finish_run(log: Any, ingest_report: Any, st: SlamStages, cfg: RunConfig, clo
     report, ``holoslam.lifelong``)."""
     from holoslam.mapping import build_maps
     from holoslam.objects import located_by
-    from holoslam.report import build_report
+    from holoslam.report_build import build_report
 
     fe, sol, seen, traj, objects = st.fe, st.sol, st.seen, st.traj, st.objects
     maps = build_maps(log, fe, sol, traj, objects, cfg, clock)

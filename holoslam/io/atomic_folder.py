@@ -31,7 +31,7 @@ from typing import Any
 
 from holoslam.errors import ConfigError, OutputError
 
-__all__ = ["FolderWriter", "settle", "check_target", "STALE_OTHER_HOST_S"]
+__all__ = ["FolderWriter", "settle", "check_target", "check_writable", "STALE_OTHER_HOST_S"]
 
 STALE_OTHER_HOST_S = 3600.0
 """Seconds after which a temporary folder left by a writer on another host counts as abandoned (its process
@@ -127,17 +127,26 @@ def check_target(target: str | Path, is_replaceable: Any = None) -> Path:
         why = is_replaceable(t)
         if why:
             raise ConfigError(f"output {target} {why}")
+    check_writable(t.parent, target)
+    return t
+
+
+def check_writable(folder: Path, shown: str | Path) -> None:
+    """Create ``folder`` (and its parents) and check a file can be written in it (one is made and removed);
+    ``shown``: the output folder the user named, for the message. Raises ``ConfigError`` (one line: which
+    folder, why, what to do)."""
+    import tempfile
+
     try:
-        t.parent.mkdir(parents=True, exist_ok=True)
-        probe = _tmp_name(t, "check", _token())
-        probe.mkdir()
-        probe.rmdir()
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".holoslam-write-check-", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
     except OSError as e:
         why = e.strerror or type(e).__name__
         raise ConfigError(
-            f"cannot create or write the output folder {target}: {why}; name a folder you can write (-o)"
+            f"cannot create or write the output folder {shown}: {why}; name a folder you can write (-o)"
         ) from None
-    return t
 
 
 def _output_error(target: Path, e: OSError) -> OutputError:

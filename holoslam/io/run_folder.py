@@ -63,22 +63,12 @@ RUN_FILES = (
 def prepare_output_folder(out_dir: str | Path) -> Path:
     """Create ``out_dir`` (and its parents) and check a file can be written in it, so a run finds out before
     its work, not after. Raises ``ConfigError`` (one line: which folder, why, what to do)."""
-    import os
-    import tempfile
+    from holoslam.io.atomic_folder import check_writable
 
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise ConfigError(f"output {out} exists and is not a folder; name a folder for the run's files")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".holoslam-write-check-", dir=out)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as e:
-        why = e.strerror or type(e).__name__
-        raise ConfigError(
-            f"cannot create or write the output folder {out}: {why}; name a folder you can write (-o)"
-        ) from None
+    check_writable(out, out)
     return out
 
 

@@ -20,9 +20,15 @@ setting of :class:`RoomRules` in metres or m^2, set by how buildings are built, 
    (wall-like: at most ``wall_thickness_max_m`` thick and at least ``wall_length_min_m`` long, a partition
    between two doors). A wide opening is kept only if it is a constriction: on one of its sides the space is at
    least ``opening_widening`` times as wide along the opening's line (a cabinet narrowing a room is not). Two
-   cuts closer than the sum of their half widths describe one opening: the one whose line continues into wall
-   beyond both ends (a door set in a wall rather than a line from a jamb to a table in front of it) is kept,
-   then the narrowest.
+   cuts closer than the sum of their half widths describe one opening. Of two such whose lines end on the same
+   jamb (within ``wall_thickness_max_m`` of each other, a wall's thickness), the one at least
+   ``room_to_door_clearance`` times as wide as the other whose far end runs head-on into a wall (the wall's
+   face goes on to both sides of it, at least a wall's thickness each way in twice that) is not the opening:
+   it runs from the door's jamb into the space behind the door (to the corridor's far wall, a room's side
+   wall), which step 4 c would drop as a narrowing and so lose the door; it gives way (a line ending on the
+   end of another wall, a jamb, or at a corner is an opening of its own and does not). Of the rest, the one whose line
+   continues into wall beyond both ends (a door set in a wall rather than a line from a jamb to a table in
+   front of it) is kept, then the narrowest.
 3. **Regions**: the space where a disc of half the narrowest door fits (gaps narrower than any door join
    nothing), with the cuts drawn in, 4-connected.
 4. **Merging**, one rule per round, in this order (:func:`merge_round`). A region's *largest clearance* is
@@ -289,9 +295,71 @@ def _widening(free: np.ndarray, p1: np.ndarray, p2: np.ndarray, res: float, enou
     return best >= enough * length
 
 
-def _one_per_opening(cands, lines, clr, free, res: float, keys) -> list[int]:
+def _segment_distance(p1: np.ndarray, p2: np.ndarray, q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """(N,) the distance between the segments p1 -> p2 and q1 -> q2 ((N, 2) each; 0 where they cross)."""
+
+    def cross(o, a, b):
+        return (a[:, 0] - o[:, 0]) * (b[:, 1] - o[:, 1]) - (a[:, 1] - o[:, 1]) * (b[:, 0] - o[:, 0])
+
+    def to_segment(x, a, b):
+        d = b - a
+        t = np.clip(((x - a) * d).sum(axis=1) / np.maximum((d * d).sum(axis=1), 1e-12), 0.0, 1.0)
+        e = a + t[:, None] * d - x
+        return np.hypot(e[:, 0], e[:, 1])
+
+    crossing = (cross(q1, q2, p1) * cross(q1, q2, p2) < 0) & (cross(p1, p2, q1) * cross(p1, p2, q2) < 0)
+    ends = np.minimum.reduce(
+        [to_segment(p1, q1, q2), to_segment(p2, q1, q2), to_segment(q1, p1, p2), to_segment(q2, p1, p2)]
+    )
+    return np.where(crossing, 0.0, ends)
+
+
+def _head_on(free: np.ndarray, end: np.ndarray, cell: np.ndarray, length_cells: int) -> np.ndarray:
+    """(N,) whether each cut line ends head-on on a wall at ``end`` ((N, 2) obstacle cells, each the cut's
+    nearest obstacle cell on its side of the skeleton ``cell``, so ``end - cell`` is the wall's normal there):
+    the obstacle runs on along the wall's face on both sides of the end (at least half of ``length_cells``
+    either way, a cell into the wall allowed), as a wall the line runs into does; the end face of a jamb (a
+    wall's end) is only the wall's thickness wide, and a corner runs on to one side."""
+    n = (end - cell).astype(np.float64)
+    n /= np.maximum(np.hypot(n[:, 0], n[:, 1]), 1e-9)[:, None]
+    t = np.column_stack([-n[:, 1], n[:, 0]])
+    s = np.arange(1, length_cells + 1, dtype=np.float64)[None, :, None]
+    out = np.ones(end.shape[0], dtype=bool)
+    for sgn in (-1.0, 1.0):
+        pts = end[:, None, :] + sgn * s * t[:, None, :]
+        blocked = ~_sample_free(free, pts) | ~_sample_free(free, pts + n[:, None, :])
+        out &= blocked.mean(axis=1) >= 0.5
+    return out
+
+
+def _off_the_jamb(free, rc, half, seg, pairs, res: float, rules: RoomRules) -> np.ndarray:
+    """(N,) bool: the candidates that give way to a narrower one of the same opening whose line ends on the
+    same jamb while theirs runs head-on into a wall (step 2 of the module docstring). ``pairs`` (K, 2): the
+    candidates closer than the sum of their half widths (cells, ``half``); ``seg`` (N, 2, 2) float: each
+    line's ends, NaN without one."""
+    out = np.zeros(half.shape[0], dtype=bool)
+    ok = ~(np.isnan(seg[pairs[:, 0], 0, 0]) | np.isnan(seg[pairs[:, 1], 0, 0]))
+    ratio = rules.room_to_door_clearance
+    a, b = pairs[ok, 0], pairs[ok, 1]
+    wide = np.concatenate([a[half[a] >= ratio * half[b]], b[half[b] >= ratio * half[a]]])
+    narrow = np.concatenate([b[half[a] >= ratio * half[b]], a[half[b] >= ratio * half[a]]])
+    if wide.shape[0] == 0:
+        return out
+    w1, w2, n1, n2 = seg[wide, 0], seg[wide, 1], seg[narrow, 0], seg[narrow, 1]
+    jamb = rules.wall_thickness_max_m / res
+    touch = _segment_distance(w1, w2, n1, n2) <= jamb
+    # the wide line's far end: the one farther from the narrow line
+    far1 = _segment_distance(w1, w1, n1, n2) >= _segment_distance(w2, w2, n1, n2)
+    end = np.where(far1[:, None], w1, w2)
+    hit = touch & _head_on(free, end, rc[wide], max(int(round(2.0 * jamb)), 1))
+    out[wide[hit]] = True
+    return out
+
+
+def _one_per_opening(cands, lines, clr, free, res: float, keys, rules: RoomRules) -> list[int]:
     """Indices of the candidates kept when those closer than the sum of their half widths (one opening seen
-    twice) keep one: the line continuing into wall beyond both ends first, then the narrowest."""
+    twice) keep one: a line from the jamb of a narrower one into the space behind it never (see
+    :func:`_off_the_jamb`); then the line continuing into wall beyond both ends first, then the narrowest."""
     from scipy.spatial import cKDTree
 
     n = len(cands)
@@ -300,13 +368,20 @@ def _one_per_opening(cands, lines, clr, free, res: float, keys) -> list[int]:
     rc = np.array([c[0] for c in cands], dtype=np.float64)
     half = np.array([clr[int(c[0][0]), int(c[0][1])] for c in cands]) / res
     wall = np.zeros(n)
+    seg = np.full((n, 2, 2), np.nan)
     has = [i for i, k in enumerate(keys) if lines.get(k) is not None]
     if has:
         p1 = np.array([lines[keys[i]][0] for i in has], dtype=np.float64)
         p2 = np.array([lines[keys[i]][1] for i in has], dtype=np.float64)
         wall[has] = _wall_beyond(free, p1, p2, max(int(round(0.3 / res)), 1))
-    order = np.lexsort((half, -np.round(wall, 1)))
+        seg[has, 0], seg[has, 1] = p1, p2
     tree = cKDTree(rc)
+    pairs = tree.query_pairs(r=2.0 * float(half.max()), output_type="ndarray").reshape(-1, 2)
+    gap = rc[pairs[:, 0]] - rc[pairs[:, 1]]
+    pairs = pairs[np.hypot(gap[:, 0], gap[:, 1]) < half[pairs[:, 0]] + half[pairs[:, 1]]]
+    gives_way = _off_the_jamb(free, rc, half, seg, pairs, res, rules)
+    order = np.lexsort((half, -np.round(wall, 1)))
+    order = order[~gives_way[order]]
     near = tree.query_ball_point(rc, r=2.0 * float(half.max()))
     kept = np.zeros(n, dtype=bool)
     for i in order.tolist():
@@ -372,7 +447,7 @@ def _cuts(free: np.ndarray, clr: np.ndarray, res: float, r: RoomRules, skeleton,
             ok[with_line[sel]] &= _widening(free, p1[sel], p2[sel], res, r.opening_widening)
     idx = np.flatnonzero(ok)
     cands, keys, kind = [cands[i] for i in idx], [keys[i] for i in idx], kind[idx]
-    kept = _one_per_opening(cands, lines, clr, free, res, keys)
+    kept = _one_per_opening(cands, lines, clr, free, res, keys, r)
     return [cands[i] for i in kept], kind[kept], lines
 
 
