@@ -255,3 +255,16 @@ def test_surface_covariance_kernel_is_the_weighted_moment():
         J = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
         got = _surface_covariance(S, pred, off, angles, aTb, 200.0, 0.05, 0.01)
         assert np.allclose(got, J @ cov @ J.T, rtol=1e-12, atol=1e-18)
+
+
+def test_refinement_step_solve_is_numpys():
+    """The matcher's unrolled 3x3 solve (``_grid_fast._solve3``) gives ``np.linalg.solve``'s step, also where
+    the pivot must move rows (a zero leading entry)."""
+    from holoslam.submaps._grid_fast import _solve3
+
+    rng = np.random.default_rng(7)
+    mats = [np.array([[0.0, 2.0, 1.0], [3.0, 1.0, 0.5], [1.0, 0.0, 4.0]])]
+    mats += [(m := rng.normal(size=(3, 3))) @ m.T + np.eye(3) * 1e-3 for _ in range(50)]
+    for A in mats:
+        b = rng.normal(size=3)
+        assert np.allclose(_solve3(A, b), np.linalg.solve(A, b), rtol=1e-9, atol=1e-12)
