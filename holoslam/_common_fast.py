@@ -4,6 +4,8 @@
   beams to the grid with it, the planner's corridor refinement finds where a segment meets a portal box).
 * :func:`csr_group` -- items grouped by an integer key, CSR style (a stable counting sort): the point buckets
   of the front end's nearest-neighbour grid, the blocks of each planning region.
+* :func:`argsort_stable` -- ``np.argsort(key, kind="mergesort")`` (numba's own took 2 s of a first run to
+  compile in each kernel that used it): the branch and bound's top-level order, the line splitter's pieces.
 """
 
 from __future__ import annotations
@@ -58,3 +60,36 @@ def csr_group(keys, n):  # pragma: no cover - compiled
         order[fill[keys[k]]] = k
         fill[keys[k]] += 1
     return start, order
+
+
+@nb.njit(**JIT)
+def argsort_stable(key):  # pragma: no cover - compiled
+    """``np.argsort(key, kind="mergesort")`` of a 1-D array: the indices by increasing key, equal keys in index
+    order (a bottom-up merge sort)."""
+    n = key.size
+    idx = np.arange(n)
+    buf = np.empty(n, dtype=np.int64)
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid, hi = min(lo + width, n), min(lo + 2 * width, n)
+            i, j, k = lo, mid, lo
+            while i < mid and j < hi:
+                if key[idx[j]] < key[idx[i]]:  # strictly less: equal keys keep their order
+                    buf[k] = idx[j]
+                    j += 1
+                else:
+                    buf[k] = idx[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                buf[k] = idx[i]
+                i += 1
+                k += 1
+            while j < hi:
+                buf[k] = idx[j]
+                j += 1
+                k += 1
+        idx, buf = buf, idx
+        width *= 2
+    return idx

@@ -85,3 +85,17 @@ def test_the_planning_kernels_follow_the_policy():
     # the query is compiled with the kernels of the files it calls into, so their sources stamp its cache
     deps = {Path(p).name for p in queries.query._cache._impl.locator._holoslam_deps}
     assert {"_jit.py", "astar.py", "smoothing.py", "tiles.py", "_common_fast.py"} <= deps
+
+
+def test_stable_argsort_kernel_is_numpys_mergesort():
+    """``_common_fast.argsort_stable`` (the branch and bound's and the line splitter's order) is
+    ``np.argsort(kind="mergesort")``: same order, ties in index order, on floats and integers."""
+    import numpy as np
+
+    from holoslam._common_fast import argsort_stable
+
+    rng = np.random.default_rng(2)
+    for n in (0, 1, 2, 5, 64, 1025):
+        for key in (rng.normal(size=n), rng.integers(0, 4, n).astype(np.float64), rng.integers(-3, 3, n)):
+            assert np.array_equal(argsort_stable(key), np.argsort(key, kind="mergesort"))
+            assert np.array_equal(argsort_stable(-key), np.argsort(-key, kind="mergesort"))

@@ -24,6 +24,7 @@ import math
 import numba as nb
 import numpy as np
 
+from holoslam._common_fast import argsort_stable
 from holoslam._jit import JIT
 
 
@@ -199,9 +200,14 @@ def _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant,
 def _boxes(rows, cols):  # pragma: no cover - compiled
     """Per angle a: (min row, max row, min col, max col) of the points' cells."""
     bb = np.empty((rows.shape[0], 4), dtype=np.int64)
-    for a in range(rows.shape[0]):
-        bb[a, 0], bb[a, 1] = rows[a].min(), rows[a].max()
-        bb[a, 2], bb[a, 3] = cols[a].min(), cols[a].max()
+    for a in range(rows.shape[0]):  # written out: numba's array min/max took a second to compile
+        r_lo = r_hi = rows[a, 0]
+        c_lo = c_hi = cols[a, 0]
+        for i in range(1, rows.shape[1]):
+            r, c = rows[a, i], cols[a, i]
+            r_lo, r_hi = min(r_lo, r), max(r_hi, r)
+            c_lo, c_hi = min(c_lo, c), max(c_hi, c)
+        bb[a, 0], bb[a, 1], bb[a, 2], bb[a, 3] = r_lo, r_hi, c_lo, c_hi
     return bb
 
 
@@ -222,7 +228,7 @@ def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0)
             for iy in range(ny):
                 top[(a * nx + ix) * ny + iy] = _score(prob, levels, starts, d_top, rows, cols, bb, a,
                                                       x_lo + ix * w, y_lo + iy * w, quant)
-    order = np.argsort(-top, kind="mergesort")
+    order = argsort_stable(-top)  # np.argsort(-top, kind="mergesort")
     cap = 4 * d_top + 4
     st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
           np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))

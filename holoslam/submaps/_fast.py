@@ -19,7 +19,7 @@ import math
 import numba as nb
 import numpy as np
 
-from holoslam._common_fast import csr_group
+from holoslam._common_fast import argsort_stable, csr_group
 from holoslam._jit import JIT
 
 
@@ -183,5 +183,5 @@ def split_pieces(x, y, run_start, run_end, tol):  # pragma: no cover - compiled
             else:
                 ps[n], pe[n] = a, b
                 n += 1
-    order = np.argsort(ps[:n], kind="mergesort")
+    order = argsort_stable(ps[:n])  # np.argsort(ps[:n], kind="mergesort")
     return ps[:n][order], pe[:n][order]

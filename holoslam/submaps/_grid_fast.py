@@ -106,7 +106,7 @@ def bicubic(prob, u, v, outside):  # pragma: no cover
     return value, du, dv
 
 
-@nb.njit(inline="always", **JIT)
+@nb.njit(**JIT)
 def _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outside, x, y, t, H, g, Hocc,
                want):  # pragma: no cover
     """``lsq_match``'s cost at (x, y, t) and its occupied-space part; with ``want`` also the Gauss-Newton
@@ -132,15 +132,25 @@ def _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outs
             gy = -s * dv / res
             j0, j1 = gx, gy
             j2 = gx * (-st * px[k] - ct * py[k]) + gy * (ct * px[k] - st * py[k])
-            J = (j0, j1, j2)
-            for a in range(3):
-                g[a] += J[a] * r
-                for b in range(3):
-                    H[a, b] += J[a] * J[b]
+            # g += J r and H += J J^T written out: a tuple J indexed in a loop took seconds to compile
+            g[0] += j0 * r
+            g[1] += j1 * r
+            g[2] += j2 * r
+            H[0, 0] += j0 * j0
+            H[0, 1] += j0 * j1
+            H[0, 2] += j0 * j2
+            H[1, 0] += j1 * j0
+            H[1, 1] += j1 * j1
+            H[1, 2] += j1 * j2
+            H[2, 0] += j2 * j0
+            H[2, 1] += j2 * j1
+            H[2, 2] += j2 * j2
     dt = math.atan2(math.sin(t - pt_), math.cos(t - pt_))
     cost = cost_occ + w_trans * w_trans * ((x - px_) ** 2 + (y - py_) ** 2) + w_rot * w_rot * dt * dt
     if want:
-        Hocc[:] = H
+        for a in range(3):  # Hocc[:] = H, written out: numba's array-to-slice copy took 5 s to compile
+            for b in range(3):
+                Hocc[a, b] = H[a, b]
         H[0, 0] += w_trans * w_trans
         H[1, 1] += w_trans * w_trans
         H[2, 2] += w_rot * w_rot
@@ -148,6 +158,35 @@ def _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outs
         g[1] += w_trans * w_trans * (y - py_)
         g[2] += w_rot * w_rot * dt
     return cost, cost_occ
+
+
+@nb.njit(**JIT)
+def _solve3(A, b):  # pragma: no cover
+    """x with A x = b for a 3x3 A: Gaussian elimination with partial pivoting (LAPACK getrf + getrs's
+    algorithm, unrolled). ``np.linalg.solve`` does the same through LAPACK, but compiling numba's binding of it
+    took 5 s of a first run's CPU for this one 3x3 system (its solution agrees to 1e-14)."""
+    a = A.copy()
+    x = b.copy()
+    for k in range(3):  # L U with row swaps, the multipliers scaled by the pivot's reciprocal (as getrf2)
+        p = k
+        for r in range(k + 1, 3):
+            if abs(a[r, k]) > abs(a[p, k]):
+                p = r
+        if p != k:
+            for c in range(3):
+                a[k, c], a[p, c] = a[p, c], a[k, c]
+            x[k], x[p] = x[p], x[k]
+        inv = 1.0 / a[k, k]
+        for r in range(k + 1, 3):
+            f = a[r, k] * inv
+            for c in range(k + 1, 3):
+                a[r, c] -= f * a[k, c]
+            x[r] -= f * x[k]
+    for k in range(2, -1, -1):  # U x = y by columns (as trsm)
+        x[k] /= a[k, k]
+        for r in range(k):
+            x[r] -= x[k] * a[r, k]
+    return x
 
 
 @nb.njit(**JIT)
@@ -176,7 +215,7 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
         A = H.copy()
         for a in range(3):
             A[a, a] += lam * (H[a, a] + 1e-9)
-        step = np.linalg.solve(A, -g)
+        step = _solve3(A, -g)
         nx, ny, nt = x + step[0], y + step[1], t + step[2]
         ncost, nocc = _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outside, nx, ny, nt,
                                  H2, g2, Hocc2, True)
@@ -254,3 +293,57 @@ def mean_bicubic(prob, ox, oy, res, px, py, x, y, t, outside):  # pragma: no cov
         wy = s * px[k] + c * py[k] + y
         tot += bicubic(prob, (wx - ox) / res - 0.5, (wy - oy) / res - 0.5, outside)[0]
     return tot / max(n, 1)
+
+
+@nb.njit(**JIT)
+def surface_covariance(S, p0, p1, p2, off, angles, a0, a1, a2, kappa, res, step):  # pragma: no cover
+    """``scanmatch._surface_covariance`` in one pass: the weighted second moment of the window's poses (scores
+    S (A, M, M): angle, y, x offsets ``off`` about the prediction (p0, p1, p2)) about the refined pose
+    (a0, a1, a2), weights exp(kappa (s - max s)), floored by the lattice's uniform variance and turned into
+    the pose's own frame. (The numpy version's set-up cost ~10x its arithmetic on a window of a few hundred
+    poses, at every match.)"""
+    na, m = S.shape[0], S.shape[1]
+    top = -np.inf
+    for a in range(na):
+        for j in range(m):
+            for i in range(m):
+                if S[a, j, i] > top:
+                    top = S[a, j, i]
+    e = np.empty((na, m, m))
+    tot = 0.0
+    for a in range(na):
+        for j in range(m):
+            for i in range(m):
+                e[a, j, i] = math.exp(kappa * (S[a, j, i] - top))
+                tot += e[a, j, i]
+    cxx = cxy = cxt = cyy = cyt = ctt = 0.0
+    two_pi = 2.0 * math.pi
+    for a in range(na):
+        dt = (p2 + angles[a] - a2 + math.pi) % two_pi - math.pi  # geometry.wrap's arithmetic
+        if dt >= math.pi:
+            dt = -math.pi
+        for j in range(m):
+            dy = p1 + off[j] - a1
+            for i in range(m):
+                w = e[a, j, i]
+                dx = p0 + off[i] - a0
+                cxx += dx * w * dx
+                cxy += dx * w * dy
+                cxt += dx * w * dt
+                cyy += dy * w * dy
+                cyt += dy * w * dt
+                ctt += dt * w * dt
+    cxx, cxy, cxt, cyy, cyt, ctt = cxx / tot, cxy / tot, cxt / tot, cyy / tot, cyt / tot, ctt / tot
+    cxx += res * res / 12.0
+    cyy += res * res / 12.0
+    ctt += step * step / 12.0
+    # the surface is in the grid frame; the pose's covariance in its own frame: J cov J^T, J = diag(R^T, 1)
+    c, s = math.cos(a2), math.sin(a2)
+    out = np.empty((3, 3))
+    out[0, 0] = c * c * cxx + 2.0 * c * s * cxy + s * s * cyy
+    out[1, 1] = s * s * cxx - 2.0 * c * s * cxy + c * c * cyy
+    out[0, 1] = out[1, 0] = -c * s * cxx + (c * c - s * s) * cxy + c * s * cyy
+    out[0, 2] = out[2, 0] = c * cxt + s * cyt
+    out[1, 2] = out[2, 1] = -s * cxt + c * cyt
+    out[2, 2] = ctt
+    return out

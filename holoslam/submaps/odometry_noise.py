@@ -82,6 +82,24 @@ def _merged_steps(P: np.ndarray, covs: np.ndarray, max_steps: int) -> tuple[np.n
     return P[idx], covs[idx]
 
 
+def _nnls(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """argmin ||A x - y|| subject to x >= 0 for a few columns (here 4), exactly: the optimum is the unconstrained
+    least-squares solution on its own support, so the best non-negative one over every support (2^4 = 16 small
+    solves) is it. The same answer as ``scipy.optimize.nnls``, without importing scipy.optimize (~0.6 s of a
+    run's start, for this one call)."""
+    n = A.shape[1]
+    best, best_r = np.zeros(n), float(np.linalg.norm(y))
+    for mask in range(1, 1 << n):
+        cols = [k for k in range(n) if mask >> k & 1]
+        x, *_ = np.linalg.lstsq(A[:, cols], y, rcond=None)
+        if np.all(x >= 0.0):
+            r = float(np.linalg.norm(A[:, cols] @ x - y))
+            if r < best_r:
+                best, best_r = np.zeros(n), r
+                best[cols] = x
+    return best
+
+
 def propagated_rates(odomTb: np.ndarray, cov_odomTb: np.ndarray) -> tuple[np.ndarray, float]:
     """Fit (a, b, c, d) (module docstring; variances per unit) to body-frame covariances (N, 3, 3) published with
     the poses (N, 3). Returns the rates and the fraction of the covariance growth the fit leaves unexplained."""
@@ -116,11 +134,8 @@ def propagated_rates(odomTb: np.ndarray, cov_odomTb: np.ndarray) -> tuple[np.nda
     w = 1.0 / (np.abs(np.trace(Y, axis1=1, axis2=2)) + np.abs(np.trace(B[:, 0], axis1=1, axis2=2)) + 1e-12)
     X = (B[:, 1:, iu[0], iu[1]] * w[:, None, None]).transpose(0, 2, 1).reshape(-1, 4)
     y = ((Y - B[:, 0])[:, iu[0], iu[1]] * w[:, None]).reshape(-1)
-    from scipy.optimize import nnls
-
     scale = np.maximum(np.linalg.norm(X, axis=0), 1e-300)
-    theta, _ = nnls(X / scale, y)
-    theta = theta / scale
+    theta = _nnls(X / scale, y) / scale
     growth = float(np.linalg.norm(y))
     unexplained = float(np.linalg.norm(y - X @ theta)) / growth if growth > 0 else 1.0
     return theta, unexplained

@@ -143,3 +143,21 @@ def test_loop_closures_between_one_pair_of_anchors_count_as_one():
     loops = m.kind == "loop"
     np.testing.assert_allclose(m.cov_iTj[loops][:, 0, 0], [4e-4 + 4e-10] * 4 + [1e-4 + 1e-10])
     assert G.loop_groups() == {(0, 5): 4, (1, 4): 1}
+
+
+def test_small_nnls_is_scipys():
+    """The rates' non-negative least squares (every support of 4 columns) gives scipy's answer, active
+    constraints included."""
+    from scipy.optimize import nnls
+
+    from holoslam.submaps.odometry_noise import _nnls
+
+    rng = np.random.default_rng(3)
+    clipped = 0
+    for _ in range(200):
+        A = rng.normal(size=(30, 4))
+        y = rng.normal(size=30)
+        want, _ = nnls(A, y)
+        clipped += int(np.any(want == 0.0))
+        assert np.allclose(_nnls(A, y), want, rtol=1e-9, atol=1e-12)
+    assert clipped > 50  # the bounds were active in many of them

@@ -231,3 +231,40 @@ def test_walls_on_cell_boundaries_bias_a_match_by_at_most_half_a_cell():
     m = match(grid, points(ray_scan(ROOM, wTs, BEAMS_360), BEAMS_360), wTs)
     e = m.aTb - wTs
     assert m.ok and np.all(np.abs(e[:2]) <= grid.resolution / 2) and abs(e[2]) < math.radians(0.2), e
+
+
+def test_surface_covariance_kernel_is_the_weighted_moment():
+    """The compiled score-surface covariance equals the numpy formula (weighted second moment about the refined
+    pose, lattice floors, rotated into the pose's frame), including a heading across +-pi."""
+    from holoslam.submaps.scanmatch import _surface_covariance
+
+    rng = np.random.default_rng(5)
+    for pred2 in (0.3, np.pi - 0.004):
+        S = rng.uniform(0.2, 0.8, (9, 5, 5))
+        off = (np.arange(5) - 2) * 0.05
+        angles = (np.arange(9) - 4) * 0.002
+        pred = np.array([1.0, -2.0, pred2])
+        aTb = pred + np.array([0.01, -0.02, 0.003])
+        w = np.exp(200.0 * (S - S.max()))
+        w /= w.sum()
+        D = np.stack(np.broadcast_arrays(pred[0] + off[None, None, :] - aTb[0], pred[1] + off[None, :, None] - aTb[1],
+                                         (pred[2] + angles[:, None, None] - aTb[2] + np.pi) % (2 * np.pi) - np.pi))
+        D = D.reshape(3, -1)
+        cov = (D * w.ravel()) @ D.T + np.diag([0.05**2 / 12, 0.05**2 / 12, 0.01**2 / 12])
+        c, s = np.cos(aTb[2]), np.sin(aTb[2])
+        J = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        got = _surface_covariance(S, pred, off, angles, aTb, 200.0, 0.05, 0.01)
+        assert np.allclose(got, J @ cov @ J.T, rtol=1e-12, atol=1e-18)
+
+
+def test_refinement_step_solve_is_numpys():
+    """The matcher's unrolled 3x3 solve (``_grid_fast._solve3``) gives ``np.linalg.solve``'s step, also where
+    the pivot must move rows (a zero leading entry)."""
+    from holoslam.submaps._grid_fast import _solve3
+
+    rng = np.random.default_rng(7)
+    mats = [np.array([[0.0, 2.0, 1.0], [3.0, 1.0, 0.5], [1.0, 0.0, 4.0]])]
+    mats += [(m := rng.normal(size=(3, 3))) @ m.T + np.eye(3) * 1e-3 for _ in range(50)]
+    for A in mats:
+        b = rng.normal(size=3)
+        assert np.allclose(_solve3(A, b), np.linalg.solve(A, b), rtol=1e-9, atol=1e-12)
