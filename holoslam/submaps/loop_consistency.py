@@ -26,7 +26,7 @@ import numpy as np
 
 from holoslam import geometry as g
 
-__all__ = ["ConsistencyConfig", "LoopConsistency", "agreement"]
+__all__ = ["ConsistencyConfig", "LoopConsistency", "agreement", "correction"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,7 +53,7 @@ class ConsistencyConfig:
     max_pending: int = 200  # closures waiting for agreement; older ones are forgotten
 
 
-def _correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:
+def correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:
     """Delta = wTm ∘ mTn ∘ wTn^-1: the world motion that puts the estimate of n where the closure says it is."""
     return g.compose(g.compose(wTm, mTn), g.inverse(wTn))
 
@@ -64,8 +64,8 @@ def agreement(c1, c2, est_wTa: np.ndarray, travel: np.ndarray, cfg: ConsistencyC
     closures from nodes nearer than ``min_separation_m``."""
     if abs(c1.travelled - c2.travelled) < cfg.min_separation_m:
         return math.inf
-    d1 = _correction(est_wTa[c1.old], c1.mTn, est_wTa[c1.new])
-    d2 = _correction(est_wTa[c2.old], c2.mTn, est_wTa[c2.new])
+    d1 = correction(est_wTa[c1.old], c1.mTn, est_wTa[c1.new])
+    d2 = correction(est_wTa[c2.old], c2.mTn, est_wTa[c2.new])
     wTn = est_wTa[c2.new]
     e = g.between(g.compose(d1, wTn), g.compose(d2, wTn))
     e[2] = g.wrap(e[2])

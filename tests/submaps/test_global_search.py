@@ -94,3 +94,24 @@ def test_a_corridor_match_keeps_its_uncertainty_along_the_corridor():
     # measured: 0.82 m along (the cupboards' 1 m period, peaks within the +-1 m fine window), 0.014 m across
     assert math.sqrt(cov_m[0, 0]) > 20 * math.sqrt(cov_m[1, 1])
     assert 0.4 < math.sqrt(cov_m[0, 0]) < 1.6
+
+
+def test_the_submaps_a_waiting_closure_predicts_are_searched_first():
+    from holoslam.submaps.loop_config import LoopConfig
+    from holoslam.submaps.loops import LoopCandidate, LoopSearch
+    from holoslam.submaps.scanmatch import MatchConfig
+
+    loops = LoopSearch(LoopConfig(), MatchConfig())
+    # old anchors along a corridor every 10 m; the new part (anchors 5, 6) was carried: its estimate is 100 m off
+    est = np.array([[0, 0, 0], [10, 0, 0], [20, 0, 0], [30, 0, 0], [40, 0, 0],
+                    [100, 50, 1.0], [0, 0, 0]], np.float64)
+    est[6] = g.compose(est[5], np.array([2.0, 0.0, 0.0]))  # 2 m on, straight ahead
+    loops.grids = {m: None for m in range(5)}
+    assert loops._hypothesis_distances(est, est[6]) == {}  # nothing waits: the round-robin order alone
+    # a waiting closure says anchor 5 stands at (21, 0, 0), facing along the corridor
+    mTn = g.between(est[2], np.array([21.0, 0.0, 0.0]))
+    loops.consistency.pending.append(LoopCandidate(2, 5, mTn, np.eye(3) * 1e-4, 0.7, 1e5, 10.0))
+    near = loops._hypothesis_distances(est, est[6])  # the node 2 m on from anchor 5: (23, 0) by that closure
+    assert sorted(near, key=near.get) == [2, 3, 1]  # within 15 m, nearest first
+    assert near[2] == pytest.approx(3.0, abs=1e-6)
+    assert 0 not in near and 4 not in near  # 23 m and 17 m away
