@@ -285,7 +285,7 @@ def real_part(out: Path, logs: list[str], compare: bool = False) -> None:
             if before is not None and compare:
                 search_rows.append((name, k + 1, _compare_searches(r, before)))
             print(f"{name:<7} {k + 1:>7} {str(s.joined):<6} {s.joined_by:<8} {s.relocalisation_s:7.1f} "
-                  f"{time.perf_counter() - t0:6.1f}   {s.why[:90]}")
+                  f"{time.perf_counter() - t0:6.1f}   {s.why[:400]}")
             sys.stdout.flush()
             st.append((r.run.stamps_ns, r.run.wTb, s.joined))
             sessions.setdefault(name, []).append((r.stages.fe.submaps, np.asarray(r.stages.sol.wTa)))

@@ -41,6 +41,13 @@ class LifelongConfig:
     changes: ChangeConfig = field(default_factory=ChangeConfig)
     frustum: FrustumConfig = field(default_factory=FrustumConfig)
     joint_method: str = "batch"  # the joint solve: batch (LM) or isam2 (benchmarks/bench_lifelong.py measures both)
+    # cross-session closures once placed (``crossmatch.session_closures``: every few keyframes of every session
+    # submap by the run's loop search, into the stored submaps near it); False: the anchor scans alone, matched
+    # into the nearest stored submaps (``relocalise.local_matches``, the rule before)
+    dense_closures: bool = True
+    # the relative poses through retired submaps kept, composed, between the working ones they linked
+    # (``joint.composed_factors``); False: dropped with them (the rule before)
+    compose_retired: bool = True
     # a stored submap leaves the working graph when the new session's submaps know this fraction of its known
     # cells (it stays in the store's history); the working graph then holds about one visit of each place
     retire_cover: float = 0.9
@@ -116,7 +123,7 @@ def run_session_data(log: Any, ingest_report: Any, store_path: str | Path, log_n
     st = slam_stages(log, cfg, clock)
     with MapStore.open(store_path) as store:
         with clock.stage("session (relocalise, join)"):
-            placed, reloc, summary = place_session(store, st, lc, log)
+            placed, reloc, summary = place_session(store, st, lc, log, cfg.frontend)
             world = _in_world(st, placed, log)
         run = finish_run(log, ingest_report, world, cfg, clock, str(log.source), session=summary)
         update = _update(log_name, log_sha256, log, st, placed, reloc, summary)
@@ -130,9 +137,11 @@ def _session_objects(st: Any) -> dict[str, tuple[np.ndarray, np.ndarray, Any]]:
             for o in st.objects}
 
 
-def place_session(store: Any, st: Any, lc: LifelongConfig, log: Any = None) -> tuple[_Placed, Any, SessionSummary]:
+def place_session(store: Any, st: Any, lc: LifelongConfig, log: Any = None, frontend: Any = None
+                  ) -> tuple[_Placed, Any, SessionSummary]:
     """Relocalise the session and join it (module docstring); nothing written yet. ``log``: the session's log
-    (its images tell where the camera looked: ``frustum``; None judges "gone" by time in view alone)."""
+    (its images tell where the camera looked: ``frustum``; None judges "gone" by time in view alone);
+    ``frontend``: the run's ``FrontEndConfig`` (the cross-session closures use its loop search)."""
     from holoslam.relocalise import relocalise
 
     sessions = store.sessions()
@@ -149,7 +158,7 @@ def place_session(store: Any, st: Any, lc: LifelongConfig, log: Any = None) -> t
     if not reloc.placed:
         placed = _unjoined(st, sTa, sobj)
         return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=0)
-    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc, log)
+    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc, log, frontend)
     n_seen = sum(o.status == ObjectStatus.SEEN for o in placed.objects)
     return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=n_seen)
 
@@ -218,9 +227,9 @@ def _unseen_images(latest: dict[str, ObjectState], located: dict, log: Any, st: 
 
 
 def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, latest: dict, reloc: Any,
-          lc: LifelongConfig, log: Any = None) -> _Placed:
+          lc: LifelongConfig, log: Any = None, frontend: Any = None) -> _Placed:
     """The joined session: object changes, the joint solve, the session transform it implies, retirements."""
-    from holoslam.lifelong.joint import joint_problem, retired_priors, solve_joint
+    from holoslam.lifelong.joint import joint_problem, retired_priors, solve_joint, working_factors
     from holoslam.lifelong.merge import merge_submaps
 
     h = reloc.hypothesis
@@ -245,10 +254,8 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     live = set(sightings.placement) | {placement[o] for o in lm.landmark}
     retired = tuple(s for s in store.submaps(working=False) if s.retired_by is not None)
     priors = retired_priors(retired, store.sightings(np.array([s.id for s in retired], np.int64)), live)
-    have = {(m.new, m.old) for m in reloc.matches}
-    cross = tuple(reloc.matches) + tuple(m for m in local_matches(st.fe.submaps, sTa, stored, h.wTs, lc.relocalise)
-                                         if (m.new, m.old) not in have)
-    jg = joint_problem(stored, store.factors(ids), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
+    cross = tuple(reloc.matches) + _closures(st, sTa, stored, h.wTs, reloc.matches, lc, frontend)
+    jg = joint_problem(stored, working_factors(store.factors(), ids, lc.compose_retired), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
                        cross, init, priors)
     js = solve_joint(jg, lc.joint_method)
     wTs = fit_se2(sTa[:, :2], js.new_wTa[:, :2]) if len(sTa) >= 2 else g.compose(js.new_wTa[0], g.inverse(sTa[0]))
@@ -258,6 +265,19 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
                for n, k in enumerate(ids.tolist())}
     return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, cross, js, jg,
                    view_s, images or {})
+
+
+def _closures(st: Any, sTa: np.ndarray, stored: tuple, wTs: np.ndarray, matches: tuple, lc: LifelongConfig,
+              frontend: Any) -> tuple:
+    """The cross-session closures beside the join's own matches (``LifelongConfig.dense_closures``)."""
+    from holoslam.lifelong.crossmatch import session_closures
+
+    if lc.dense_closures:
+        return tuple(session_closures(st.fe.submaps, sTa, stored, wTs, frontend, cfg=lc.relocalise,
+                                      already=matches))
+    have = {(m.new, m.old) for m in matches}
+    return tuple(m for m in local_matches(st.fe.submaps, sTa, stored, wTs, lc.relocalise)
+                 if (m.new, m.old) not in have)
 
 
 def _kept_landmarks(st: Any) -> Any:

@@ -1,0 +1,69 @@
+"""Cross-session closures once a session is placed: every few keyframes of every session submap searched in the
+stored submaps near it, by the run's own loop search (``holoslam.submaps.loops.LoopSearch``: its windowed branch
+and bound around the estimate, its score thresholds, its ambiguity test that refuses a match with a second peak,
+its refinement and Eq. 15 for the anchors' relative pose, at most ``max_per_pair`` closures a pair of submaps).
+
+The global matches that verified the join (``holoslam.relocalise``) are few (3-10 a session) and all from the
+anchor scans; two sessions of one building need as many closures between them as a run finds between its own
+revisits to be aligned to the centimetre (intel, three sessions: 6-10 matches left its sessions 0.2-0.3 m apart).
+Here the session's keyframes stand at their placed estimate (``wTs`` ∘ sTa ∘ aTb) and the stored submaps at
+their stored poses, as a run's nodes and finished submaps do; the window is the loop search's right after a
+closure (``base_window_xy``, ``base_window_deg``: the hypothesis is good to the relocalisation's 0.3 m / 3 deg).
+A closure must also agree with the hypothesis within that 0.3 m / 3 deg (``RelocaliseConfig.consistent_*``):
+it refines the join, it cannot move it elsewhere."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from holoslam import geometry as g
+from holoslam.relocalise import LaserMatch, RelocaliseConfig, _consistent, _grid
+
+__all__ = ["session_closures"]
+
+
+def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs: np.ndarray, frontend=None,
+                     every_nodes: int | None = None, cfg: RelocaliseConfig | None = None,
+                     already=()) -> list[LaserMatch]:
+    """The cross-session closures of a placed session (module docstring): ``LaserMatch``es (new: session submap
+    index, old: stored submap id, oTn: the new anchor in the old one). ``frontend``: the run's
+    ``FrontEndConfig`` (its loop search and matcher settings; the defaults when None); ``every_nodes``: search
+    from every k-th keyframe of a submap (the loop search's ``every_nodes`` when None); ``already``: the
+    closures the join holds (``LaserMatch``es), counted against ``max_per_pair`` as the loop search counts its own."""
+    from holoslam.submaps.frontend import FrontEndConfig
+    from holoslam.submaps.loops import LoopSearch
+
+    fe = frontend or FrontEndConfig()
+    cfg = cfg or RelocaliseConfig()
+    step = max(1, int(every_nodes if every_nodes is not None else fe.loops.every_nodes))
+    search = LoopSearch(fe.loops, fe.local.match)
+    olds = [j for j, s in enumerate(stored_submaps) if _grid(s) is not None]
+    for j in olds:
+        search.add_submap(j, _grid(stored_submaps[j]))
+    if not olds:
+        return []
+    M = len(stored_submaps)
+    first = M + fe.loops.skip_recent + 1  # the session's submap k is node index first + k, past every stored one
+    sTa = np.asarray(session_sTa, np.float64).reshape(-1, 3)
+    est = np.zeros((first + len(sTa), 3))
+    est[:M] = np.array([s.wTa for s in stored_submaps], np.float64).reshape(-1, 3)
+    est[first:] = g.compose(np.broadcast_to(np.asarray(wTs, np.float64), sTa.shape), sTa)
+    row = {int(s.id): j for j, s in enumerate(stored_submaps)}
+    for m in already:
+        if int(m.old) in row:
+            key = (row[int(m.old)], first + int(m.new))
+            search.pairs[key] = search.pairs.get(key, 0) + 1
+    distance = np.zeros(len(est))  # the graph distance to every old submap: just closed (the join)
+    out: list[LaserMatch] = []
+    for k, sm in enumerate(session_submaps):
+        scans = getattr(sm, "scan_points", None)
+        if not scans:
+            continue
+        aTb, cov = np.asarray(sm.aTb, np.float64).reshape(-1, 3), np.asarray(sm.cov_aTb, np.float64)
+        for r in range(0, len(scans), step):
+            for c in search.search(first + k, aTb[r], cov[r], np.asarray(scans[r], np.float64), est, distance):
+                st = stored_submaps[c.old]
+                implied = g.compose(g.compose(np.asarray(st.wTa, np.float64), c.mTn), g.inverse(sTa[k]))
+                if _consistent(implied[None], np.asarray(wTs, np.float64)[None], cfg)[0, 0]:
+                    out.append(LaserMatch(k, int(st.id), c.mTn, c.cov_mTn, float(c.score), implied))
+    return out
