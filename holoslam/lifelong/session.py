@@ -45,6 +45,11 @@ class LifelongConfig:
     # submap by the run's loop search, into the stored submaps near it); False: the anchor scans alone, matched
     # into the nearest stored submaps (``relocalise.local_matches``, the rule before)
     dense_closures: bool = True
+    # the join settled by its closures (``crossmatch.settle_join``): a group of closures whose map check over every
+    # session submap beats the hypothesis's by this fraction of walls moves it (aces' third session: 0.64 at the
+    # global matches' place one corridor bay along, 0.88 at the log's relations' place), at most settle_moves times
+    settle_margin: float = 0.1
+    settle_moves: int = 2
     # the relative poses through retired submaps kept, composed, between the working ones they linked
     # (``joint.composed_factors``); False: dropped with them (the rule before)
     compose_retired: bool = True
@@ -158,7 +163,8 @@ def place_session(store: Any, st: Any, lc: LifelongConfig, log: Any = None, fron
     if not reloc.placed:
         placed = _unjoined(st, sTa, sobj)
         return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=0)
-    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc, log, frontend)
+    reloc, closures = _settled(st, sTa, stored, reloc, lc, frontend)
+    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc, log, closures)
     n_seen = sum(o.status == ObjectStatus.SEEN for o in placed.objects)
     return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=n_seen)
 
@@ -227,7 +233,7 @@ def _unseen_images(latest: dict[str, ObjectState], located: dict, log: Any, st: 
 
 
 def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, latest: dict, reloc: Any,
-          lc: LifelongConfig, log: Any = None, frontend: Any = None) -> _Placed:
+          lc: LifelongConfig, log: Any = None, closures: tuple = ()) -> _Placed:
     """The joined session: object changes, the joint solve, the session transform it implies, retirements."""
     from holoslam.lifelong.joint import joint_problem, retired_priors, solve_joint, working_factors
     from holoslam.lifelong.merge import merge_submaps
@@ -254,7 +260,7 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     live = set(sightings.placement) | {placement[o] for o in lm.landmark}
     retired = tuple(s for s in store.submaps(working=False) if s.retired_by is not None)
     priors = retired_priors(retired, store.sightings(np.array([s.id for s in retired], np.int64)), live)
-    cross = tuple(reloc.matches) + _closures(st, sTa, stored, h.wTs, reloc.matches, lc, frontend)
+    cross = tuple(reloc.matches) + tuple(closures)
     jg = joint_problem(stored, working_factors(store.factors(), ids, lc.compose_retired), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
                        cross, init, priors)
     js = solve_joint(jg, lc.joint_method)
@@ -267,17 +273,27 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
                    view_s, images or {})
 
 
-def _closures(st: Any, sTa: np.ndarray, stored: tuple, wTs: np.ndarray, matches: tuple, lc: LifelongConfig,
-              frontend: Any) -> tuple:
-    """The cross-session closures beside the join's own matches (``LifelongConfig.dense_closures``)."""
-    from holoslam.lifelong.crossmatch import session_closures
+def _settled(st: Any, sTa: np.ndarray, stored: tuple, reloc: Any, lc: LifelongConfig, frontend: Any
+             ) -> tuple[Any, tuple]:
+    """The placed session's join settled and its closures (``LifelongConfig.dense_closures``): the relocalisation
+    with its hypothesis (moved or not, ``crossmatch.settle_join``) and the global matches that agree with it,
+    and the cross-session closures beside them."""
+    from holoslam.lifelong.crossmatch import settle_join
+    from holoslam.relocalise import _consistent
 
-    if lc.dense_closures:
-        return tuple(session_closures(st.fe.submaps, sTa, stored, wTs, frontend, cfg=lc.relocalise,
-                                      already=matches))
-    have = {(m.new, m.old) for m in matches}
-    return tuple(m for m in local_matches(st.fe.submaps, sTa, stored, wTs, lc.relocalise)
-                 if (m.new, m.old) not in have)
+    h = reloc.hypothesis
+    if not lc.dense_closures:
+        have = {(m.new, m.old) for m in reloc.matches}
+        return reloc, tuple(m for m in local_matches(st.fe.submaps, sTa, stored, h.wTs, lc.relocalise)
+                            if (m.new, m.old) not in have)
+    h2, closures, note = settle_join(st.fe.submaps, sTa, stored, h, frontend, lc.relocalise, lc.settle_margin,
+                                     lc.settle_moves)
+    if h2 is not h:
+        T = np.array([m.wTs for m in reloc.all_matches]).reshape(-1, 3)
+        ok = _consistent(T, h2.wTs[None], lc.relocalise)[:, 0]
+        reloc = dataclasses.replace(reloc, hypothesis=h2, why=f"{reloc.why}; {note}",
+                                    matches=tuple(m for m, k in zip(reloc.all_matches, ok, strict=True) if k))
+    return reloc, tuple(closures)
 
 
 def _kept_landmarks(st: Any) -> Any:
