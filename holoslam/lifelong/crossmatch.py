@@ -70,7 +70,8 @@ def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, w
 
 
 def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypothesis, frontend=None,
-                cfg: RelocaliseConfig | None = None, margin: float = 0.1, moves: int = 2):
+                cfg: RelocaliseConfig | None = None, margin: float = 0.1, moves: int = 2,
+                every_nodes: int | None = None):
     """The join checked against its neighbourhood once placed: the session's closures (``session_closures``,
     searched in the loop search's windows around the hypothesis) grouped by the transform each implies
     (``laser_hypothesis``'s groups: 0.3 m / 3 deg, at least ``min_consistent`` from ``min_session_submaps``
@@ -92,7 +93,7 @@ def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypoth
     h = hypothesis
     notes: list[str] = []
     for move in range(moves + 1):
-        closures = session_closures(session_submaps, session_sTa, stored_submaps, h.wTs, frontend, cfg=wide,
+        closures = session_closures(session_submaps, session_sTa, stored_submaps, h.wTs, frontend, every_nodes, wide,
                                     already=h.members if move == 0 else ())
         here = [m for m in closures if _consistent(np.asarray(m.wTs)[None], h.wTs[None], cfg)[0, 0]]
         a = join_agreement(session_submaps, session_sTa, stored_submaps, h.wTs, every, cfg)

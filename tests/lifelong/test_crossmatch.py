@@ -16,17 +16,26 @@ from holoslam.store.records import StoredFactors
 from tests.test_relocalise import L_ROOM, _stored, _wall_points
 
 
+def _session(walls, wTs, sTa, aTb):
+    """Session submaps of ``walls`` at wTs ∘ sTa: keyframes at ``aTb`` seeing every wall, and the grid."""
+    subs = []
+    for T in sTa:
+        wTn = g.compose(wTs, T)
+        wTb = g.compose(np.broadcast_to(wTn, aTb.shape), aTb)
+        scans = tuple(g.transform_points(g.inverse(b), _wall_points(walls)) for b in wTb)
+        st = _stored(walls, wTn, 0)
+        subs.append(SimpleNamespace(scan_points=scans, aTb=aTb, cov_aTb=np.array([np.eye(3) * 1e-6] * len(aTb)),
+                                    prob=st.prob, origin=st.origin, resolution=st.resolution, known=st.known))
+    return subs
+
+
 def test_keyframes_close_on_the_stored_submaps_near_them():
     stored = [_stored(L_ROOM, np.array([1.0, 0.5, 0.3]), 1), _stored(L_ROOM, np.array([4.0, 1.0, -1.0]), 2),
               _stored(L_ROOM, np.array([40.0, 40.0, 0.0]), 3)]  # the third far away: never searched
     wTs = np.array([2.0, 1.5, 1.1])
     sTa = np.array([[0.0, 0.0, 0.0], [0.5, 0.2, 0.3]])
     aTb = np.array([[0.0, 0.0, 0.0], [0.4, 0.3, 0.2], [0.8, 0.1, -0.3], [1.0, 1.0, 0.5]])
-    subs = []
-    for T in sTa:
-        wTb = g.compose(np.broadcast_to(g.compose(wTs, T), aTb.shape), aTb)
-        scans = tuple(g.transform_points(g.inverse(b), _wall_points(L_ROOM)) for b in wTb)
-        subs.append(SimpleNamespace(scan_points=scans, aTb=aTb, cov_aTb=np.array([np.eye(3) * 1e-6] * 4)))
+    subs = _session(L_ROOM, wTs, sTa, aTb)
     off = g.compose(wTs, np.array([0.12, -0.08, math.radians(1.5)]))  # the hypothesis 14 cm / 1.5 deg off
     ms = session_closures(subs, sTa, stored, off, every_nodes=2)
     pairs = sorted({(m.new, m.old) for m in ms})
@@ -40,6 +49,27 @@ def test_keyframes_close_on_the_stored_submaps_near_them():
     joined = [ms[0]] * 4
     again = session_closures(subs, sTa, stored, off, every_nodes=2, already=joined)
     assert (ms[0].new, ms[0].old) not in {(m.new, m.old) for m in again} and len(again) == 6
+
+
+def test_a_join_one_bay_along_settles_where_the_closures_and_the_map_agree():
+    from holoslam.lifelong.crossmatch import settle_join
+    from holoslam.relocalise import Hypothesis
+
+    stored = [_stored(L_ROOM, np.array([1.0, 0.5, 0.3]), 1), _stored(L_ROOM, np.array([4.0, 1.0, -1.0]), 2)]
+    wTs = np.array([2.0, 1.5, 1.1])
+    sTa = np.array([[0.0, 0.0, 0.0], [0.5, 0.2, 0.3], [1.5, -0.5, -0.4]])
+    aTb = np.array([[0.0, 0.0, 0.0], [0.4, 0.3, 0.2], [0.8, 0.1, -0.3], [1.0, 1.0, 0.5]])
+    subs = _session(L_ROOM, wTs, sTa, aTb)
+    off = g.compose(wTs, np.array([0.6, 0.0, 0.0]))  # the global matches agreed 0.6 m along
+    h0 = Hypothesis(off, np.eye(3) * 1e-3, 3, True, "3 matches")
+    h, closures, note = settle_join(subs, sTa, stored, h0, every_nodes=1)
+    assert h is not h0 and "moved 0.6" in note and h.why.startswith("3 matches; moved")
+    assert np.hypot(*(h.wTs[:2] - wTs[:2])) < 0.03 and abs(g.wrap(h.wTs[2] - wTs[2])) < math.radians(0.5)
+    assert len(closures) >= 6 and all(np.hypot(*(m.wTs[:2] - wTs[:2])) < 0.05 for m in closures)
+    # at the right place it stays, and a margin no group can beat keeps any hypothesis where it is
+    h_right = Hypothesis(wTs, np.eye(3) * 1e-3, 3, True, "3 matches")
+    assert settle_join(subs, sTa, stored, h_right, every_nodes=1)[0] is h_right
+    assert settle_join(subs, sTa, stored, h0, every_nodes=1, margin=1.0)[0] is h0
 
 
 def _factors(rows):
