@@ -249,8 +249,7 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
                         images)
     sightings = store.sightings(ids)
     # every placement the store ever gave (retired submaps' sightings included): a new one never reuses a name
-    ever = {o.placement for o in store.object_history() if o.placement}
-    placement = _placements(statuses, latest, set(sightings.placement) | ever)
+    placement = _placements(statuses, latest, store.placements())
     lm = _kept_landmarks(st)
     for oid in set(lm.landmark) - set(placement):  # a landmark without an object record: a fresh placement
         placement[oid] = f"{oid}#new{len(placement)}"
