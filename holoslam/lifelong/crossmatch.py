@@ -71,7 +71,7 @@ def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, w
 
 def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypothesis, frontend=None,
                 cfg: RelocaliseConfig | None = None, margin: float = 0.1, moves: int = 2,
-                every_nodes: int | None = None):
+                every_nodes: int | None = None, refine_margin: float | None = None):
     """The join checked against its neighbourhood once placed: the session's closures (``session_closures``,
     searched in the loop search's windows around the hypothesis) grouped by the transform each implies
     (``laser_hypothesis``'s groups: 0.3 m / 3 deg, at least ``min_consistent`` from ``min_session_submaps``
@@ -106,7 +106,8 @@ def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypoth
                 break
             refuted.append(g_h.wTs)
             ga = join_agreement(session_submaps, session_sTa, stored_submaps, g_h.wTs, every, cfg)
-            if ga is not None and ga.fraction >= best_a + margin and (best is None or ga.fraction > best[1]):
+            need = margin if move == 0 or refine_margin is None else refine_margin
+            if ga is not None and ga.fraction >= best_a + need and (best is None or ga.fraction > best[1]):
                 best = (g_h, ga.fraction)
         if best is None:
             return h, here, "; ".join(notes)

@@ -85,11 +85,17 @@ def retired_priors(retired, sightings, live: set[str]) -> PlacementPriors:
     return PlacementPriors(names, xy, cov_w, np.array([int(acc[n][2][0]) for n in names], np.int64))
 
 
-def composed_factors(factors, working_ids: np.ndarray):
+# the stored factors a composition runs through: a session's chain (local SLAM's scan matches and the odometry
+# beside them), never its loops or the cross-session matches: those enter the joint solve under a robust kernel
+# and its chi-square rounds, which a composition would take from a wrong one
+CHAIN_KINDS = ("scan_match", "dead_reckoning")
+
+
+def composed_factors(factors, working_ids: np.ndarray, kinds: tuple[str, ...] = CHAIN_KINDS):
     """The relative poses that retirement would drop, kept: for every connected part of retired submaps (linked
     by stored factors), the working submaps it touches are chained (each to the next, in id order) by the
-    composition of the stored factors along the most certain path through the retired ones (per pair of submaps
-    the factor of least position variance; covariances propagated to first order). A ``StoredFactors`` of kind
+    composition of the stored factors of ``kinds`` along the most certain path through the retired ones (per pair
+    of submaps the factor of least position variance; covariances propagated to first order). A ``StoredFactors`` of kind
     ``composed`` between working ids. Without them, a session whose middle was retired falls apart into pieces
     held only by the cross-session matches (or, cut off, by a prior at their stored poses)."""
     import networkx as nx
@@ -98,8 +104,9 @@ def composed_factors(factors, working_ids: np.ndarray):
 
     working = {int(k) for k in np.asarray(working_ids).tolist()}
     best: dict[tuple[int, int], tuple[float, np.ndarray, np.ndarray]] = {}
-    for i, j, T, C in zip(factors.i.tolist(), factors.j.tolist(), factors.iTj, factors.cov_iTj, strict=True):
-        if i == j or (i in working and j in working):
+    for i, j, T, C, kind in zip(factors.i.tolist(), factors.j.tolist(), factors.iTj, factors.cov_iTj,
+                                factors.kind, strict=True):
+        if i == j or (i in working and j in working) or str(kind) not in kinds:
             continue
         a, b, T, C = (i, j, T, C) if i < j else (j, i, g.inverse(T), _inv_cov(T, C))
         w = float(C[0, 0] + C[1, 1])

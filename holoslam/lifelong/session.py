@@ -50,6 +50,9 @@ class LifelongConfig:
     # global matches' place one corridor bay along, 0.88 at the log's relations' place), at most settle_moves times
     settle_margin: float = 0.1
     settle_moves: int = 2
+    settle_refine_margin: float = 0.1  # after a move, a group beating it by this fraction moves it again
+    # search closures from every k-th keyframe of each session submap; 0: the loop search's every_nodes (3)
+    closure_every_nodes: int = 0
     # the relative poses through retired submaps kept, composed, between the working ones they linked
     # (``joint.composed_factors``); False: dropped with them (the rule before)
     compose_retired: bool = True
@@ -286,7 +289,7 @@ def _settled(st: Any, sTa: np.ndarray, stored: tuple, reloc: Any, lc: LifelongCo
         return reloc, tuple(m for m in local_matches(st.fe.submaps, sTa, stored, h.wTs, lc.relocalise)
                             if (m.new, m.old) not in have)
     h2, closures, note = settle_join(st.fe.submaps, sTa, stored, h, frontend, lc.relocalise, lc.settle_margin,
-                                     lc.settle_moves)
+                                     lc.settle_moves, lc.closure_every_nodes or None, lc.settle_refine_margin)
     if h2 is not h:
         T = np.array([m.wTs for m in reloc.all_matches]).reshape(-1, 3)
         ok = _consistent(T, h2.wTs[None], lc.relocalise)[:, 0]

@@ -95,3 +95,4 @@ def test_relative_poses_through_retired_submaps_are_kept_composed():
     w = working_factors(f, np.array([1, 4, 5]))
     assert sorted(zip(w.i.tolist(), w.j.tolist(), strict=True)) == [(1, 4), (4, 5)]
     assert len(working_factors(f, np.array([1, 4, 5]), compose=False)) == 1
+    assert len(composed_factors(f, np.array([1, 4, 5]), kinds=("loop", "cross"))) == 0  # only a session's chain
