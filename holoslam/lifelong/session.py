@@ -45,6 +45,7 @@ class LifelongConfig:
     # submap by the run's loop search, into the stored submaps near it); False: the anchor scans alone, matched
     # into the nearest stored submaps (``relocalise.local_matches``, the rule before)
     dense_closures: bool = True
+    settle: bool = True  # the join settled by its closures' map check (``crossmatch.settle_join``)
     # the join settled by its closures (``crossmatch.settle_join``): a group of closures whose map check over every
     # session submap beats the hypothesis's by this fraction of walls moves it (aces' third session: 0.64 at the
     # global matches' place one corridor bay along, 0.88 at the log's relations' place), at most settle_moves times
@@ -277,25 +278,28 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
 
 def _settled(st: Any, sTa: np.ndarray, stored: tuple, reloc: Any, lc: LifelongConfig, frontend: Any
              ) -> tuple[Any, tuple]:
-    """The placed session's join settled and its closures (``LifelongConfig.dense_closures``): the relocalisation
-    with its hypothesis (moved or not, ``crossmatch.settle_join``) and the global matches that agree with it,
-    and the cross-session closures beside them."""
+    """The placed session's join settled (``LifelongConfig.settle``: the relocalisation with its hypothesis moved
+    or not, ``crossmatch.settle_join``, and the global matches that agree with it) and the cross-session factors
+    beside them (``LifelongConfig.dense_closures``: the settling's closures, or the anchor scans' local matches)."""
     from holoslam.lifelong.crossmatch import settle_join
     from holoslam.relocalise import _consistent
 
-    h = reloc.hypothesis
-    if not lc.dense_closures:
-        have = {(m.new, m.old) for m in reloc.matches}
-        return reloc, tuple(m for m in local_matches(st.fe.submaps, sTa, stored, h.wTs, lc.relocalise)
-                            if (m.new, m.old) not in have)
-    h2, closures, note = settle_join(st.fe.submaps, sTa, stored, h, frontend, lc.relocalise, lc.settle_margin,
-                                     lc.settle_moves, lc.closure_every_nodes or None, lc.settle_refine_margin)
-    if h2 is not h:
-        T = np.array([m.wTs for m in reloc.all_matches]).reshape(-1, 3)
-        ok = _consistent(T, h2.wTs[None], lc.relocalise)[:, 0]
-        reloc = dataclasses.replace(reloc, hypothesis=h2, why=f"{reloc.why}; {note}",
-                                    matches=tuple(m for m, k in zip(reloc.all_matches, ok, strict=True) if k))
-    return reloc, tuple(closures)
+    closures: tuple = ()
+    if lc.settle or lc.dense_closures:
+        h2, found, note = settle_join(st.fe.submaps, sTa, stored, reloc.hypothesis, frontend, lc.relocalise,
+                                      lc.settle_margin if lc.settle else 1e9, lc.settle_moves,
+                                      lc.closure_every_nodes or None, lc.settle_refine_margin)
+        closures = tuple(found)
+        if h2 is not reloc.hypothesis:
+            T = np.array([m.wTs for m in reloc.all_matches]).reshape(-1, 3)
+            ok = _consistent(T, h2.wTs[None], lc.relocalise)[:, 0]
+            reloc = dataclasses.replace(reloc, hypothesis=h2, why=f"{reloc.why}; {note}",
+                                        matches=tuple(m for m, k in zip(reloc.all_matches, ok, strict=True) if k))
+    if lc.dense_closures:
+        return reloc, closures
+    have = {(m.new, m.old) for m in reloc.matches}
+    return reloc, tuple(m for m in local_matches(st.fe.submaps, sTa, stored, reloc.hypothesis.wTs, lc.relocalise)
+                        if (m.new, m.old) not in have)
 
 
 def _kept_landmarks(st: Any) -> Any:
