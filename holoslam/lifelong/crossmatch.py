@@ -14,6 +14,8 @@ it refines the join, it cannot move it elsewhere."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from holoslam import geometry as g
@@ -24,19 +26,21 @@ __all__ = ["session_closures"]
 
 def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs: np.ndarray, frontend=None,
                      every_nodes: int | None = None, cfg: RelocaliseConfig | None = None,
-                     already=()) -> list[LaserMatch]:
+                     already=(), per_pair: int = 0) -> list[LaserMatch]:
     """The cross-session closures of a placed session (module docstring): ``LaserMatch``es (new: session submap
     index, old: stored submap id, oTn: the new anchor in the old one). ``frontend``: the run's
     ``FrontEndConfig`` (its loop search and matcher settings; the defaults when None); ``every_nodes``: search
     from every k-th keyframe of a submap (the loop search's ``every_nodes`` when None); ``already``: the
-    closures the join holds (``LaserMatch``es), counted against ``max_per_pair`` as the loop search counts its own."""
+    closures the join holds (``LaserMatch``es), counted against ``max_per_pair`` as the loop search counts its own;
+    ``per_pair`` > 0 replaces that ``max_per_pair``."""
     from holoslam.submaps.frontend import FrontEndConfig
     from holoslam.submaps.loops import LoopSearch
 
     fe = frontend or FrontEndConfig()
     cfg = cfg or RelocaliseConfig()
     step = max(1, int(every_nodes if every_nodes is not None else fe.loops.every_nodes))
-    search = LoopSearch(fe.loops, fe.local.match)
+    loops = fe.loops if per_pair <= 0 else dataclasses.replace(fe.loops, max_per_pair=int(per_pair))
+    search = LoopSearch(loops, fe.local.match)
     olds = [j for j, s in enumerate(stored_submaps) if _grid(s) is not None]
     for j in olds:
         search.add_submap(j, _grid(stored_submaps[j]))
@@ -71,7 +75,7 @@ def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, w
 
 def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypothesis, frontend=None,
                 cfg: RelocaliseConfig | None = None, margin: float = 0.1, moves: int = 2,
-                every_nodes: int | None = None, refine_margin: float | None = None):
+                every_nodes: int | None = None, refine_margin: float | None = None, per_pair: int = 0):
     """The join checked against its neighbourhood once placed: the session's closures (``session_closures``,
     searched in the loop search's windows around the hypothesis) grouped by the transform each implies
     (``laser_hypothesis``'s groups: 0.3 m / 3 deg, at least ``min_consistent`` from ``min_session_submaps``
@@ -83,8 +87,6 @@ def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypoth
     give); a session's many keyframes, each matched in a window, find the right bay.
 
     Returns (the hypothesis kept or moved, the closures consistent with it, a note of the moves)."""
-    import dataclasses
-
     from holoslam.relocalise import join_agreement, laser_hypothesis
 
     cfg = cfg or RelocaliseConfig()
@@ -94,7 +96,7 @@ def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypoth
     notes: list[str] = []
     for move in range(moves + 1):
         closures = session_closures(session_submaps, session_sTa, stored_submaps, h.wTs, frontend, every_nodes, wide,
-                                    already=h.members if move == 0 else ())
+                                    already=h.members if move == 0 else (), per_pair=per_pair)
         here = [m for m in closures if _consistent(np.asarray(m.wTs)[None], h.wTs[None], cfg)[0, 0]]
         a = join_agreement(session_submaps, session_sTa, stored_submaps, h.wTs, every, cfg)
         if a is None or move == moves:

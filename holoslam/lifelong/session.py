@@ -54,6 +54,7 @@ class LifelongConfig:
     settle_refine_margin: float = 0.1  # after a move, a group beating it by this fraction moves it again
     # search closures from every k-th keyframe of each session submap; 0: the loop search's every_nodes (3)
     closure_every_nodes: int = 0
+    closures_per_pair: int = 0  # closures kept between a session submap and a stored one; 0: the loop search's (4)
     # the relative poses through retired submaps kept, composed, between the working ones they linked
     # (``joint.composed_factors``); False: dropped with them (the rule before)
     compose_retired: bool = True
@@ -288,7 +289,8 @@ def _settled(st: Any, sTa: np.ndarray, stored: tuple, reloc: Any, lc: LifelongCo
     if lc.settle or lc.dense_closures:
         h2, found, note = settle_join(st.fe.submaps, sTa, stored, reloc.hypothesis, frontend, lc.relocalise,
                                       lc.settle_margin if lc.settle else 1e9, lc.settle_moves,
-                                      lc.closure_every_nodes or None, lc.settle_refine_margin)
+                                      lc.closure_every_nodes or None, lc.settle_refine_margin,
+                                      lc.closures_per_pair)
         closures = tuple(found)
         if h2 is not reloc.hypothesis:
             T = np.array([m.wTs for m in reloc.all_matches]).reshape(-1, 3)
