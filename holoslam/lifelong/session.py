@@ -41,10 +41,12 @@ class LifelongConfig:
     changes: ChangeConfig = field(default_factory=ChangeConfig)
     frustum: FrustumConfig = field(default_factory=FrustumConfig)
     joint_method: str = "batch"  # the joint solve: batch (LM) or isam2 (benchmarks/bench_lifelong.py measures both)
-    # cross-session closures once placed (``crossmatch.session_closures``: every few keyframes of every session
-    # submap by the run's loop search, into the stored submaps near it); False: the anchor scans alone, matched
-    # into the nearest stored submaps (``relocalise.local_matches``, the rule before)
-    dense_closures: bool = True
+    # the cross-session factors once placed: True, the closures of every third keyframe of every session submap by
+    # the run's loop search into the stored submaps near it (``crossmatch.session_closures``); False, the anchor
+    # scans matched into the 3 nearest stored submaps (``relocalise.local_matches``). Measured on the real logs in
+    # 3 sessions (README): True takes aces to x1.22 of the whole log (False x1.51) but intel to x3.14 (False
+    # x2.73, as before); off until the dense closures are weighted against the stored map's own error
+    dense_closures: bool = False
     settle: bool = True  # the join settled by its closures' map check (``crossmatch.settle_join``)
     # the join settled by its closures (``crossmatch.settle_join``): a group of closures whose map check over every
     # session submap beats the hypothesis's by this fraction of walls moves it (aces' third session: 0.64 at the
