@@ -393,9 +393,12 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
             oTn, cov, score = m
             wTs = g.compose(g.compose(st.wTa, oTn), g.inverse(session_sTa[k]))
             out.append(LaserMatch(k, st.id, oTn, cov, score, wTs))
-        h, _refused = checked_hypothesis(out, session_submaps, session_sTa, stored_submaps, cfg)
+        h = laser_hypothesis(out, cfg)
         if cfg.enough_consistent and h is not None and h.verified and h.support >= cfg.enough_consistent:
-            break
+            # stop only for a group the map check does not refuse (the check runs here, not after every submap)
+            h, _refused = checked_hypothesis(out, session_submaps, session_sTa, stored_submaps, cfg)
+            if h is not None and h.verified and h.support >= cfg.enough_consistent:
+                break
         if h is not None and h.support >= cfg.guide_support:
             guide = h
     return out, searches
