@@ -251,11 +251,11 @@ def _window(log, t0: int, t1: int, hidden):
                                headings=tuple(h for h in log.headings if inside(h)), ground_truth=())
 
 
-def real_part(out: Path, logs: list[str], compare: bool = False) -> None:
+def real_part(out: Path, logs: list[str], compare: bool = False, lifelong: dict | None = None) -> None:
     from holoslam.evaluate import relation_errors
     from holoslam.io.mcap import read_log
     from holoslam.io.relations import read_relations
-    from holoslam.lifelong.session import run_session_data
+    from holoslam.lifelong.session import LifelongConfig, run_session_data
     from holoslam.pipeline import run_data
     from holoslam.relocalise import relocalise
     from holoslam.store.db import MapStore
@@ -280,12 +280,13 @@ def real_part(out: Path, logs: list[str], compare: bool = False) -> None:
                 with MapStore.open(store) as s0:
                     before = s0.submaps(working=True, grids=True)
             t0 = time.perf_counter()
-            r = run_session_data(w, rep, store, f"{name}-{k + 1}", f"{name}-{k + 1}")
+            r = run_session_data(w, rep, store, f"{name}-{k + 1}", f"{name}-{k + 1}",
+                                 lifelong=LifelongConfig(**(lifelong or {})))
             s = r.summary
             if before is not None and compare:
                 search_rows.append((name, k + 1, _compare_searches(r, before)))
             print(f"{name:<7} {k + 1:>7} {str(s.joined):<6} {s.joined_by:<8} {s.relocalisation_s:7.1f} "
-                  f"{time.perf_counter() - t0:6.1f}   {s.why[:90]}")
+                  f"{time.perf_counter() - t0:6.1f}   {s.why[:400]}")
             sys.stdout.flush()
             st.append((r.run.stamps_ns, r.run.wTb, s.joined))
             sessions.setdefault(name, []).append((r.stages.fe.submaps, np.asarray(r.stages.sol.wTa)))
@@ -417,6 +418,8 @@ def main() -> None:
     ap.add_argument("--growth-days", type=int, default=30)
     ap.add_argument("--growth-duration", type=float, default=150.0)
     ap.add_argument("--out", type=Path, default=None)
+    ap.add_argument("--lifelong", type=json.loads, default=None,
+                    help='real: LifelongConfig settings as JSON, e.g. \'{"dense_closures": true}\'')
     a = ap.parse_args()
     out = a.out or Path(tempfile.mkdtemp(prefix="bench_lifelong_"))
     for part in a.parts:
@@ -426,7 +429,7 @@ def main() -> None:
         if part == "sim":
             sim_part(d, a.days, a.duration, a.seed)
         elif part == "real":
-            real_part(d, a.logs, a.compare_search)
+            real_part(d, a.logs, a.compare_search, a.lifelong)
         elif part == "wrong":
             wrong_part(d)
         else:

@@ -23,6 +23,7 @@ No optimiser here: the joint solve (``holoslam.lifelong``) refines the verified 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -31,9 +32,10 @@ from itertools import combinations
 import numpy as np
 
 from holoslam import geometry as g
+from holoslam.submaps.loop_verify import Agreement, VerifyConfig
 
 __all__ = ["RelocaliseConfig", "LaserMatch", "Hypothesis", "Relocalisation", "global_match", "precompute_stored", "laser_matches",
-           "laser_hypothesis", "object_hypothesis", "relocalise", "fit_se2", "local_matches"]
+           "laser_hypothesis", "checked_hypothesis", "object_hypothesis", "relocalise", "fit_se2", "local_matches", "join_agreement"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,6 +92,14 @@ class RelocaliseConfig:
     # 0.3 m / 3 deg around the prediction; accepted at min_score and consistent with the hypothesis
     close_radius_m: float = 6.0
     close_per_submap: int = 3
+    # The map check of a laser hypothesis (``join_agreement``, the loop search's ``map_agreement``): the session
+    # submaps within ``verify.neighbours`` indices of those whose matches agree, laid by the hypothesis onto the
+    # stored submaps whose anchors lie within verify_radius_m of theirs; walls must fall on walls, not in space
+    # the other side saw free. A hypothesis it refuses is not joined; the next consistent group that passes it
+    # and the verification above is (aces' third session: 4 matches one corridor bay along, 0.7-0.9 m off)
+    verify_joins: bool = True
+    verify_radius_m: float = 10.0  # m: a real log's submap spans 10-30 m (30 m lasers); the household's 5-8 m
+    verify: VerifyConfig = field(default_factory=VerifyConfig)  # the loop search's, calibrated on aces
     object_inlier_m: float = 0.3  # m: an object this close to its stored place agrees (the "moved" threshold)
     min_object_inliers: int = 3  # objects agreeing with an object hypothesis for it to be verified
     min_pair_separation_m: float = 1.0  # m: two objects nearer fix the heading poorly (5 cm in 1 m = 3 deg)
@@ -294,6 +304,55 @@ def local_matches(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs:
     return out
 
 
+def _grid(submap):
+    """A submap's ``ProbGrid`` (a session's ``Submap.grid`` or a stored one's prob / known), None without one."""
+    from holoslam.submaps.probgrid import ProbGrid
+
+    gr = getattr(submap, "grid", None)
+    if isinstance(gr, ProbGrid):
+        return gr
+    if getattr(submap, "prob", None) is not None:
+        return ProbGrid(np.asarray(submap.prob, np.float32), tuple(submap.origin), float(submap.resolution),
+                        known=submap.known)
+    return None
+
+
+def join_agreement(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs: np.ndarray, near: list[int],
+                   cfg: RelocaliseConfig = RelocaliseConfig()) -> Agreement | None:
+    """The map check of the session placed by ``wTs``: the session submaps within ``cfg.verify.neighbours``
+    indices of those in ``near`` (the ones whose matches agree), each at wTs ∘ sTa, against the stored submaps
+    whose anchors lie within ``verify_radius_m`` of theirs, at their stored poses: the loop search's
+    ``map_agreement`` (walls on walls against walls in the other side's free space, both ways). None when
+    either side has no grid (no verdict)."""
+    from holoslam.submaps.loop_verify import map_agreement
+
+    K = cfg.verify.neighbours
+    new = sorted({q for k in near for q in range(k - K, k + K + 1) if 0 <= q < len(session_submaps)})
+    new = [q for q in new if _grid(session_submaps[q]) is not None]
+    if not new:
+        return None
+    wTn = g.compose(np.broadcast_to(np.asarray(wTs, np.float64), (len(new), 3)), np.asarray(session_sTa)[new])
+    anchors = np.array([s.wTa for s in stored_submaps], np.float64).reshape(-1, 3)
+    d = np.min(np.hypot(anchors[:, None, 0] - wTn[None, :, 0], anchors[:, None, 1] - wTn[None, :, 1]), axis=1)
+    old = [j for j in np.argsort(d, kind="stable").tolist()
+           if d[j] <= cfg.verify_radius_m and _grid(stored_submaps[j]) is not None]
+    if not old:
+        return None
+    # map_agreement's indices: the old side around a pivot m (|q - m| <= its neighbours), the new side just before
+    # n, both sides in one frame (the world: m and n at the identity, mTn the identity)
+    P, Q = len(old), len(new)
+    m, n = P, 2 * P + 1 + Q
+    grids = {q: _grid(stored_submaps[j]) for q, j in enumerate(old)}
+    grids.update({2 * P + 1 + q: _grid(session_submaps[k]) for q, k in enumerate(new)})
+    est = np.zeros((n + 1, 3))
+    est[:P] = anchors[old]
+    est[2 * P + 1:n] = wTn
+    part = np.zeros(n + 1, np.int64)
+    part[2 * P + 1:] = 1
+    vcfg = dataclasses.replace(cfg.verify, neighbours=max(P, Q))
+    return map_agreement(grids, est, part, m, n, np.zeros(3), vcfg)
+
+
 def query_points(submap) -> np.ndarray:
     """What a session submap is searched with: the scan taken at its anchor (its first keyframe's points, in the
     anchor frame), as a loop closure searches one scan. A scan sees from one place what a stored submap of that
@@ -336,7 +395,10 @@ def laser_matches(session_submaps, session_sTa: np.ndarray, stored_submaps,
             out.append(LaserMatch(k, st.id, oTn, cov, score, wTs))
         h = laser_hypothesis(out, cfg)
         if cfg.enough_consistent and h is not None and h.verified and h.support >= cfg.enough_consistent:
-            break
+            # stop only for a group the map check does not refuse (the check runs here, not after every submap)
+            h, _refused = checked_hypothesis(out, session_submaps, session_sTa, stored_submaps, cfg)
+            if h is not None and h.verified and h.support >= cfg.enough_consistent:
+                break
         if h is not None and h.support >= cfg.guide_support:
             guide = h
     return out, searches
@@ -376,8 +438,14 @@ def _group(T: np.ndarray, cfg: RelocaliseConfig) -> list[int]:
     return best
 
 
-def laser_hypothesis(matches: list[LaserMatch], cfg: RelocaliseConfig = RelocaliseConfig()) -> Hypothesis | None:
-    """The verified laser hypothesis of the matches (module docstring), or the best unverified one, or None."""
+def laser_hypothesis(matches: list[LaserMatch], cfg: RelocaliseConfig = RelocaliseConfig(),
+                     refuted: tuple[np.ndarray, ...] = ()) -> Hypothesis | None:
+    """The verified laser hypothesis of the matches (module docstring), or the best unverified one, or None.
+    ``refuted``: session transforms the map check refused; the matches that agree with one of them are left out
+    (they neither support a hypothesis nor count as its runner-up)."""
+    if refuted:
+        R = np.array(refuted).reshape(-1, 3)
+        matches = [m for m in matches if not _consistent(np.asarray(m.wTs)[None], R, cfg).any()]
     if not matches:
         return None
     T = np.array([m.wTs for m in matches])
@@ -399,6 +467,28 @@ def laser_hypothesis(matches: list[LaserMatch], cfg: RelocaliseConfig = Relocali
     return Hypothesis(wTs, _spread_cov(wTs, M, cfg), len(members), ok, why, tuple(matches[k] for k in members))
 
 
+def checked_hypothesis(matches: list[LaserMatch], session_submaps, session_sTa: np.ndarray, stored_submaps,
+                       cfg: RelocaliseConfig = RelocaliseConfig()) -> tuple[Hypothesis | None, list[str]]:
+    """``laser_hypothesis`` with the map check (``join_agreement``, ``verify_joins``): a verified group the check
+    refuses is set aside and the next is tried, so long as one is verified. Returns the hypothesis (verified and
+    not refused, or the best unverified one, or None) and a note per refused group."""
+    refuted: list[np.ndarray] = []
+    notes: list[str] = []
+    while True:
+        h = laser_hypothesis(matches, cfg, tuple(refuted))
+        if h is None or not h.verified or not cfg.verify_joins:
+            return h, notes
+        near = sorted({m.new for m in h.members})
+        a = join_agreement(session_submaps, session_sTa, stored_submaps, h.wTs, near, cfg)
+        if a is None or a.verdict(cfg.verify) is not False:
+            tail = "" if a is None else f"; map check {a.fraction:.2f} of {a.support + a.conflict} walls"
+            return dataclasses.replace(h, why=h.why + tail), notes
+        notes.append(f"refused by the map check ({a.fraction:.2f} of {a.support + a.conflict} walls agree, needs "
+                     f"{cfg.verify.min_agreement:g}): {h.support} matches at ({h.wTs[0]:.2f}, {h.wTs[1]:.2f}, "
+                     f"{math.degrees(h.wTs[2]):.1f} deg)")
+        refuted.append(h.wTs)
+
+
 def _agree(a: Hypothesis, b: Hypothesis, cfg: RelocaliseConfig) -> bool:
     return bool(_consistent(a.wTs[None], b.wTs[None], cfg)[0, 0])
 
@@ -414,7 +504,9 @@ def relocalise(session_submaps, session_sTa: np.ndarray, session_objects: dict[s
     # a verified object hypothesis only chooses where the laser looks first; the laser's matches stay global
     matches, searches = laser_matches(session_submaps, session_sTa, stored_submaps, cfg,
                                       obj if obj is not None and obj.verified else None)
-    las = laser_hypothesis(matches, cfg)
+    las, refused = checked_hypothesis(matches, session_submaps, session_sTa, stored_submaps, cfg)
+    if las is not None and refused:
+        las = dataclasses.replace(las, why=las.why + "; " + "; ".join(refused))
     lv, ov = las is not None and las.verified, obj is not None and obj.verified
     chosen: Hypothesis | None = None
     if lv and ov:
@@ -434,7 +526,8 @@ def relocalise(session_submaps, session_sTa: np.ndarray, session_objects: dict[s
     else:
         by = "none"
         why = "no verified hypothesis: " + "; ".join(
-            [f"laser: {las.why}" if las is not None else "laser: no match above the score",
+            [f"laser: {las.why}" if las is not None else "laser: no match above the score" + "".join(
+                f"; {r}" for r in refused),
              f"objects: {obj.why}" if obj is not None else "objects: fewer than two known to the store"])
     consistent: tuple[LaserMatch, ...] = ()
     if chosen is not None:

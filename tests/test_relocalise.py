@@ -118,3 +118,54 @@ def test_a_placed_session_is_matched_locally_into_the_nearest_stored_submaps():
     for m in ms:  # each match implies the true transform, not the hypothesis it started from
         assert np.hypot(*(m.wTs[:2] - wTs[:2])) < 0.03 and abs(g.wrap(m.wTs[2] - wTs[2])) < math.radians(0.5)
     assert local_matches(subs, sTa, stored, off, RelocaliseConfig(close_per_submap=0)) == []
+
+
+def _session_submap(walls, wTn, res=0.05):
+    """A session submap of ``walls`` (world) anchored at ``wTn``: its grid (``_stored``'s) and its anchor scan."""
+    st = _stored(walls, wTn, 0, res)
+    return SimpleNamespace(prob=st.prob, origin=st.origin, resolution=st.resolution, known=st.known,
+                           points=g.transform_points(g.inverse(wTn), _wall_points(walls)))
+
+
+# a corridor with bays: a door recess every 2 m on one side, one wider bay at the end (what tells them apart)
+CORRIDOR = [(0, 0, 14, 0), (0, 2, 14, 2), (14, 0, 14, 2), (0, 0, 0, 2)] + [
+    (x, 2, x, 2.6) for x in (2.0, 2.8, 4.0, 4.8, 6.0, 6.8, 8.0, 8.8, 10.0, 11.6)]
+
+
+def test_the_map_check_refuses_a_join_one_bay_along():
+    from holoslam.relocalise import join_agreement
+
+    stored = [_stored(CORRIDOR, np.array([x, 1.0, 0.0]), k + 1) for k, x in enumerate((1.0, 5.0, 9.0, 13.0))]
+    wTs = np.array([3.0, 1.0, 0.0])
+    sTa = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [8.0, 0.0, 0.0]])
+    subs = [_session_submap(CORRIDOR, g.compose(wTs, T)) for T in sTa]
+    cfg = RelocaliseConfig()
+    right = join_agreement(subs, sTa, stored, wTs, [0], cfg)
+    assert right is not None and right.fraction > 0.97 and right.verdict(cfg.verify) is True
+    wrong = join_agreement(subs, sTa, stored, g.compose(wTs, np.array([2.0, 0.0, 0.0])), [0], cfg)
+    assert wrong is not None and wrong.fraction < 0.9 and wrong.verdict(cfg.verify) is False
+    bare = [SimpleNamespace(points=s.points) for s in subs]  # no grids: no verdict
+    assert join_agreement(bare, sTa, stored, wTs, [0], cfg) is None
+
+
+def test_a_refused_group_gives_way_to_the_next_verified_one():
+    from holoslam.relocalise import LaserMatch, checked_hypothesis
+
+    stored = [_stored(CORRIDOR, np.array([x, 1.0, 0.0]), k + 1) for k, x in enumerate((1.0, 5.0, 9.0, 13.0))]
+    wTs = np.array([3.0, 1.0, 0.0])
+    sTa = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [8.0, 0.0, 0.0]])
+    subs = [_session_submap(CORRIDOR, g.compose(wTs, T)) for T in sTa]
+    alias = g.compose(wTs, np.array([2.0, 0.0, 0.0]))
+
+    def match(k, T):
+        return LaserMatch(k, 1, np.zeros(3), np.eye(3) * 1e-4, 0.7, np.asarray(T, float))
+
+    ms = [match(k % 3, alias) for k in range(5)] + [match(k % 3, wTs) for k in range(3)]
+    cfg = RelocaliseConfig(runner_up_ratio=0.7)
+    h, notes = checked_hypothesis(ms, subs, sTa, stored, cfg)
+    assert len(notes) == 1 and "refused by the map check" in notes[0] and "5 matches" in notes[0]
+    assert h is not None and h.verified and h.support == 3 and np.allclose(h.wTs, wTs)
+    assert "map check" in h.why
+    h_off, notes_off = checked_hypothesis(ms, subs, sTa, stored, RelocaliseConfig(runner_up_ratio=0.7,
+                                                                                  verify_joins=False))
+    assert notes_off == [] and h_off is not None and np.allclose(h_off.wTs, alias)

@@ -18,7 +18,8 @@ import numpy as np
 
 from holoslam import geometry as g
 
-__all__ = ["JointGraph", "JointSolution", "PlacementPriors", "joint_problem", "retired_priors", "solve_joint"]
+__all__ = ["JointGraph", "JointSolution", "PlacementPriors", "joint_problem", "retired_priors", "solve_joint",
+           "composed_factors", "working_factors"]
 
 # m: the virtual anchor that carries the retired sightings stands this far from the placements' centroid (a
 # bearing/range factor from afar is near linear in x/y, so the fused x/y covariance converts with little error)
@@ -82,6 +83,82 @@ def retired_priors(retired, sightings, live: set[str]) -> PlacementPriors:
     cov_w = np.array([np.linalg.inv(acc[n][0]) for n in names]).reshape(-1, 2, 2)
     xy = np.array([c @ acc[n][1] for c, n in zip(cov_w, names, strict=True)]).reshape(-1, 2)
     return PlacementPriors(names, xy, cov_w, np.array([int(acc[n][2][0]) for n in names], np.int64))
+
+
+# the stored factors a composition runs through: a session's chain (local SLAM's scan matches and the odometry
+# beside them), never its loops or the cross-session matches: those enter the joint solve under a robust kernel
+# and its chi-square rounds, which a composition would take from a wrong one
+CHAIN_KINDS = ("scan_match", "dead_reckoning")
+
+
+def composed_factors(factors, working_ids: np.ndarray, kinds: tuple[str, ...] = CHAIN_KINDS):
+    """The relative poses that retirement would drop, kept: for every connected part of retired submaps (linked
+    by stored factors), the working submaps it touches are chained (each to the next, in id order) by the
+    composition of the stored factors of ``kinds`` along the most certain path through the retired ones (per pair
+    of submaps the factor of least position variance; covariances propagated to first order). A ``StoredFactors`` of kind
+    ``composed`` between working ids. Without them, a session whose middle was retired falls apart into pieces
+    held only by the cross-session matches (or, cut off, by a prior at their stored poses)."""
+    import networkx as nx
+
+    from holoslam.store.records import StoredFactors
+
+    working = {int(k) for k in np.asarray(working_ids).tolist()}
+    best: dict[tuple[int, int], tuple[float, np.ndarray, np.ndarray]] = {}
+    for i, j, T, C, kind in zip(factors.i.tolist(), factors.j.tolist(), factors.iTj, factors.cov_iTj,
+                                factors.kind, strict=True):
+        if i == j or (i in working and j in working) or str(kind) not in kinds:
+            continue
+        a, b, T, C = (i, j, T, C) if i < j else (j, i, g.inverse(T), _inv_cov(T, C))
+        w = float(C[0, 0] + C[1, 1])
+        if (a, b) not in best or w < best[(a, b)][0]:
+            best[(a, b)] = (w, np.asarray(T, np.float64), np.asarray(C, np.float64))
+    G = nx.Graph()
+    for (a, b), (w, _T, _C) in best.items():
+        G.add_edge(a, b, weight=max(w, 1e-12))
+    retired = G.subgraph([v for v in G if v not in working])
+    rows: list[tuple[int, int, np.ndarray, np.ndarray]] = []
+    for part in nx.connected_components(retired):
+        touch = sorted({u for v in part for u in G[v] if u in working})
+        H = G.subgraph(set(part) | set(touch))
+        for a, b in zip(touch, touch[1:], strict=False):
+            try:
+                path = nx.shortest_path(H, a, b, weight="weight")
+            except nx.NetworkXNoPath:
+                continue
+            if any(v in working for v in path[1:-1]):
+                continue  # through another working submap: the chain to it is composed on its own
+            T, C = np.zeros(3), np.zeros((3, 3))
+            for u, v in zip(path, path[1:], strict=False):
+                _w, E, CE = best[(min(u, v), max(u, v))]
+                if u > v:
+                    E, CE = g.inverse(E), _inv_cov(E, CE)
+                T, C = g.propagate_compose(T, C, E, CE)
+            rows.append((a, b, T, C))
+    n = len(rows)
+    return StoredFactors(np.full(n, -1, np.int64), np.full(n, -1, np.int64),
+                         np.array([r[0] for r in rows], np.int64), np.array([r[1] for r in rows], np.int64),
+                         np.array([r[2] for r in rows]).reshape(-1, 3), np.array([r[3] for r in rows]).reshape(-1, 3, 3),
+                         np.array(["composed"] * n, dtype=object))
+
+
+def working_factors(factors, working_ids: np.ndarray, compose: bool = True):
+    """The stored factors between working submaps, with (``compose``) the ``composed_factors`` through retired
+    ones."""
+    from holoslam.store.records import StoredFactors
+
+    keep = set(np.asarray(working_ids).tolist())
+    sel = np.array([int(i) in keep and int(j) in keep for i, j in zip(factors.i, factors.j, strict=True)], bool)
+    parts = [StoredFactors(*(np.asarray(a)[sel] for a in (factors.id, factors.session_id, factors.i, factors.j,
+                                                            factors.iTj, factors.cov_iTj, factors.kind)))]
+    if compose:
+        parts.append(composed_factors(factors, working_ids))
+    return StoredFactors(*(np.concatenate([getattr(p, f) for p in parts]) for f in
+                           ("id", "session_id", "i", "j", "iTj", "cov_iTj", "kind")))
+
+
+def _inv_cov(T: np.ndarray, C: np.ndarray) -> np.ndarray:
+    J = g.inverse_jacobian(np.asarray(T, np.float64))
+    return J @ np.asarray(C, np.float64) @ J.T
 
 
 @dataclass(frozen=True, eq=False)

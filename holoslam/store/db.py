@@ -50,6 +50,15 @@ def _version() -> str:
         return "unknown"
 
 
+def _state(r: Any) -> ObjectState:
+    """An ``ObjectState`` of an ``object_history`` row (the columns ``object_history`` selects)."""
+    xy = None if r[5] is None else np.array([r[5], r[6]])
+    d = None if r[9] is None else np.array([r[9], r[10]])
+    view = None if r[13] is None else np.array([r[13], r[14]])
+    return ObjectState(r[1], r[2], r[3], r[4], xy, np.nan if r[7] is None else r[7], _opt(r[8], "object cov"),
+                       r[12], r[15] or "", d, _opt(r[11], "object cov_d"), view, r[0])
+
+
 def _opt(blob: bytes | None, where: str) -> np.ndarray | None:
     return None if blob is None else unpack(blob, where)
 
@@ -189,16 +198,30 @@ class MapStore:
             np.array([r[6] for r in rows], dtype=object))
 
     def sightings(self, submap_ids: np.ndarray | None = None) -> StoredSightings:
-        rows = self._con.execute(
-            "SELECT submap_id, object_id, placement, a_x, a_y, cov, z FROM sightings ORDER BY id").fetchall()
-        if submap_ids is not None:
-            keep = set(np.asarray(submap_ids).tolist())
-            rows = [r for r in rows if r[0] in keep]
+        """Object sightings; with ``submap_ids``, those from these submaps (selected by the database's index on
+        the submap, so a session reads its working submaps' rows, not the whole history)."""
+        sql = "SELECT submap_id, object_id, placement, a_x, a_y, cov, z, id FROM sightings"
+        if submap_ids is None:
+            rows = self._con.execute(sql + " ORDER BY id").fetchall()
+        else:
+            ids = sorted({int(k) for k in np.asarray(submap_ids).tolist()})
+            rows = []
+            for k in range(0, len(ids), 900):  # SQLite's bound parameters: at most 999 in older builds
+                chunk = ids[k:k + 900]
+                rows += self._con.execute(sql + f" WHERE submap_id IN ({','.join('?' * len(chunk))})",  # noqa: S608
+                                          chunk).fetchall()
+            rows.sort(key=lambda r: r[7])
         return StoredSightings(
             np.array([r[0] for r in rows], np.int64), tuple(r[1] for r in rows), tuple(r[2] for r in rows),
             np.array([[r[3], r[4]] for r in rows], np.float64).reshape(-1, 2),
             np.array([unpack(r[5], "sighting") for r in rows]).reshape(-1, 2, 2),
             np.array([np.nan if r[6] is None else r[6] for r in rows], np.float64))
+
+    def placements(self) -> set[str]:
+        """Every placement the store ever gave (object history and sightings, retired submaps' included)."""
+        rows = self._con.execute("SELECT placement FROM object_history WHERE placement IS NOT NULL AND placement != '' "
+                                 "UNION SELECT placement FROM sightings").fetchall()
+        return {r[0] for r in rows if r[0]}
 
     def object_history(self, object_id: str | None = None, session_id: int | None = None
                        ) -> tuple[ObjectState, ...]:
@@ -215,24 +238,16 @@ class MapStore:
             args.append(int(session_id))
         if cond:
             sql += " WHERE " + " AND ".join(cond)
-        out = []
-        for r in self._con.execute(sql + " ORDER BY session_id, object_id", args):
-            xy = None if r[5] is None else np.array([r[5], r[6]])
-            d = None if r[9] is None else np.array([r[9], r[10]])
-            view = None if r[13] is None else np.array([r[13], r[14]])
-            out.append(ObjectState(r[1], r[2], r[3], r[4], xy, np.nan if r[7] is None else r[7],
-                                   _opt(r[8], "object cov"), r[12], r[15] or "", d, _opt(r[11], "object cov_d"),
-                                   view, r[0]))
-        return tuple(out)
+        return tuple(_state(r) for r in self._con.execute(sql + " ORDER BY session_id, object_id", args))
 
     def latest_objects(self) -> dict[str, ObjectState]:
-        """Each object's state in the latest joined session that has a row for it (gone ones included)."""
-        out: dict[str, ObjectState] = {}
-        joined = {s.id for s in self.sessions() if s.joined}
-        for st in self.object_history():
-            if st.session_id in joined:
-                out[st.object_id] = st
-        return out
+        """Each object's state in the latest joined session that has a row for it (gone ones included): one row
+        per object, chosen by the database (the history's index on object and session)."""
+        sql = ("SELECT h.session_id, h.object_id, h.kind, h.payload, h.status, h.x, h.y, h.z, h.cov, h.dx, h.dy, "
+               "h.cov_d, h.sightings, h.view_x, h.view_y, h.placement FROM object_history h "
+               "WHERE h.session_id = (SELECT MAX(h2.session_id) FROM object_history h2 JOIN sessions e "
+               "ON e.id = h2.session_id WHERE e.joined = 1 AND h2.object_id = h.object_id) ORDER BY h.object_id")
+        return {st.object_id: st for st in (_state(r) for r in self._con.execute(sql))}
 
     def trajectory(self, session_id: int) -> StoredTrajectory:
         r = self._con.execute("SELECT stamps_ns, anchor_idx, aTb, sTb FROM trajectories WHERE session_id = ?",

@@ -215,3 +215,23 @@ def test_a_session_killed_after_its_commit_is_kept(tmp_path):
     with MapStore.open(p) as st:
         assert st.counts()["sessions"] == 1 and st.counts()["submaps"] == 6
         assert len(st.trajectory(1).stamps_ns) == 5000
+
+
+def test_the_bounded_reads_give_what_the_whole_history_gives():
+    """latest_objects / sightings(ids) / placements() select in SQL what reading every row would give."""
+    with MapStore.open(FIXTURE, create=False) as st:
+        joined = {s.id for s in st.sessions() if s.joined}
+        whole: dict = {}
+        for o in st.object_history():
+            if o.session_id in joined:
+                whole[o.object_id] = o
+        latest = st.latest_objects()
+        assert sorted(latest) == sorted(whole) and len(latest) > 5
+        assert all(latest[k].session_id == whole[k].session_id and latest[k].placement == whole[k].placement
+                   for k in latest)
+        every = st.sightings()
+        ids = np.array([m.id for m in st.submaps()][:3], np.int64)
+        some = st.sightings(ids)
+        keep = np.isin(every.submap_id, ids)
+        assert 0 < len(some) < len(every) and some.placement == tuple(np.array(every.placement, object)[keep])
+        assert st.placements() == {o.placement for o in st.object_history() if o.placement} | set(every.placement)
