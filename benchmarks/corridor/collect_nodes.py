@@ -1,4 +1,7 @@
-"""Run the front end (loops off) on a log and save node poses chained through anchors, DR and truth."""
+"""Issue 25 diagnosis: run the front end (loop search off) on a log with ground truth and save, per node, the
+pose chained through the anchors (local SLAM alone), the dead reckoning and the truth (a pickle for
+corridor_legs.py). Usage: ``python benchmarks/corridor/collect_nodes.py LOG.mcap OUT.pkl``; the environment's
+LOCAL / GRID / MATCH (JSON) override LocalSlamConfig / GridConfig / MatchConfig fields."""
 import json
 import os
 import pickle
@@ -22,7 +25,8 @@ cfg = RunConfig().frontend
 cfg = _r(cfg, loops=_r(cfg.loops, every_nodes=1000000, global_per_node=0, global_per_node_lost=0))
 lo = json.loads(os.environ.get("LOCAL", "{}"))
 ma = json.loads(os.environ.get("MATCH", "{}"))
-cfg = _r(cfg, local=_r(cfg.local, **lo, match=_r(cfg.local.match, **ma)))
+gr = json.loads(os.environ.get("GRID", "{}"))
+cfg = _r(cfg, local=_r(cfg.local, **lo, grid=_r(cfg.local.grid, **gr), match=_r(cfg.local.match, **ma)))
 print(lo, ma)
 rec = []
 orig = LocalSlam.add

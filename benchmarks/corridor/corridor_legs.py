@@ -1,3 +1,6 @@
+"""Issue 25 diagnosis: per corridor leg (truth heading within 15 deg), the distance local SLAM, the odometry and the
+truth travelled; per node step (straight / turning / other) the along / across / heading errors of the increments
+in the truth step frame. Usage: ``python benchmarks/corridor/corridor_legs.py OUT.pkl`` (from collect_nodes.py)."""
 import pickle
 import sys
 

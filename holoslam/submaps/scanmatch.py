@@ -81,13 +81,6 @@ class MatchConfig:
     # odometry is good, the laser's window never scored 0.05 higher (197 of 423 low windows scored higher, all by
     # less than 0.05); a margin of 0.02 took ACES 3.68 -> 3.76 cm (an alias chosen), 0.1 left fr079's breaks
     laser_prediction_margin: float = 0.05
-    # solution remapping (Zhang, Kaess & Singh, ICRA 2016): where the scan's own information on the translation
-    # (the occupied term's Gauss-Newton Hessian) is weaker along one direction than ``degenerate_ratio`` times
-    # along the other (a corridor), the match's move along that direction is dropped and the prediction (the
-    # odometry) carries it. 0 = off (default until measured on the real logs). Issue 25: in the simulated
-    # building, local SLAM shortens straight corridor legs by 3.7 % (-1.7 cm per 0.46 m node step) while the
-    # odometry lengthens them by 1.7 %: points beyond the host's mapped frontier pull the scan back.
-    degenerate_ratio: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -183,26 +176,13 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     seed = np.array([pred[0] + off[i], pred[1] + off[j], g.wrap(pred[2] + angles[a])])
     # the priors pull toward the prediction, not the correlative seed: along a corridor the window's best cell
     # is noise, and a prior at it would let the estimate random-walk along the corridor scan after scan
-    x, y, t, _cost, _occ, H, _it = fast.lsq_match(
+    x, y, t, _cost, _occ, _H, _it = fast.lsq_match(
         prob, origin[0], origin[1], res, px, py, seed[0], seed[1], seed[2], pred[0], pred[1], pred[2],
         cfg.occupied_weight, cfg.translation_weight, cfg.rotation_weight, cfg.iterations, outside)
     aTb = np.array([x, y, t])
-    if cfg.degenerate_ratio > 0:
-        aTb[:2] = _remap_degenerate(aTb[:2], pred[:2], H[:2, :2], cfg.degenerate_ratio)
     score = float(fast.mean_bicubic(prob, origin[0], origin[1], res, px, py, x, y, t, outside))
     cov = _surface_covariance(S, pred, off, angles, aTb, cfg.kappa, res, step)
     return Match(aTb, cov, score, bool(score >= cfg.min_score))
-
-
-def _remap_degenerate(xy: np.ndarray, pred_xy: np.ndarray, H_xy: np.ndarray, ratio: float) -> np.ndarray:
-    """The matched translation ``xy`` with its move from ``pred_xy`` along the weak eigenvector of the scan's
-    translation Hessian ``H_xy`` dropped, when that eigenvalue is below ``ratio`` times the strong one
-    (``MatchConfig.degenerate_ratio``); else ``xy`` unchanged."""
-    w, V = np.linalg.eigh(0.5 * (H_xy + H_xy.T))
-    if not (w[1] > 0 and w[0] < ratio * w[1]):
-        return xy
-    u = V[:, 0]
-    return xy - float((xy - pred_xy) @ u) * u
 
 
 class WidePyramid:
