@@ -339,6 +339,15 @@ class _Graph:
         self._meas = (len(self.i), meas)
         return meas
 
+    def disagree(self, closures: Sequence[Any], min_d2: float) -> bool:
+        """Whether any closure's relative pose is further than ``min_d2`` (squared Mahalanobis, its own
+        covariance) from what the current estimate says (``LoopConfig.resolve_min_d2``)."""
+        for c in closures:
+            r = g.between(c.mTn, g.between(self.est[c.old], self.est[c.new]))
+            if float(r @ np.linalg.solve(c.cov_mTn, r)) > min_d2:
+                return True
+        return False
+
     def reoptimise(self, optimize: Callable[[object], np.ndarray] | None) -> None:
         if optimize is None:
             return
@@ -493,7 +502,7 @@ def _local_slam(
                                  partial(slam.bundle, node, cfg.loops.global_bundle_m))
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
-            if found:
+            if found and graph.disagree(found, cfg.loops.resolve_min_d2):
                 graph.reoptimise(optimize)
     slam.close()
     closed.extend(_submap_record(sm, cfg, "scans") for sm in slam.pop_finished())

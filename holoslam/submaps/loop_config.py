@@ -32,6 +32,10 @@ class LoopConfig:
     wide_window_xy: float = 3.0  # m
     depth: int = 7
     skip_recent: int = 2  # the submaps this many before the current one are its chain neighbours
+    # squared Mahalanobis distance (3 dof): the anchors are re-solved after a node's closures only when one of them
+    # disagrees with the current estimate by more than this (chi2(3) at 0.99 = 11.34); a closure within its own
+    # noise of the estimate moves it by less than that noise, and the windows are many sigmas wide. 0: always
+    resolve_min_d2: float = 11.34
     max_per_pair: int = 4  # closures kept between one old submap and one new submap
     wide_search_spacing: float = 2.0  # m travelled between two wide searches of one old submap
     precomputed_cache: int = 64  # submaps whose max-pooled grids stay in memory (a few ms to rebuild one)

@@ -386,3 +386,19 @@ def test_observation_before_the_first_scan_goes_to_anchor_0_by_dead_reckoning_ba
         name, xy, c = P.landmarks.landmark[r], P.landmarks.a_position[r], P.landmarks.cov_a_position[r]
         e = xy - g.transform_points(g.inverse(a0), OBJECTS[name][None, :2])[0]
         assert e @ np.linalg.solve(c, e) < 20.0 and np.hypot(*e) < 0.1, (name, e)
+
+
+def test_the_anchors_are_re_solved_only_for_a_closure_the_estimate_contradicts():
+    from types import SimpleNamespace
+
+    from holoslam.submaps.frontend import _Graph
+
+    G = _Graph(np.zeros(3))
+    G.est.append(np.array([10.0, 0.0, 0.0]))  # anchor 1 estimated 10 m ahead of anchor 0
+    cov = np.diag([0.05**2, 0.05**2, np.radians(1.0) ** 2])
+    agrees = SimpleNamespace(old=0, new=1, mTn=np.array([10.08, 0.0, 0.0]), cov_mTn=cov)  # 1.6 sigma
+    contradicts = SimpleNamespace(old=0, new=1, mTn=np.array([10.3, 0.0, 0.0]), cov_mTn=cov)  # 6 sigma
+    min_d2 = LoopConfig().resolve_min_d2
+    assert not G.disagree([agrees], min_d2)
+    assert G.disagree([agrees, contradicts], min_d2)
+    assert G.disagree([agrees], 0.0)  # 0: always re-solved
