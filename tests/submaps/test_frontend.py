@@ -391,9 +391,9 @@ def test_observation_before_the_first_scan_goes_to_anchor_0_by_dead_reckoning_ba
 def test_the_anchors_are_re_solved_only_for_a_closure_the_estimate_contradicts():
     from types import SimpleNamespace
 
-    from holoslam.submaps.frontend import _Graph
+    from holoslam.submaps.anchor_graph import AnchorGraph
 
-    G = _Graph(np.zeros(3))
+    G = AnchorGraph(np.zeros(3))
     G.est.append(np.array([10.0, 0.0, 0.0]))  # anchor 1 estimated 10 m ahead of anchor 0
     cov = np.diag([0.05**2, 0.05**2, np.radians(1.0) ** 2])
     agrees = SimpleNamespace(old=0, new=1, mTn=np.array([10.08, 0.0, 0.0]), cov_mTn=cov)  # 1.6 sigma

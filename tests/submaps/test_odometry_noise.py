@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from holoslam import geometry as g
+from holoslam.submaps.anchor_graph import AnchorGraph
 from holoslam.submaps.deadreckon import DeadReckoningConfig
-from holoslam.submaps.frontend import _Graph
 from holoslam.submaps.odometry_noise import odometry_noise
 
 
@@ -99,7 +99,7 @@ def _graph(n_pairs=40, dr_sigma=0.02, model_sigma=0.01, slips=(), seed=0):
     """Anchors 1 m apart; each pair has a dead-reckoning relative pose with true error sigma ``dr_sigma`` but a
     model covariance of ``model_sigma``, and a (near-exact) scan match."""
     rng = np.random.default_rng(seed)
-    G = _Graph(np.zeros(3))
+    G = AnchorGraph(np.zeros(3))
     for k in range(n_pairs):
         T = np.array([1.0, 0.0, 0.1])
         err = rng.normal(0, dr_sigma, 3) * [1, 1, 0.1]
