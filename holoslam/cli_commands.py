@@ -7,6 +7,7 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 from holoslam.cli_output import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, Progress, _err, _json
@@ -89,32 +90,26 @@ def cmd_run(a: argparse.Namespace) -> int:
         raise ConfigError(
             f"no logs found in {', '.join(map(str, a.logs))}; give .mcap files or folders of them"
         )
-    compiling = _compile_kernels_first(a.quiet or a.json)
-    progress = Progress(quiet=a.quiet or a.json)
-    try:
-        if a.map is not None:
-            outcome = _run_into_store(a, logs, config, progress)
-        else:
-            outcome = run_logs(logs, a.output, config, workers=a.workers, scheduler=a.scheduler,
-                               progress=progress, force=a.force)
-    finally:
-        if compiling is not None:
-            compiling.shutdown(wait=True, cancel_futures=True)
-    if a.json:
-        print(_json(outcome))
-    elif not a.quiet:
-        print(outcome["text"])
-    return EXIT_OK if outcome["ok"] else EXIT_FAILED
+    if a.map is not None:
+        return _compiled_run(a, lambda progress: _run_into_store(a, logs, config, progress))
+    return _compiled_run(a, lambda progress: run_logs(logs, a.output, config, workers=a.workers,
+                                                      scheduler=a.scheduler, progress=progress, force=a.force))
 
 
 def cmd_demo(a: argparse.Namespace) -> int:
     from holoslam.config import load_run_config
     from holoslam.run_jobs import run_demo
 
+    config = load_run_config(a.config)
+    return _compiled_run(a, lambda progress: run_demo(a.output, config, progress=progress))
+
+
+def _compiled_run(a: argparse.Namespace, job: Callable[[Progress], dict]) -> int:
+    """Run ``job`` (its outcome: ``ok``, ``text``) with the kernels compiling beside it when numba's cache lacks
+    them (``_compile_kernels_first``), then print the outcome as ``--json`` / ``--quiet`` ask."""
     compiling = _compile_kernels_first(a.quiet or a.json)
-    progress = Progress(quiet=a.quiet or a.json)
     try:
-        outcome = run_demo(a.output, load_run_config(a.config), progress=progress)
+        outcome = job(Progress(quiet=a.quiet or a.json))
     finally:
         if compiling is not None:
             compiling.shutdown(wait=True, cancel_futures=True)

@@ -126,7 +126,7 @@ def _kernel_module(name: str):
 
 def _dispatcher(sig: KernelSignature):
     """The kernel of ``sig``: a module attribute, or ``NAME[i]``, item i of a module's tuple of kernels (a
-    module that builds its kernels on first use keeps them so: ``holoslam.submaps.loops._KERNELS``)."""
+    module that builds its kernels on first use keeps them so: ``holoslam.submaps.bnb_window._KERNELS``)."""
     mod: Any = _kernel_module(sig.module)
     name, _, index = sig.function.partition("[")
     obj = getattr(mod, name)

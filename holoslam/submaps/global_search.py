@@ -11,7 +11,7 @@ submaps (aces, 30 x 50 m, 1,100-1,800 headings): too slow to try often. The sear
    farthest point by one coarse cell), inside the window clipped to the submap's extent; max-pooling never lowers
    a cell, so the coarse best is an upper bound of the fine one and a right match cannot be pruned there;
 2. **fine**: the window's full-resolution branch and bound within ``check_xy_m`` / ``check_deg`` of the coarse best
-   (the caller's ``_Window``, whose second-peak search then tells whether the match is ambiguous at the 5 cm scale).
+   (the caller's ``bnb_window.SearchWindow``, whose second-peak search then tells whether the match is ambiguous at the 5 cm scale).
 """
 
 from __future__ import annotations

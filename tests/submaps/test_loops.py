@@ -136,10 +136,10 @@ def test_chain_neighbours_saturated_pairs_and_wide_windows_are_spaced(household_
 
 
 def test_the_second_peak_search_is_exact():
-    """``_Window``: its best is bnb.search's, and each second peak is the brute-force best of the window outside
+    """``SearchWindow``: its best is bnb.search's, and each second peak is the brute-force best of the window outside
     the boxes cut around the best and the peaks before it (random grids, points, windows and boxes)."""
     from holoslam.submaps import bnb
-    from holoslam.submaps.loops import _Window
+    from holoslam.submaps.bnb_window import SearchWindow
 
     rng = np.random.default_rng(7)
     res = 0.05
@@ -150,7 +150,7 @@ def test_the_second_peak_search_is_exact():
         pts = rng.uniform(-1.0, 1.0, (int(rng.integers(5, 30)), 2))
         seed = np.array([0.3, 0.2, 0.1])
         wxy, wth = float(rng.uniform(0.05, 0.4)), float(rng.uniform(0.0, 0.2))
-        win = _Window(pre, pts, seed, wxy, wth)
+        win = SearchWindow(pre, pts, seed, wxy, wth)
         best, ref = win.best(0.0), bnb.search(pre, pts, seed, wxy, wth, 0.0)
         assert np.array_equal(best.aTb, ref.aTb) and best.score == ref.score
         # every candidate's score, (angle, y, x)
@@ -182,7 +182,7 @@ def test_the_second_peak_search_is_exact():
         first = win.second_peaks(best, margin, ex_xy, ex_rad, count=1, first=True)
         assert bool(first) == bool(peaks) and all(f.score > best.score - margin for f in first)
         # resumed from the nodes the best's search set aside within the margin (what LoopSearch does): the same
-        again = _Window(pre, pts, seed, wxy, wth)
+        again = SearchWindow(pre, pts, seed, wxy, wth)
         assert again.best(0.0, margin).score == best.score
         assert [p.score for p in again.second_peaks(best, margin, ex_xy, ex_rad, count=3)] == [p.score for p in peaks]
         assert bool(again.second_peaks(best, margin, ex_xy, ex_rad, count=1, first=True)) == bool(peaks)
