@@ -18,6 +18,25 @@ _CHI2_3_MEDIAN = 2.366  # median of the chi-square distribution with 3 degrees o
 _CHI2_3_95 = 7.815  # its 95 % quantile
 
 
+def _adjoints(aTb: np.ndarray) -> np.ndarray:
+    """(N, 3, 3): ``geometry.adjoint`` of each pose of an (N, 3) batch."""
+    c, s = np.cos(aTb[:, 2]), np.sin(aTb[:, 2])
+    Ad = np.zeros((len(aTb), 3, 3))
+    Ad[:, 0, 0], Ad[:, 0, 1], Ad[:, 0, 2] = c, -s, aTb[:, 1]
+    Ad[:, 1, 0], Ad[:, 1, 1], Ad[:, 1, 2] = s, c, -aTb[:, 0]
+    Ad[:, 2, 2] = 1.0
+    return Ad
+
+
+def _lookup(keys: np.ndarray, order: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """The index in ``keys`` (unique; ``order`` sorts them) of each wanted key, -1 where absent."""
+    if keys.size == 0:
+        return np.full(wanted.shape, -1, np.int64)
+    pos = np.minimum(np.searchsorted(keys[order], wanted), keys.size - 1)
+    hit = keys[order][pos] == wanted
+    return np.where(hit, order[pos], -1)
+
+
 class AnchorGraph:
     """The relative poses found so far and the anchors' current world estimate."""
 
@@ -33,6 +52,22 @@ class AnchorGraph:
         self._infl: tuple[int, float] | None = None
         self._rel: tuple[int, int, np.ndarray] | None = None
         self._meas: tuple[int, Any] | None = None
+        self._drs: tuple[tuple[int, int], Any] | None = None
+        self._fused: tuple[int, tuple[np.ndarray, np.ndarray]] | None = None
+        self._arrays: tuple[np.ndarray, ...] = (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)),
+                                                np.zeros((0, 3, 3)), np.zeros(0, object))
+
+    def edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The relative poses as arrays (i, j, T (E, 3), cov (E, 3, 3), kind): the lists' rows, converted only
+        where they grew since the last call (the edges are only ever appended)."""
+        n0 = len(self._arrays[0])
+        if n0 < len(self.i):
+            new = (np.array(self.i[n0:], np.int64), np.array(self.j[n0:], np.int64),
+                   np.array(self.T[n0:], np.float64).reshape(-1, 3), np.array(self.cov[n0:]).reshape(-1, 3, 3),
+                   np.array(self.kind[n0:], dtype=object))
+            self._arrays = tuple(np.concatenate([a, b]) for a, b in zip(self._arrays, new, strict=True))
+        i, j, T, cov, kind = self._arrays
+        return i, j, T, cov, kind
 
     def graph_distance(self, n: int) -> np.ndarray:
         """Shortest path length from every anchor to anchor n: chain edges weigh the distance travelled
@@ -43,9 +78,8 @@ class AnchorGraph:
             from scipy.sparse.csgraph import dijkstra
 
             N = len(self.est)
-            ii, jj = np.array(self.i, np.int64), np.array(self.j, np.int64)
+            ii, jj, _, _, kinds = self.edges()
             trav = np.array(self.travel)
-            kinds = np.array(self.kind, dtype=object)
             # a break (kind "lost") is as long as the building is large: a window across it covers everything
             w = np.where(kinds == "loop", 1e-6, np.where(kinds == "lost", 1e6, np.abs(trav[jj] - trav[ii]) + 1e-6))
             A = coo_matrix((w, (ii, jj)), shape=(N, N)).tocsr()
@@ -69,29 +103,30 @@ class AnchorGraph:
         w = np.sqrt(covs[:, 0, 0] + covs[:, 1, 1]) + 5.0 * np.sqrt(covs[:, 2, 2]) + 1e-9
         A = coo_matrix((w, (pairs[:, 0], pairs[:, 1])), shape=(N, N)).tocsr()
         dist, pred = dijkstra(A, directed=False, indices=n, return_predecessors=True)
-        edge = {(int(a), int(b)): e for e, (a, b) in enumerate(pairs.tolist())}
         est = np.array(self.est)
         # Ad(nTp) of every anchor p at once (geometry.adjoint's matrix, between's arithmetic)
         nTp = g.between(np.broadcast_to(est[n], est.shape), est)
-        c, s = np.cos(nTp[:, 2]), np.sin(nTp[:, 2])
-        Ad = np.zeros((N, 3, 3))
-        Ad[:, 0, 0], Ad[:, 0, 1], Ad[:, 0, 2] = c, -s, nTp[:, 1]
-        Ad[:, 1, 0], Ad[:, 1, 1], Ad[:, 1, 2] = s, c, -nTp[:, 0]
-        Ad[:, 2, 2] = 1.0
+        Ad = _adjoints(nTp)
+        # every reached anchor m and its predecessor p on the path: the edge's covariance of mTp (at p). An edge
+        # (m, p) measures mTp; an edge (p, m) measures pTm (covariance at m): mTp is its inverse, at p
+        reached = np.flatnonzero(pred >= 0)
+        p_of = pred[reached]
+        pk = pairs[:, 0] * N + pairs[:, 1]
+        korder = np.argsort(pk, kind="stable")
+        fwd = _lookup(pk, korder, reached * N + p_of)
+        rev = _lookup(pk, korder, p_of * N + reached)
+        C = np.empty((len(reached), 3, 3))
+        C[fwd >= 0] = covs[fwd[fwd >= 0]]
+        back = np.flatnonzero(fwd < 0)
+        J = _adjoints(g.between(est[p_of[back]], est[reached[back]]))
+        C[back] = np.einsum("mij,mjk,mlk->mil", J, covs[rev[back]], J)
+        # mTn = mTp ∘ pTn: cov(mTn) = Ad(nTp) cov(mTp) Ad(nTp)^T + cov(pTn), summed from n outwards
+        step = np.full((N, 3, 3), np.nan)
+        step[reached] = np.einsum("mij,mjk,mlk->mil", Ad[p_of], C, Ad[p_of])
         out = np.full((N, 3, 3), np.nan)
         out[n] = 0.0
-        for m in np.argsort(dist, kind="stable")[1:].tolist():
-            p = int(pred[m])
-            if p < 0:
-                break
-            # mTn = mTp ∘ pTn: cov(mTn) = Ad(nTp) cov(mTp) Ad(nTp)^T + cov(pTn)
-            e = edge.get((m, p))
-            if e is None:  # the edge measures pTm (covariance at m): mTp = its inverse, at p
-                J = g.adjoint(g.between(est[p], est[m]))
-                C = J @ covs[edge[(p, m)]] @ J.T
-            else:
-                C = covs[e]
-            out[m] = Ad[p] @ C @ Ad[p].T + out[p]
+        for m in reached[np.argsort(dist[reached], kind="stable")].tolist():
+            out[m] = step[m] + out[pred[m]]
         unreached = ~np.isfinite(out[:, 0, 0])
         out[unreached] = np.diag([1e12, 1e12, np.pi ** 2])
         self._rel = (*key, out)
@@ -100,16 +135,20 @@ class AnchorGraph:
     def _fused_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """The anchor pairs (P, 2) the relative poses join, in the order first measured, and the covariance (P, 3,
         3) of their fused measurements (the parallel ones' information summed, in the order measured)."""
+        if self._fused is not None and self._fused[0] == len(self.i):
+            return self._fused[1]
         meas = self.measurements()
         keep = meas.kind != "lost"  # a break says nothing the window could use: the other part is anywhere
-        ij = np.stack([meas.i[keep], meas.j[keep]], axis=1)
-        pairs, first, which = np.unique(ij, axis=0, return_index=True, return_inverse=True)
+        N = max(len(self.est), max(self.i) + 1, max(self.j) + 1)  # keys i N + j, unique per pair
+        keys, first, which = np.unique(meas.i[keep] * N + meas.j[keep], return_index=True, return_inverse=True)
         order = np.argsort(first, kind="stable")  # pairs by first measurement
         rank = np.empty_like(order)
         rank[order] = np.arange(len(order))
-        info = np.zeros((len(pairs), 3, 3))
+        info = np.zeros((len(keys), 3, 3))
         np.add.at(info, rank[which.reshape(-1)], np.linalg.inv(meas.cov_iTj[keep]))
-        return pairs[order], np.linalg.inv(info)
+        pairs = np.stack([keys[order] // N, keys[order] % N], axis=1)
+        self._fused = (len(self.i), (pairs, np.linalg.inv(info)))  # cached until the graph grows
+        return self._fused[1]
 
     def add(self, i: int, j: int, T, cov, kind: str) -> None:
         self.i.append(i)
@@ -121,14 +160,19 @@ class AnchorGraph:
     def _dr_vs_scan(self, min_pairs: int = 5) -> tuple[np.ndarray, np.ndarray] | None:
         """(rows of the dead-reckoning relative poses, d^T C_dr^-1 d of each against the scan match between the same
         anchors), or None with fewer than ``min_pairs`` pairs. Both are added together for every new anchor."""
-        kinds = np.array(self.kind, dtype=object)
+        key = (len(self.i), min_pairs)
+        if self._drs is not None and self._drs[0] == key:
+            return self._drs[1]
+        _, _, T, C, kinds = self.edges()
         dr, sm = np.flatnonzero(kinds == "dead_reckoning"), np.flatnonzero(kinds == "scan_match")
-        if len(dr) < min_pairs or len(dr) != len(sm):
-            return None
-        T, C = np.array(self.T), np.array(self.cov)
-        d = g.between(T[dr], T[sm])
-        d[:, 2] = g.wrap(d[:, 2])
-        return dr, np.einsum("ni,ni->n", d, np.linalg.solve(C[dr], d[..., None])[..., 0])
+        out = None
+        if len(dr) >= min_pairs and len(dr) == len(sm):
+            C = C[dr]
+            d = g.between(T[dr], T[sm])
+            d[:, 2] = g.wrap(d[:, 2])
+            out = dr, np.einsum("ni,ni->n", d, np.linalg.solve(C, d[..., None])[..., 0])
+        self._drs = (key, out)  # cached until the graph grows
+        return out
 
     def dead_reckoning_inflation(self, min_pairs: int = 5) -> float:
         """How much the dead-reckoning covariances must grow to explain their disagreement with the scan matches
@@ -180,16 +224,17 @@ class AnchorGraph:
             return RelativePoseMeasurements.empty()
         if self._meas is not None and self._meas[0] == len(self.i):  # the edges only grow: cached until they do
             return self._meas[1]
-        cov = np.array(self.cov)
-        kinds = np.array(self.kind, dtype=object)
+        ii, jj, T, cov, kinds = self.edges()
+        cov = cov.copy()
         cov[kinds == "dead_reckoning"] *= self.dead_reckoning_inflation()
         for row, f in self.dead_reckoning_slips().items():
             cov[row] *= f
-        groups = self.loop_groups()
-        for n, (i, j, k) in enumerate(zip(self.i, self.j, self.kind, strict=True)):
-            if k == "loop":
-                cov[n] *= groups[(i, j)]
-        meas = RelativePoseMeasurements(np.array(self.i), np.array(self.j), np.array(self.T), cov, kinds)
+        loop = np.flatnonzero(kinds == "loop")
+        if loop.size:  # each closure scaled by the number of closures between its pair
+            key = ii[loop] * (ii.max() + jj.max() + 2) + jj[loop]
+            _, which, count = np.unique(key, return_inverse=True, return_counts=True)
+            cov[loop] *= count[which.reshape(-1)][:, None, None]
+        meas = RelativePoseMeasurements(ii, jj, T, cov, kinds)
         self._meas = (len(self.i), meas)
         return meas
 

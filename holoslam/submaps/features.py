@@ -20,6 +20,7 @@ Per-point work is vectorised with numpy; the split of all runs of a scan is one 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,8 +73,11 @@ def fit_line(pts: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
     """Total least squares line of (N, 2) points: unit normal n, offset d (n . p = d), and the segment (4,)
     between the projections of the first and last point."""
     c = pts.mean(axis=0)
-    _, _, vt = np.linalg.svd(pts - c, full_matrices=False)
-    direction = vt[0]
+    q = pts - c
+    sxx, syy, sxy = float(q[:, 0] @ q[:, 0]), float(q[:, 1] @ q[:, 1]), float(q[:, 0] @ q[:, 1])
+    # the scatter's principal axis in closed form (what the SVD's first right singular vector spans)
+    phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+    direction = np.array([math.cos(phi), math.sin(phi)])
     n = np.array([-direction[1], direction[0]])
     d = float(n @ c)
     t = (pts[[0, -1]] - c) @ direction

@@ -33,6 +33,7 @@ Steps (seed 002 §2, SPEC §4 and §8), each a named function or class:
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import TYPE_CHECKING, Any
@@ -146,8 +147,9 @@ def landmark_in_anchor(
     return a_xy, 0.5 * (cov + cov.T), float(pb[2])
 
 
-def _submap_record(sm: ActiveSubmap, cfg: FrontEndConfig, reason: str) -> Submap:
-    """A finished submap as the record the rest of holoslam reads (keyframes = its nodes)."""
+def _submap_record(sm: ActiveSubmap, cfg: FrontEndConfig, reason: str, grid: ProbGrid | None = None) -> Submap:
+    """A finished submap as the record the rest of holoslam reads (keyframes = its nodes); ``grid``: its frozen
+    grid when already made."""
     P = np.array(sm.aTb).reshape(-1, 3)
     every = max(1, cfg.feature_every_nodes)
     feats = [transform_features(T, extract_features(b, cfg.features))
@@ -156,7 +158,8 @@ def _submap_record(sm: ActiveSubmap, cfg: FrontEndConfig, reason: str) -> Submap
                               ("segments", "lines", "corners", "crossings", "points")))
     pts = np.vstack([g.transform_points(T, b) for T, b in zip(P, sm.b_points, strict=True)])
     pts, nrm = voxel_downsample(pts, np.zeros_like(pts), cfg.point_voxel)
-    grid = sm.grid() if cfg.build_grids else None
+    if grid is None and cfg.build_grids:
+        grid = sm.grid()
     tr_t = np.array([t for t, _ in sm.tracked], np.int64)
     tr_T = np.array([T for _, T in sm.tracked]).reshape(-1, 3)
     return Submap(sm.index, sm.anchor_stamp_ns, np.array(sm.stamps, np.int64), P, np.array(sm.cov).reshape(-1, 3, 3),
@@ -254,11 +257,36 @@ def _local_slam(
 ) -> tuple[list[Submap], AnchorGraph, LoopSearch]:
     """Steps 2-3: local SLAM over the scans and the revisit search; returns the finished submaps (by index), the
     relative-pose graph between their anchors and the loop search (its counts)."""
-    ost, opose, travelled = run.ost, run.opose, run.travelled
     slam = LocalSlam(cfg.local, run.bTs)
     loops = LoopSearch(cfg.loops, cfg.local.match)
     graph = AnchorGraph(run.dr_wTb[0])
-    closed: list[Submap] = []
+    records: list[Future[Submap]] = []
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-submaps") as worker:
+
+        def finish(done: list[ActiveSubmap]) -> None:
+            """Finished submaps (their growing grids are dropped here: only the cropped ones are kept): the grid
+            to the loop search at once, the record's features and points in the worker, which runs while this
+            thread is in the compiled kernels (they release the GIL); the same records either way."""
+            for sm in done:
+                grid = sm.grid() if cfg.build_grids else None
+                records.append(worker.submit(_submap_record, sm, cfg, "scans", grid))
+                if isinstance(grid, ProbGrid):  # None without build_grids
+                    loops.add_submap(sm.index, grid)
+
+        _walk_scans(run, cfg, progress, optimize, slam, loops, graph, finish)
+        slam.close()
+        finish(slam.pop_finished())
+    return sorted((r.result() for r in records), key=lambda sm: sm.index), graph, loops
+
+
+def _walk_scans(
+    run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
+    optimize: Callable[[object], np.ndarray] | None, slam: LocalSlam, loops: LoopSearch, graph: AnchorGraph,
+    finish: Callable[[list[ActiveSubmap]], None],
+) -> None:
+    """``_local_slam``'s walk over the scans: each node to local SLAM, new anchors into the graph, finished
+    submaps to ``finish``, and every ``every_nodes``-th node's loop search."""
+    ost, opose, travelled = run.ost, run.opose, run.travelled
     n_arrivals, n_breaks, last_t, n_nodes = 0, 0, int(run.scans[0].stamp_ns), 0
     lost = np.diag([cfg.lost_sigma_m ** 2] * 2 + [np.radians(cfg.lost_sigma_deg) ** 2])
     every = max(1, -(-len(run.scans) // 50))
@@ -293,10 +321,7 @@ def _local_slam(
                 graph.est.append(g.compose(graph.est[m], mTn))
             graph.travel.append(float(travelled[k]))
         n_arrivals, n_breaks = len(slam.arrivals), len(slam.breaks)
-        for sm in slam.pop_finished():  # the growing grids are dropped here: only the cropped ones are kept
-            closed.append(_submap_record(sm, cfg, "scans"))
-            if isinstance(closed[-1].grid, ProbGrid):  # a finished submap's grid (None without build_grids)
-                loops.add_submap(sm.index, closed[-1].grid)
+        finish(slam.pop_finished())
         if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
             usual = slam.usual_score()
             loops.scale = 1.0 if usual is None else min(1.0, usual / cfg.loops.score_reference)
@@ -308,10 +333,6 @@ def _local_slam(
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found and graph.disagree(found, cfg.loops.resolve_min_d2):
                 graph.reoptimise(optimize)
-    slam.close()
-    closed.extend(_submap_record(sm, cfg, "scans") for sm in slam.pop_finished())
-    closed.sort(key=lambda sm: sm.index)
-    return closed, graph, loops
 
 
 def _problem(

@@ -17,6 +17,7 @@ travelled since the anchor (a submap is built from matched scans, each with its 
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from collections.abc import Callable
@@ -118,6 +119,27 @@ class ActiveSubmap:
         return self.builder.freeze()
 
 
+class _RunningMedian:
+    """The median of the last ``size`` values appended (``np.median``'s value), kept sorted as they come."""
+
+    def __init__(self, size: int) -> None:
+        self._last: deque[float] = deque(maxlen=size)
+        self._sorted: list[float] = []
+
+    def __len__(self) -> int:
+        return len(self._last)
+
+    def append(self, value: float) -> None:
+        if len(self._last) == self._last.maxlen:
+            del self._sorted[bisect.bisect_left(self._sorted, self._last[0])]
+        self._last.append(float(value))
+        bisect.insort(self._sorted, float(value))
+
+    def median(self) -> float:
+        s, n = self._sorted, len(self._sorted)
+        return s[n // 2] if n % 2 else (s[n // 2 - 1] + s[n // 2]) / 2.0
+
+
 class LocalSlam:
     """Walks scans one by one (``add``) and hands out finished submaps (``finished``)."""
 
@@ -132,7 +154,7 @@ class LocalSlam:
         self._last_odo: np.ndarray | None = None
         self._last_stamp = 0
         self._turn = math.radians(cfg.motion_turn_deg)
-        self._scores: deque[float] = deque(maxlen=200)
+        self._scores = _RunningMedian(200)
         self._track_cfg = replace(cfg.match, angular_window_deg=cfg.track_angular_window_deg)
         self._pyramid = WidePyramid()  # the wide search's pyramid of the host's grid, while it is unchanged
         self.arrivals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (m, n, mTn, cov) of new anchors
@@ -227,7 +249,7 @@ class LocalSlam:
     def _match(self, host: ActiveSubmap, b_pts: np.ndarray, pred: np.ndarray, cfg: MatchConfig | None = None,
                alternative: np.ndarray | None = None):
         """Match into the host; the running median of recent scores tells the matcher what is usual."""
-        usual = float(np.median(self._scores)) if len(self._scores) >= 20 else None
+        usual = self._scores.median() if len(self._scores) >= 20 else None
         self._pyramid.key = (host.index, host.count)  # the host's grid changes only when a scan is inserted
         m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred,
                        cfg or self.cfg.match, expected_score=usual, pyramid=self._pyramid,
@@ -259,7 +281,7 @@ class LocalSlam:
 
     def usual_score(self) -> float | None:
         """The median score of the last 200 trusted matches (None before 20): how full this laser fills the grids."""
-        return float(np.median(self._scores)) if len(self._scores) >= 20 else None
+        return self._scores.median() if len(self._scores) >= 20 else None
 
     def close(self) -> None:
         """Finish every active submap (end of the log)."""

@@ -25,10 +25,13 @@ ambiguity test's were measured on the real logs (``LoopConfig``).
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections import OrderedDict
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -112,22 +115,32 @@ class LoopSearch:
                mTr: np.ndarray | None = None) -> tuple[float, float, float]:
         """Search window half-widths (x m, y m, rad) in the old submap's frame for a node this far from it in the
         graph (the drift since the last closure) and, when given, with this covariance of its pose ``mTr`` there:
-        the larger of the two, uncapped (module docstring)."""
+        the larger of the two, uncapped (module docstring). One row of ``windows``."""
+        cov = None if cov_mTr is None or mTr is None else np.asarray(cov_mTr, float)[None]
+        wx, wy, wth = self.windows(np.array([graph_distance_m], float), cov,
+                                   None if cov is None else np.asarray(mTr, float)[None])
+        return float(wx[0]), float(wy[0]), float(wth[0])
+
+    def windows(self, graph_distance_m: np.ndarray, cov_mTr: np.ndarray | None = None,
+                mTr: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``window`` of M old submaps at once: graph distances (M,), covariances (M, 3, 3) of the node's poses
+        ``mTr`` (M, 3) in them; (wx, wy, wth), each (M,). The covariance part is ``window_sigmas`` of the node's
+        covariance relative to the old submap, in the submap's axes."""
         c = self.cfg
         xy = c.base_window_xy + c.window_rate * graph_distance_m
-        th = math.radians(c.base_window_deg + c.window_deg_rate * graph_distance_m)
+        th = np.radians(c.base_window_deg + c.window_deg_rate * graph_distance_m)
         if cov_mTr is None or mTr is None:
-            return xy, xy, min(th, math.pi)
-        wx, wy, wth = self.covariance_window(cov_mTr, mTr)
-        return max(xy, wx), max(xy, wy), min(max(th, wth), math.pi)
-
-    def covariance_window(self, cov_mTr: np.ndarray, mTr: np.ndarray) -> tuple[float, float, float]:
-        """``window_sigmas`` of the node's covariance relative to the old submap, in the submap's axes."""
-        R = g.rot2(float(mTr[2]))
-        S = R @ np.asarray(cov_mTr)[:2, :2] @ R.T
-        k = self.cfg.window_sigmas
-        return (k * math.sqrt(max(S[0, 0], 0.0)), k * math.sqrt(max(S[1, 1], 0.0)),
-                min(k * math.sqrt(max(float(cov_mTr[2, 2]), 0.0)), math.pi))
+            return xy, xy.copy(), np.minimum(th, math.pi)
+        cs, sn = np.cos(mTr[:, 2]), np.sin(mTr[:, 2])
+        a, b, d = cov_mTr[:, 0, 0], cov_mTr[:, 0, 1], cov_mTr[:, 1, 1]
+        # R S R^T of the position block, R = rot2(mTr's heading): its diagonal
+        sxx = cs * cs * a - 2.0 * cs * sn * b + sn * sn * d
+        syy = sn * sn * a + 2.0 * cs * sn * b + cs * cs * d
+        k = c.window_sigmas
+        wx = k * np.sqrt(np.maximum(sxx, 0.0))
+        wy = k * np.sqrt(np.maximum(syy, 0.0))
+        wth = np.minimum(k * np.sqrt(np.maximum(cov_mTr[:, 2, 2], 0.0)), math.pi)
+        return np.maximum(xy, wx), np.maximum(xy, wy), np.minimum(np.maximum(th, wth), math.pi)
 
     def _is_global(self, wx: float, wy: float, wth: float) -> bool:
         return max(wx, wy) > self.cfg.max_window_xy or wth > math.radians(self.cfg.max_window_deg) + 1e-12
@@ -153,16 +166,20 @@ class LoopSearch:
         olds_arr = np.array(olds)
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
+        jobs: list[tuple[int, np.ndarray, tuple[float, float], float, bool]] = []
         globals_: list[tuple[int, np.ndarray, float, float, float]] = []
         searched = 0
         search_pts = (adaptive_voxel_filter(b_pts, ScanFilterConfig(c.search_voxel_m, c.search_min_points))
                       if c.search_voxel_m > 0 else b_pts)
         A = g.adjoint(g.inverse(nTr))
-        for q in np.argsort(dist, kind="stable").tolist():  # nearest first
-            m, d = int(olds_arr[q]), float(dist[q])
-            seed = g.between(est_wTa[m], wTr)
-            cov_mTr = None if rel_cov is None else A @ rel_cov[m] @ A.T + cov_nTr
-            wx, wy, wth = self.window(float(graph_distance[m]), cov_mTr, seed)
+        order = np.argsort(dist, kind="stable")  # nearest first
+        olds_arr, dist = olds_arr[order], dist[order]
+        seeds = g.between(np.asarray(est_wTa[olds_arr], float), np.broadcast_to(wTr, (len(olds_arr), 3)))
+        covs = None if rel_cov is None else np.einsum("ij,mjk,lk->mil", A, rel_cov[olds_arr], A) + cov_nTr
+        win = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
+        for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
+                                                    strict=True)):
+            seed = seeds[q].copy()
             # beyond the caps (by the drift since the last closure or by the covariance): the global search too,
             # within its budget. Neither window is trusted to bound the error there: on fr079 at 1.4 Hz a revisit
             # after 142 m of graph was 13 m / 20 deg off, where the drift window said 8 m and 3 sigma of the
@@ -182,11 +199,8 @@ class LoopSearch:
             if wide:
                 self.last_wide[m] = travelled
             searched += not wide
-            t0 = time.perf_counter()
-            cand = self._windowed(m, n, nTr, cov_nTr, b_pts, search_pts, seed, (wx, wy), wth, wide)
-            self.seconds["windowed"] += time.perf_counter() - t0
-            if cand is not None:
-                found.append(cand)
+            jobs.append((m, seed, (wx, wy), wth, wide))
+        found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts))
         if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
             self.last_global_round = travelled
             g_pts = b_pts if bundle is None else adaptive_voxel_filter(
@@ -197,36 +211,55 @@ class LoopSearch:
     def _count(self, reason: str) -> None:
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
-    def _windowed(self, m: int, n: int, nTr, cov_nTr, b_pts, search_pts, seed, wxy, wth: float,
-                  wide: bool) -> LoopCandidate | None:
-        """One windowed search (at most max_window_xy / max_window_deg), accepted on its own (``min_score_wide``
-        when ``wide``)."""
+    def _windowed_all(self, jobs, n: int, nTr, cov_nTr, b_pts, search_pts) -> list[LoopCandidate]:
+        """The windowed searches (m, seed, (wx, wy), wth, wide) of one node, at most ``max_window_xy`` /
+        ``max_window_deg``, each accepted on its own (``min_score_wide`` when ``wide``). They are independent:
+        run in threads (the branch-and-bound and the matcher are compiled kernels that release the GIL), and
+        counted and kept in the order given, so the result does not depend on the threads."""
+        if not jobs:
+            return []
+        pres = [self._precomputed(job[0]) for job in jobs]  # here: the cache's order is the searches' order
+        t0 = time.perf_counter()
+
+        def one(q: int):
+            m, seed, wxy, wth, wide = jobs[q]
+            return self._window_match(pres[q], m, seed, wxy, wth, wide, n, nTr, cov_nTr, b_pts, search_pts)
+
+        outs = list(_threads().map(one, range(len(jobs)))) if len(jobs) > 1 else [one(0)]
+        self.seconds["windowed"] += time.perf_counter() - t0
+        found = []
+        for (m, *_), (cand, reason, hit, peaks) in zip(jobs, outs, strict=True):
+            self.tried += 1
+            self._count("windowed searches")
+            if peaks is not None:
+                self.peaks.append((m, n, hit, peaks))
+                self.ambiguous += bool(peaks)
+            self._count(reason)
+            if cand is not None:
+                self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
+                found.append(cand)
+        return found
+
+    def _window_match(self, pre, m: int, seed, wxy, wth: float, wide: bool, n: int, nTr, cov_nTr, b_pts,
+                      search_pts) -> tuple[LoopCandidate | None, str, Any, list | None]:
+        """One windowed search against m's precomputed grids ``pre``: (the closure or None, the outcome's
+        reason, the best match, its second peaks (None when not sought)). Reads the search's state only."""
         c = self.cfg
         min_score = (c.min_score_wide if wide else c.min_score) * self.scale
         margin = c.ambiguity_margin * self.scale
-        self.tried += 1
-        self._count("windowed searches")
-        win = SearchWindow(self._precomputed(m), search_pts, seed, wxy, wth)
+        win = SearchWindow(pre, search_pts, seed, wxy, wth)
         hit = win.best(min_score, margin if c.ambiguity != "off" else -1.0)
         if hit is None:
-            self._count("windowed: no match above the score")
-            return None
-        peaks = []
+            return None, "windowed: no match above the score", None, None
+        peaks = None
         if c.ambiguity != "off":  # before the refinement: an ambiguous match is not worth refining
             peaks = win.second_peaks(hit, margin, c.ambiguity_exclude_xy,
                                      math.radians(c.ambiguity_exclude_deg), c.ambiguity_peaks,
                                      first=c.ambiguity == "reject")
-            self.peaks.append((m, n, hit, peaks))
-            if peaks:
-                self.ambiguous += 1
-                if c.ambiguity == "reject":
-                    self._count("windowed: ambiguous (a second peak)")
-                    return None
-        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, min_score, float(np.max(wxy)))
-        self._count("windowed: accepted" if cand is not None else "windowed: refinement failed")
-        if cand is not None:
-            self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
-        return cand
+            if peaks and c.ambiguity == "reject":
+                return None, "windowed: ambiguous (a second peak)", hit, peaks
+        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks or [], min_score, float(np.max(wxy)))
+        return cand, "windowed: accepted" if cand is not None else "windowed: refinement failed", hit, peaks
 
     def _refined(self, m: int, n: int, nTr, cov_nTr, b_pts, hit, peaks, min_score: float,
                  window_xy: float) -> LoopCandidate | None:
@@ -358,6 +391,18 @@ class LoopSearch:
         if cand is None:
             self._count("global: refinement failed")
         return cand
+
+
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _threads() -> ThreadPoolExecutor:
+    """The threads the windowed searches of a node share (made on first use; up to 4, one per core)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)),
+                                   thread_name_prefix="holoslam-loops")
+    return _POOL
 
 
 _LOST_M = 1e5  # m: a window this wide comes from a break of local SLAM (``relative_covariances``), not from drift

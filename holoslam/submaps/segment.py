@@ -112,8 +112,12 @@ def voxel_downsample(points: np.ndarray, normals: np.ndarray, voxel: float) -> t
     """Keep the first point (and its normal) of every occupied voxel."""
     if points.shape[0] == 0:
         return points, normals
-    keys = np.floor(points / voxel).astype(np.int64)
-    _, first = np.unique(keys, axis=0, return_index=True)
+    codes = _voxel_codes(points, voxel)
+    if codes is None:  # an index beyond 31 bits: voxels as rows (slower)
+        codes = np.floor(points / voxel).astype(np.int64)
+        _, first = np.unique(codes, axis=0, return_index=True)
+    else:
+        _, first = np.unique(codes, return_index=True)
     first = np.sort(first)
     return points[first], normals[first]
 
