@@ -33,7 +33,10 @@ LOG = REPO / "datasets" / "household_small.mcap"
 def run(checkout: Path, out: Path, env: dict[str, str] | None = None, quiet: bool = True) -> dict:
     """One whole ``holoslam run`` of the bundled log with ``checkout`` on the path: wall, CPU, accuracy.
     ``quiet`` False: without ``--quiet``, so that the run's notice of compiling (stderr) can be checked."""
-    env = {**os.environ, **(env or {}), "PYTHONPATH": str(checkout)}
+    # bytecode written and read as an installed package's is (a shell with PYTHONDONTWRITEBYTECODE would make
+    # every run compile each module it imports from source, the checkout with more modules paying more)
+    env = {k: v for k, v in {**os.environ, **(env or {}), "PYTHONPATH": str(checkout)}.items()
+           if k != "PYTHONDONTWRITEBYTECODE"}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     p = subprocess.run([sys.executable, "-m", "holoslam.cli", "run", str(LOG), "-o", str(out)]

@@ -115,6 +115,24 @@ class SlamStages:
     objects: tuple
 
 
+#: the libraries the stages after the front end import (maps, graphs, report, pictures): ~1 s of imports, mostly
+#: Python, done in the vision thread while the front end's compiled kernels leave the GIL free
+_LATER_MODULES = ("networkx", "scipy.spatial", "matplotlib.figure", "matplotlib.backends.backend_agg",
+                  "matplotlib.collections", "holoslam.report_build", "holoslam.evaluate", "holoslam.io.results_mcap")
+
+
+def _import_later_stages() -> None:
+    """Import ``_LATER_MODULES`` ahead of their stages (the run imports them anyway; one that fails to import
+    here fails there, with its own message)."""
+    import importlib
+
+    for name in _LATER_MODULES:
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            return
+
+
 def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     """The stages of a run from vision to the located objects (``run`` without the maps and the report)."""
     from concurrent.futures import ThreadPoolExecutor
@@ -131,6 +149,7 @@ def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     # kernels release the GIL; the results are the same either way)
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-vision") as pool:
         sightings = pool.submit(see_objects, log, cfg.vision, clock.background())
+        pool.submit(_import_later_stages)  # after the vision stage, while the front end runs
         with clock.stage(FRONT_END):
             fe = build_problem(log, lambda: sightings.result().observations, cfg.frontend,
                                clock.progress_of(FRONT_END), optimize=reestimate_anchors)
