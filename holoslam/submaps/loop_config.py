@@ -29,6 +29,10 @@ class LoopConfig:
     window_sigmas: float = 3.0  # the window covers this many sigmas of the node's pose relative to the old submap
     min_score: float = 0.55
     min_score_wide: float = 0.6
+    # > 0: a windowed match scoring at least this (and below min_score / min_score_wide) is not dropped but offered
+    # to the consistency test like a global one (``consistency``: min_agreeing closures from nodes metres apart that
+    # agree on one correction, and the map check). 0: off
+    agree_min_score: float = 0.0
     wide_window_xy: float = 3.0  # m
     depth: int = 7
     skip_recent: int = 2  # the submaps this many before the current one are its chain neighbours

@@ -200,7 +200,7 @@ class LoopSearch:
                 self.last_wide[m] = travelled
             searched += not wide
             jobs.append((m, seed, (wx, wy), wth, wide))
-        found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts))
+        found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel, travelled))
         if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
             self.last_global_round = travelled
             g_pts = b_pts if bundle is None else adaptive_voxel_filter(
@@ -211,7 +211,8 @@ class LoopSearch:
     def _count(self, reason: str) -> None:
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
-    def _windowed_all(self, jobs, n: int, nTr, cov_nTr, b_pts, search_pts) -> list[LoopCandidate]:
+    def _windowed_all(self, jobs, n: int, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel,
+                      travelled: float) -> list[LoopCandidate]:
         """The windowed searches (m, seed, (wx, wy), wth, wide) of one node, at most ``max_window_xy`` /
         ``max_window_deg``, each accepted on its own (``min_score_wide`` when ``wide``). They are independent:
         run in threads (the branch-and-bound and the matcher are compiled kernels that release the GIL), and
@@ -235,10 +236,32 @@ class LoopSearch:
                 self.peaks.append((m, n, hit, peaks))
                 self.ambiguous += bool(peaks)
             self._count(reason)
-            if cand is not None:
+            if cand is not None and reason == "windowed: weak, offered for agreement":
+                if travel is not None:  # without the anchors' odometer no agreement can be judged: dropped
+                    found.extend(self._agreed(replace(cand, travelled=travelled), est_wTa, travel,
+                                              "windowed weak"))
+            elif cand is not None:
                 self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
                 found.append(cand)
         return found
+
+    def _agreed(self, cand: LoopCandidate, est_wTa, travel, kind: str) -> list[LoopCandidate]:
+        """``cand`` through the map check and the consistency test: the closures accepted now (module docstring
+        of ``loop_consistency``), counted under ``kind``."""
+        c = self.cfg
+        if c.verify.enabled:
+            agree = map_agreement(self.grids, est_wTa, self._parts(len(est_wTa)), cand.old, cand.new, cand.mTn,
+                                  c.verify)
+            if agree.verdict(c.verify) is False:
+                self._count(f"{kind}: rejected by the map check")
+                return []
+        accepted = self.consistency.offer(cand, est_wTa, travel)
+        self._count(f"{kind}: accepted (consistent)" if accepted else f"{kind}: waiting for agreement")
+        for a in accepted:
+            if a is not cand:
+                self._count(f"{kind}: accepted later (consistent)")
+            self.pairs[(a.old, a.new)] = self.pairs.get((a.old, a.new), 0) + 1
+        return accepted
 
     def _window_match(self, pre, m: int, seed, wxy, wth: float, wide: bool, n: int, nTr, cov_nTr, b_pts,
                       search_pts) -> tuple[LoopCandidate | None, str, Any, list | None]:
@@ -246,11 +269,15 @@ class LoopSearch:
         reason, the best match, its second peaks (None when not sought)). Reads the search's state only."""
         c = self.cfg
         min_score = (c.min_score_wide if wide else c.min_score) * self.scale
+        weak_floor = min(c.agree_min_score * self.scale, min_score)
         margin = c.ambiguity_margin * self.scale
         win = SearchWindow(pre, search_pts, seed, wxy, wth)
-        hit = win.best(min_score, margin if c.ambiguity != "off" else -1.0)
+        hit = win.best(weak_floor if weak_floor > 0 else min_score, margin if c.ambiguity != "off" else -1.0)
         if hit is None:
             return None, "windowed: no match above the score", None, None
+        weak = hit.score <= min_score  # above the agreement floor only: accepted only with others that agree
+        if weak:
+            min_score = weak_floor
         peaks = None
         if c.ambiguity != "off":  # before the refinement: an ambiguous match is not worth refining
             peaks = win.second_peaks(hit, margin, c.ambiguity_exclude_xy,
@@ -259,7 +286,9 @@ class LoopSearch:
             if peaks and c.ambiguity == "reject":
                 return None, "windowed: ambiguous (a second peak)", hit, peaks
         cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks or [], min_score, float(np.max(wxy)))
-        return cand, "windowed: accepted" if cand is not None else "windowed: refinement failed", hit, peaks
+        if cand is None:
+            return None, "windowed: refinement failed", hit, peaks
+        return cand, "windowed: weak, offered for agreement" if weak else "windowed: accepted", hit, peaks
 
     def _refined(self, m: int, n: int, nTr, cov_nTr, b_pts, hit, peaks, min_score: float,
                  window_xy: float) -> LoopCandidate | None:
@@ -320,19 +349,7 @@ class LoopSearch:
             self.seconds["global"] += time.perf_counter() - t0
             if cand is None:
                 continue
-            cand = replace(cand, travelled=travelled)
-            if c.verify.enabled:
-                agree = map_agreement(self.grids, est_wTa, self._parts(len(est_wTa)), m, n, cand.mTn, c.verify)
-                if agree.verdict(c.verify) is False:
-                    self._count("global: rejected by the map check")
-                    continue
-            accepted = self.consistency.offer(cand, est_wTa, travel)
-            self._count("global: accepted (consistent)" if accepted else "global: waiting for agreement")
-            for a in accepted:
-                if a is not cand:
-                    self._count("global: accepted later (consistent)")
-                self.pairs[(a.old, a.new)] = self.pairs.get((a.old, a.new), 0) + 1
-            out.extend(accepted)
+            out.extend(self._agreed(replace(cand, travelled=travelled), est_wTa, travel, "global"))
         return out
 
     def _hypothesis_distances(self, est_wTa: np.ndarray, wTr: np.ndarray) -> dict[int, float]:
