@@ -75,6 +75,7 @@ class LoopSearch:
         self.pre: OrderedDict[int, object] = OrderedDict()
         self.pairs: dict[tuple[int, int], int] = {}
         self.last_wide: dict[int, float] = {}
+        self.last_weak: dict[int, float] = {}  # odometer reading at each old submap's last low-floor search
         self.tried = 0
         self.pre_coarse: OrderedDict[int, object] = OrderedDict()  # coarse grids of the global search
         self.last_global: dict[int, float] = {}  # odometer reading at each old submap's last global search
@@ -166,7 +167,7 @@ class LoopSearch:
         olds_arr = np.array(olds)
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
-        jobs: list[tuple[int, np.ndarray, tuple[float, float], float, bool]] = []
+        jobs: list[tuple[int, np.ndarray, tuple[float, float], float, bool, bool]] = []
         globals_: list[tuple[int, np.ndarray, float, float, float]] = []
         searched = 0
         search_pts = (adaptive_voxel_filter(b_pts, ScanFilterConfig(c.search_voxel_m, c.search_min_points))
@@ -199,7 +200,13 @@ class LoopSearch:
             if wide:
                 self.last_wide[m] = travelled
             searched += not wide
-            jobs.append((m, seed, (wx, wy), wth, wide))
+            # a weak match (``agree_min_score``) counts only with others from nodes min_separation_m apart: one
+            # low-floor search of an old submap per that much travel (the lower floor prunes less: ~4x the cost)
+            weak = (c.agree_min_score > 0 and self.scale < 1.0 and travel is not None
+                    and travelled - self.last_weak.get(m, -np.inf) >= c.consistency.min_separation_m)
+            if weak:
+                self.last_weak[m] = travelled
+            jobs.append((m, seed, (wx, wy), wth, wide, weak))
         found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel, travelled))
         if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
             self.last_global_round = travelled
@@ -223,8 +230,8 @@ class LoopSearch:
         t0 = time.perf_counter()
 
         def one(q: int):
-            m, seed, wxy, wth, wide = jobs[q]
-            return self._window_match(pres[q], m, seed, wxy, wth, wide, n, nTr, cov_nTr, b_pts, search_pts)
+            m, seed, wxy, wth, wide, weak = jobs[q]
+            return self._window_match(pres[q], m, seed, wxy, wth, wide, weak, n, nTr, cov_nTr, b_pts, search_pts)
 
         outs = list(_threads().map(one, range(len(jobs)))) if len(jobs) > 1 else [one(0)]
         self.seconds["windowed"] += time.perf_counter() - t0
@@ -263,13 +270,14 @@ class LoopSearch:
             self.pairs[(a.old, a.new)] = self.pairs.get((a.old, a.new), 0) + 1
         return accepted
 
-    def _window_match(self, pre, m: int, seed, wxy, wth: float, wide: bool, n: int, nTr, cov_nTr, b_pts,
-                      search_pts) -> tuple[LoopCandidate | None, str, Any, list | None]:
+    def _window_match(self, pre, m: int, seed, wxy, wth: float, wide: bool, weak_ok: bool, n: int, nTr, cov_nTr,
+                      b_pts, search_pts) -> tuple[LoopCandidate | None, str, Any, list | None]:
         """One windowed search against m's precomputed grids ``pre``: (the closure or None, the outcome's
-        reason, the best match, its second peaks (None when not sought)). Reads the search's state only."""
+        reason, the best match, its second peaks (None when not sought)); ``weak_ok``: down to the agreement
+        floor (``agree_min_score``). Reads the search's state only."""
         c = self.cfg
         min_score = (c.min_score_wide if wide else c.min_score) * self.scale
-        weak_floor = min(c.agree_min_score * self.scale, min_score)
+        weak_floor = min(c.agree_min_score * self.scale, min_score) if weak_ok else 0.0
         margin = c.ambiguity_margin * self.scale
         win = SearchWindow(pre, search_pts, seed, wxy, wth)
         hit = win.best(weak_floor if weak_floor > 0 else min_score, margin if c.ambiguity != "off" else -1.0)

@@ -134,20 +134,26 @@ def test_chain_neighbours_saturated_pairs_and_wide_windows_are_spaced(household_
 
 def test_a_weak_match_closes_only_once_others_agree(household_place):
     """A windowed match below the score (min_score raised to 0.95 here: the right match scores 0.7-0.8) is
-    dropped by default; with ``agree_min_score`` it waits for agreement and closes once three nodes 5 m apart
-    agree on it (``loop_consistency``), all three then accepted."""
+    dropped without ``agree_min_score`` or on a laser as full as the reference; on a sparser one it waits for
+    agreement and closes once three nodes 5 m apart agree on it (``loop_consistency``), all three accepted."""
     segs, grid, wTm, wTn, wTr = household_place
     est = np.zeros((6, 3))
     est[0], est[5] = wTm, wTn
     nTr = g.between(wTn, wTr)
     b_pts = points(ray_scan(segs, wTr, np.random.default_rng(4)))
     strict = dict(min_score=0.95, min_score_wide=0.95)
-    ls = LoopSearch(LoopConfig(**strict), MatchConfig())
+    ls = LoopSearch(LoopConfig(**strict, agree_min_score=0.0), MatchConfig())
     ls.add_submap(0, grid)
     assert ls.search(5, nTr, np.eye(3) * 1e-6, b_pts, est, np.full(6, 2.0), 0.0, travel=np.zeros(6)) == []
     assert ls.counts["windowed: no match above the score"] == 1
     ls = LoopSearch(LoopConfig(**strict, agree_min_score=0.5, max_per_pair=10), MatchConfig())
     ls.add_submap(0, grid)
+    ls.scale = 1.0  # a laser that fills its grids as the thresholds' reference lasers: no weak matches
+    assert ls.search(5, nTr, np.eye(3) * 1e-6, b_pts, est, np.full(6, 2.0), 0.0, travel=np.zeros(6)) == []
+    assert "windowed: weak, offered for agreement" not in ls.counts
+    ls = LoopSearch(LoopConfig(**strict, agree_min_score=0.5, max_per_pair=10), MatchConfig())
+    ls.add_submap(0, grid)
+    ls.scale = 0.99  # a sparser laser (the local matches' usual score below score_reference)
     found = [ls.search(5, nTr, np.eye(3) * 1e-6, b_pts, est, np.full(6, 2.0), t, travel=np.zeros(6))
              for t in (0.0, 5.0, 10.0)]
     assert [len(f) for f in found] == [0, 0, 3]
