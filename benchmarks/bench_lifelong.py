@@ -251,6 +251,19 @@ def _window(log, t0: int, t1: int, hidden):
                                headings=tuple(h for h in log.headings if inside(h)), ground_truth=())
 
 
+def _joined_poses(store: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The joined sessions' poses as the store holds them at the end (what ``holoslam export`` writes: each
+    session's poses hung from its submaps' current anchors), not as each session's run left them before the later
+    sessions' joint solves."""
+    from holoslam.lifelong.export import session_trajectories
+    from holoslam.store.db import MapStore
+
+    with MapStore.open(store, create=False) as s:
+        final = session_trajectories(s)
+    joined = [final[k] for k in sorted(final) if final[k][2]]
+    return np.concatenate([x[0] for x in joined]), np.vstack([x[1] for x in joined])
+
+
 def real_part(out: Path, logs: list[str], compare: bool = False, lifelong: dict | None = None) -> None:
     from holoslam.evaluate import relation_errors
     from holoslam.io.mcap import read_log
@@ -292,9 +305,7 @@ def real_part(out: Path, logs: list[str], compare: bool = False, lifelong: dict 
             sessions.setdefault(name, []).append((r.stages.fe.submaps, np.asarray(r.stages.sol.wTa)))
             if k:
                 reloc.append(s.relocalisation_s)
-        joined = [x for x in st if x[2]]
-        stamps = np.concatenate([x[0] for x in joined])
-        wTb = np.vstack([x[1] for x in joined])
+        stamps, wTb = _joined_poses(store)
         e = relation_errors(stamps, wTb, rel)
         which = np.searchsorted(cuts, rel.t1_ns, side="right") != np.searchsorted(cuts, rel.t2_ns, side="right")
         ec = relation_errors(stamps, wTb, dataclasses.replace(rel, t1_ns=rel.t1_ns[which], t2_ns=rel.t2_ns[which],

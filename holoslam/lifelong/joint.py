@@ -179,14 +179,16 @@ class JointSolution:
 
 def joint_problem(stored, factors, sightings, new_sTa: np.ndarray, new_relative, new_landmarks,
                   new_placement: dict[str, str], wTs: np.ndarray, cross, placements_init: dict[str, np.ndarray],
-                  priors: PlacementPriors | None = None) -> JointGraph:
+                  priors: PlacementPriors | None = None, hold_stored: bool = False) -> JointGraph:
     """The joint ``SlamProblem``: ``stored`` working submaps (``StoredSubmap``), their ``factors`` and
     ``sightings`` (store batches), the new session's anchors ``new_sTa`` in its own frame, its relative poses
     (``RelativePoseMeasurements``, indices into its anchors) and landmark sightings (``LandmarkMeasurements``,
     object ids renamed to placements by ``new_placement``), the session transform ``wTs``, the cross-session
     ``LaserMatch``es, initial placement positions, and the placements' ``priors`` from retired submaps
     (``retired_priors``): sightings from one virtual anchor (index M+K) held at its pose by a tight prior, as the
-    oldest working anchor is (the gauge)."""
+    oldest working anchor is (the gauge). ``hold_stored``: every stored anchor pinned at its stored pose as the
+    gauge is (``default_prior``), so only the new session's anchors and the placements move
+    (``LifelongConfig.hold_stored`` says why)."""
     from holoslam.graph.problem import (
         LandmarkMeasurements,
         PosePrior,
@@ -219,7 +221,8 @@ def joint_problem(stored, factors, sightings, new_sTa: np.ndarray, new_relative,
         np.concatenate([sightings.z, new_landmarks.z]))
     init = np.vstack([np.array([s.wTa for s in stored]).reshape(-1, 3),
                       g.compose(np.broadcast_to(wTs, (K, 3)), new_sTa)])
-    pri: tuple[PosePrior, ...] = _orphan_priors(stored, relative, M + K)
+    pri: tuple[PosePrior, ...] = (tuple(default_prior(n, init[n]) for n in range(M)) if hold_stored
+                                  else _orphan_priors(stored, relative, M + K))
     n_prior = 0
     live = set(landmarks.landmark)
     if priors is not None and len(priors):

@@ -43,10 +43,18 @@ class LifelongConfig:
     joint_method: str = "batch"  # the joint solve: batch (LM) or isam2 (benchmarks/bench_lifelong.py measures both)
     # the cross-session factors once placed: True, the closures of every third keyframe of every session submap by
     # the run's loop search into the stored submaps near it (``crossmatch.session_closures``); False, the anchor
-    # scans matched into the 3 nearest stored submaps (``relocalise.local_matches``). Measured on the real logs in
-    # 3 sessions (README): True takes aces to x1.22 of the whole log (False x1.51) but intel to x3.14 (False
-    # x2.73, as before); off until the dense closures are weighted against the stored map's own error
-    dense_closures: bool = False
+    # scans matched into the 3 nearest stored submaps (``relocalise.local_matches``). With the stored map held
+    # (``hold_stored``) the closures bend only the new session onto it; measured on the real logs in 3 sessions
+    # (README): intel x1.38 of the whole log with them, x1.68 with the anchor scans' matches; aces x1.14. (Before
+    # the stored map was held, they pulled it too: intel x3.14, aces x1.22.)
+    dense_closures: bool = True
+    # the stored working anchors pinned at their stored poses in the joint solve (``joint.joint_problem``). They
+    # are their sessions' keyframe solve (every scan's matches, ``optimise.keyframe_anchors``), which the stored
+    # anchor-level factors cannot reproduce (intel in one piece: 0.019 m with the keyframe solve, 0.029 m from the
+    # anchors' factors alone); re-solving them from those factors undid it (intel's first session's own relations
+    # 0.024 m -> 0.030 m once the second joined, 0.033 m after the third). Held, the new session is solved onto the
+    # map as it stands (as Cartographer's frozen trajectories are); False: the whole working graph moves
+    hold_stored: bool = True
     settle: bool = True  # the join settled by its closures' map check (``crossmatch.settle_join``)
     # the join settled by its closures (``crossmatch.settle_join``): a group of closures whose map check over every
     # session submap beats the hypothesis's by this fraction of walls moves it (aces' third session: 0.64 at the
@@ -268,13 +276,15 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     priors = retired_priors(retired, store.sightings(np.array([s.id for s in retired], np.int64)), live)
     cross = tuple(reloc.matches) + tuple(closures)
     jg = joint_problem(stored, working_factors(store.factors(), ids, lc.compose_retired), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
-                       cross, init, priors)
+                       cross, init, priors, lc.hold_stored)
     js = solve_joint(jg, lc.joint_method)
     wTs = fit_se2(sTa[:, :2], js.new_wTa[:, :2]) if len(sTa) >= 2 else g.compose(js.new_wTa[0], g.inverse(sTa[0]))
     objs = _object_states(statuses, located, latest, placement, js)
     retire = _retire(stored, js, st, lc.retire_cover)
-    updates = {int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
-               for n, k in enumerate(ids.tolist())}
+    # held stored anchors keep their pose and covariance (a pinned anchor's marginal is only the pin's)
+    updates = {} if lc.hold_stored else {
+        int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
+        for n, k in enumerate(ids.tolist())}
     return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, cross, js, jg,
                    view_s, images or {})
 
