@@ -51,7 +51,9 @@ day before's true objects, standing for the store's knowledge), the head also ai
 place whose label it has not read yet today, under the rules of a label (within 3.5 m, the place's label side
 facing the camera within 60 deg, not behind a wall or furniture, zoomed so that the remembered label's module
 spans ``TARGET_MODULE_PX``, a second view from ``SECOND_VIEW_BASELINE`` away, later ones after ``resnap_s``, the
-same ``image_rate_hz`` budget), in one order with the labels (fewest views first, then the nearest). Such an
+same ``image_rate_hz`` budget), in one order with the labels (fewest views first, then the nearest; a place
+checked once and found empty ranks with the labels never photographed, so that it is confirmed from a second
+point while the robot is still near). Such an
 image is kept whatever it reads: where the object was moved or removed it holds the place empty (the rendered
 furniture and background, no readable label there); where the object still stands it reads it like any snapshot.
 Without ``remembered`` (day 1, single-day logs) the snapshots are exactly the operator's above.
@@ -467,7 +469,12 @@ def camera_snapshots(
         # their checks
         count = np.array([min(len(shots_of.get(o.object_id, ())), 2) for o in world.all_codes]
                          + [min(len(checks_of.get(o.object_id, ())), 2) for o in places], dtype=np.int64)
-        found = _snapshot_target(world, np.lexsort((d, count)), d, count, cam, t, shots_of, last_of, resnap_s,
+        # a place found empty once is looked at again first (with a label never photographed): a robot that
+        # misses a known object confirms it from another point while it is still near, where a label's second
+        # view can wait, the label being known to be there
+        rank = count.copy()
+        rank[len(world.all_codes):][rank[len(world.all_codes):] == 1] = 0
+        found = _snapshot_target(world, np.lexsort((d, rank)), d, count, cam, t, shots_of, last_of, resnap_s,
                                  cosmax, walls, modules, size, places, checks_of, last_check)
         if found is None:
             continue
