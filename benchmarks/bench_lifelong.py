@@ -169,6 +169,7 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:
         errs_life += list(e_life.values())
         errs_single += list(e_single.values())
         detail.append({"day": d["day"], "truth": tru, "detected": det, "unseen_in_view_s": s.unseen_in_view_s,
+                       "unseen_in_images": s.unseen_in_images, "checked": d.get("checked", {}),
                        "err_store_m": e_life, "err_single_m": e_single, "xy_store": p_life, "xy_single": p_single,
                        "reloc_s": s.relocalisation_s, "run_s": run_s, "joined_by": s.joined_by})
         (out / "sim_detail.json").write_text(json.dumps(detail, indent=1))

@@ -10,7 +10,10 @@
   occupied cell of the store's merged grid between them; the camera's time is shared among the objects in view
   at once that it still has to read (a camera aimed at one label at a time reads one of them per snapshot; a
   label read ``competing_reads`` times in the session no longer competes), and an object is gone when its
-  share reaches ``view_min_s`` (or when the session's images held its place: ``frustum``);
+  share reaches ``view_min_s``, or when at least ``min_images`` of the session's images held its place readable
+  and read nothing there (``frustum``: the camera aimed at the place of an object of the map, the label's side
+  facing it, its modules large enough, free space in between): the evidence of absence a robot that checks on
+  the objects it knows collects;
 - **new**: located and unknown to the store (or gone from it before).
 
 Objects neither located nor in view keep their last state (no row for this session).
@@ -52,10 +55,13 @@ class ChangeConfig:
     view_step_s: float = 0.5  # s between the robot poses the view test looks at
     p_occupied: float = 0.65  # a merged-grid cell above this blocks the line of sight (map_server's occupied)
     skip_end_m: float = 0.6  # m before the object that never block: the furniture it stands on
-    # images of the session whose frustum held the place readable (``holoslam.lifelong.frustum``) for an object
-    # not read there to be gone, whatever its time in view (a wide camera sees places it does not aim at; the
-    # simulated PTZ camera zooms onto one label, and on 9 simulated days no missing object's place lay in one of
-    # its images). Two: one image may hold the place only by a pose error
+    # images of the session whose frustum held the place readable (``holoslam.lifelong.frustum``: inside the
+    # picture 10 % from its borders, the label's side facing the camera, its module >= 4 px, free space in
+    # between) for an object not read there to be gone, whatever its time in view. A robot that checks on the
+    # objects of its map aims its camera at their places (the simulated PTZ camera: ``sim.sensors``'
+    # ``remembered``, zoomed for a 5 px module, and, as for a label, a second view from 0.5 m away): two such
+    # images from two viewpoints. One is not enough: a place known to a few cm, a pointing error of 0.5 deg and
+    # the session's pose error can put one image's frustum on it while the label itself lay just outside
     min_images: int = 2
 
 

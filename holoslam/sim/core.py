@@ -157,10 +157,13 @@ class SimulatedRun:
 
 
 def simulate_household(config: SimConfig = SimConfig(), world: World | None = None,
-                       start_pose: tuple[float, float, float] | None = None, t0_ns: int = T0_NS) -> SimulatedRun:
+                       start_pose: tuple[float, float, float] | None = None, t0_ns: int = T0_NS,
+                       remembered: tuple = ()) -> SimulatedRun:
     """Simulate the reference household run for ``config`` (pure and deterministic for a config). ``world``:
     another household (default: the reference household with the config's extras); ``start_pose`` (x, y, yaw
-    in map): where the robot starts (default ``route.START_POSE``); ``t0_ns``: the first stamp (another day)."""
+    in map): where the robot starts (default ``route.START_POSE``); ``t0_ns``: the first stamp (another day);
+    ``remembered``: the robot's map of the home (``WorldObject`` records where it believes objects are), whose
+    places the snapshot camera checks (``sensors.camera_snapshots``; empty: none, a first day)."""
     from holoslam.sim.route import START_POSE, household_trajectory
     from holoslam.sim.sensors import camera_snapshots, compass, laser_scans, odometry
     from holoslam.sim.world import reference_household
@@ -230,6 +233,7 @@ def simulate_household(config: SimConfig = SimConfig(), world: World | None = No
             resnap_s=config.resnap_s,
             jpeg_quality=config.jpeg_quality,
             size=(config.image_width, config.image_height),
+            remembered=tuple(remembered),
         )
     return SimulatedRun(config, world, traj.stamps_ns, traj.wTb, odo, com, scans, tuple(snaps))
 

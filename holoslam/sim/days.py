@@ -13,7 +13,12 @@ every 0.15 m, the label 1 cm outside the edge at the surface's height plus 5 cm,
 every other label, with a viewing spot for the operator in front of it. The robot starts each day at a random
 standable place with a random heading; its odometry starts at the identity there, so the world frame of the day
 is unknown to the log. ``days.json`` beside the logs holds per day the log, the start pose, the changes (before
-and after positions) and every object's true position."""
+and after positions), every object's true position, the labels photographed and the remembered places checked.
+
+The robot checks on the objects it knows: from day 2 its camera also aims at the places of the objects of its map
+(``sensors.camera_snapshots``' ``remembered``). The simulator stands the day before's true objects in for that map
+(the store's knowledge of the home after the day before's session); an image of a place whose object was moved or
+removed holds it empty. Day 1 has no map, so its log is the single-day household's."""
 
 from __future__ import annotations
 
@@ -181,6 +186,17 @@ def household_days(days: int, seed: int = 0, changes: tuple[int, int] = (5, 10))
     return tuple(out)
 
 
+def _checks(snapshots: Any) -> dict[str, list[int]]:
+    """Per remembered place the camera checked: [images aimed at it, of them those that read its label]."""
+    out: dict[str, list[int]] = {}
+    for s in snapshots:
+        if s.checked_id:
+            c = out.setdefault(s.checked_id, [0, 0])
+            c[0] += 1
+            c[1] += s.checked_id in s.visible_ids
+    return dict(sorted(out.items()))
+
+
 def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | None = None,
                   changes: tuple[int, int] = (5, 10), config: Any = None) -> dict[str, Any]:
     """Write ``day_01.mcap`` ... and ``days.json`` (the ground truth of every change) into ``out_dir`` (created);
@@ -197,15 +213,19 @@ def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | No
     out = prepare_output_folder(Path(out_dir))
     base = config or SimConfig()
     summary: dict[str, Any] = {"format": "holoslam-days-1", "seed": seed, "days": []}
+    remembered: tuple = ()  # the robot's map: the day before's objects where they stood (module docstring)
     for day in household_days(days, seed, changes):
         cfg = replace(base, seed=seed + day.day, duration_s=duration_s)
-        run = simulate_household(cfg, world=day.world, start_pose=day.start, t0_ns=T0_NS + (day.day - 1) * DAY_NS)
+        run = simulate_household(cfg, world=day.world, start_pose=day.start, t0_ns=T0_NS + (day.day - 1) * DAY_NS,
+                                 remembered=remembered)
+        remembered = day.world.objects
         name = f"day_{day.day:02d}.mcap"
         write_household_log(run, out / name)
         summary["days"].append({
             "day": day.day, "log": name, "start_pose": list(day.start),
             "changes": [c.to_dict() for c in day.changes],
             "objects": {o.object_id: list(o.position) for o in day.world.objects},
-            "photographed": sorted({i for s in run.snapshots for i in s.visible_ids})})
+            "photographed": sorted({i for s in run.snapshots for i in s.visible_ids}),
+            "checked": _checks(run.snapshots)})
     (out / "days.json").write_text(dumps(summary, indent=1))
     return summary

@@ -44,6 +44,19 @@ readable in an image (and is published on ``/tags``) when its code lies fully in
 camera within 60 deg, is not occluded by a wall or by furniture at least as tall as the label, and its
 smallest projected module is at least ``MIN_MODULE_PX`` = 3 px; the corners published are the true projections
 plus N(0, 0.3 px).
+
+Checking the robot's map (``remembered``): a robot that keeps a map of its home checks on the objects it knows.
+Given the objects of its map (where it believes they are: on a simulated day, ``holoslam.sim.days`` passes the
+day before's true objects, standing for the store's knowledge), the head also aims at each remembered object's
+place whose label it has not read yet today, under the rules of a label (within 3.5 m, the place's label side
+facing the camera within 60 deg, not behind a wall or furniture, zoomed so that the remembered label's module
+spans ``TARGET_MODULE_PX``, a second view from ``SECOND_VIEW_BASELINE`` away, later ones after ``resnap_s``, the
+same ``image_rate_hz`` budget), in one order with the labels (fewest views first, then the nearest; a place
+checked once and found empty ranks with the labels never photographed, so that it is confirmed from a second
+point while the robot is still near). Such an
+image is kept whatever it reads: where the object was moved or removed it holds the place empty (the rendered
+furniture and background, no readable label there); where the object still stands it reads it like any snapshot.
+Without ``remembered`` (day 1, single-day logs) the snapshots are exactly the operator's above.
 """
 
 from __future__ import annotations
@@ -140,6 +153,9 @@ class Snapshot:
     tags: tuple[tuple[str, np.ndarray], ...]
     target_id: str
     blur_px: float = 0.0  # motion blur over the exposure (camera-stream frames, holoslam.sim.stream), px
+    # the remembered object whose place the head aimed at (a check of the robot's map: ``remembered`` of
+    # ``camera_snapshots``; ``target_id`` is then ""), "" for a label's snapshot
+    checked_id: str = ""
 
 
 # ----------------------------------------------------------------------------------------------- odometer
@@ -356,31 +372,55 @@ def readable_labels(
     return readable, corners, draw
 
 
+def _can_photograph(world: World, o, d: float, count: int, cam: np.ndarray, t: int,
+                    shots_of: dict[str, list[np.ndarray]], last_t: int, resnap_s: float, cosmax: float,
+                    walls: np.ndarray, n_modules: int, size: tuple[int, int]) -> bool:
+    """Whether the operator would photograph label (or remembered place) ``o`` at distance ``d`` from the camera
+    at ``cam`` (time ``t``), ``count`` views of it taken (``shots_of`` their camera positions, ``last_t`` the
+    last): within range; a second view only from SECOND_VIEW_BASELINE away from the first, a later one only
+    after ``resnap_s``; facing the camera, not behind a wall or an object, and readable within the zoom range."""
+    if d > MAX_SNAPSHOT_RANGE:
+        return False
+    if count == 1:
+        if np.linalg.norm(shots_of[o.object_id][0][:2] - cam[:2]) < SECOND_VIEW_BASELINE:
+            return False
+    elif t - last_t < resnap_s * 1e9:
+        return False
+    if _facing_cos(o, cam) < cosmax + 0.05:
+        return False
+    if segments_block(walls, cam[None, :2], np.asarray(o.position, np.float64)[None, :2])[0] or _occluded(
+            world, cam[:2], o):
+        return False
+    zoom = TARGET_MODULE_PX * n_modules * d / (F0 * size[0] / 640.0 * o.label_size)
+    return zoom <= ZOOM_MAX * 1.25
+
+
 def _snapshot_target(world: World, order: np.ndarray, d: np.ndarray, count: np.ndarray, cam: np.ndarray, t: int,
                      shots_of: dict[str, list[np.ndarray]], last_of: dict[str, int], resnap_s: float, cosmax: float,
-                     walls: np.ndarray, positions: np.ndarray, modules: dict[str, np.ndarray], size: tuple[int, int]):
-    """The first label in ``order`` the operator would photograph from the camera at ``cam`` (time ``t``):
-    within range; a second view only from SECOND_VIEW_BASELINE away from the first, a later one only after
-    ``resnap_s``; facing the camera, not behind a wall or an object, and readable within the zoom range.
+                     walls: np.ndarray, modules: dict[str, np.ndarray], size: tuple[int, int],
+                     places: tuple = (), checks_of: dict[str, list[np.ndarray]] | None = None,
+                     last_check: dict[str, int] | None = None):
+    """The first label or remembered place the operator would photograph from the camera at ``cam`` (time
+    ``t``): ``order`` indexes ``world.all_codes`` (0 ..) then ``places`` (len(all_codes) ..), fewest views
+    first, then the nearest (``_can_photograph``). (object, is a place, its index in ``order``'s numbering), or
     None when there is none."""
+    codes = world.all_codes
+    n_codes = len(codes)
+    checks_of = checks_of if checks_of is not None else {}
+    last_check = last_check if last_check is not None else {}
     for i in order:
-        o = world.all_codes[i]
-        if d[i] > MAX_SNAPSHOT_RANGE:
+        if i < n_codes:
+            o = codes[i]
+            if _can_photograph(world, o, d[i], count[i], cam, t, shots_of, last_of.get(o.object_id, -(10**19)),
+                               resnap_s, cosmax, walls, modules[o.object_id].shape[0], size):
+                return o, False, int(i)
             continue
-        if count[i] == 1:
-            if np.linalg.norm(shots_of[o.object_id][0][:2] - cam[:2]) < SECOND_VIEW_BASELINE:
-                continue
-        elif t - last_of.get(o.object_id, -(10**19)) < resnap_s * 1e9:
+        o = places[i - n_codes]
+        if o.object_id in shots_of:  # read today: it is where the robot sees it, nothing to check
             continue
-        if _facing_cos(o, cam) < cosmax + 0.05:
-            continue
-        if segments_block(walls, cam[None, :2], positions[i : i + 1, :2])[0] or _occluded(world, cam[:2], o):
-            continue
-        n = modules[o.object_id].shape[0]
-        zoom = TARGET_MODULE_PX * n * d[i] / (F0 * size[0] / 640.0 * o.label_size)
-        if zoom > ZOOM_MAX * 1.25:
-            continue
-        return o
+        if _can_photograph(world, o, d[i], count[i], cam, t, checks_of, last_check.get(o.object_id, -(10**19)),
+                           resnap_s, cosmax, walls, modules[o.object_id].shape[0], size):
+            return o, True, int(i)
     return None
 
 
@@ -396,19 +436,27 @@ def camera_snapshots(
     jpeg_quality: int = 55,
     size: tuple[int, int] = IMAGE_SIZE,
     render: bool = True,
+    remembered: tuple = (),
 ) -> list[Snapshot]:
-    """Operator-style PTZ snapshots along the trajectory (see the module docstring)."""
+    """Operator-style PTZ snapshots along the trajectory (see the module docstring); ``remembered``: the robot's
+    map, ``WorldObject`` records where it believes objects are, whose places it checks (module docstring)."""
     from holoslam.sim.render import render_image
 
     modules = {o.object_id: qr_modules(o.payload) for o in world.all_codes}
+    places = tuple(remembered)
+    for o in places:
+        if o.object_id not in modules:
+            modules[o.object_id] = qr_modules(o.payload)
     cosmax = math.cos(math.radians(MAX_FACING_DEG))
     period = int(round(1e9 / image_rate_hz))
     last_shot = -(10**19)
     last_of: dict[str, int] = {}
     shots_of: dict[str, list[np.ndarray]] = {}  # camera positions of the snapshots of each label
+    checks_of: dict[str, list[np.ndarray]] = {}  # camera positions of the checks of each remembered place
+    last_check: dict[str, int] = {}
     out: list[Snapshot] = []
     walls = world.wall_segments()
-    positions = np.array([o.position for o in world.all_codes])
+    positions = np.array([o.position for o in world.all_codes] + [o.position for o in places])
     for k in range(0, len(stamps_ns), 2):
         t = int(stamps_ns[k]) + offset_ns
         if t - last_shot < period or t > stamps_ns[-1]:
@@ -417,12 +465,20 @@ def camera_snapshots(
         _, cam = camera_pose_world(pose, 0.0, 0.0)
         d = np.linalg.norm(positions - cam, axis=1)
         # labels never photographed first, then those photographed once (a second view from a point at
-        # least SECOND_VIEW_BASELINE away, for triangulation), then the nearest
-        count = np.array([min(len(shots_of.get(o.object_id, ())), 2) for o in world.all_codes])
-        target = _snapshot_target(world, np.lexsort((d, count)), d, count, cam, t, shots_of, last_of, resnap_s,
-                                  cosmax, walls, positions, modules, size)
-        if target is None:
+        # least SECOND_VIEW_BASELINE away, for triangulation), then the nearest; remembered places likewise by
+        # their checks
+        count = np.array([min(len(shots_of.get(o.object_id, ())), 2) for o in world.all_codes]
+                         + [min(len(checks_of.get(o.object_id, ())), 2) for o in places], dtype=np.int64)
+        # a place found empty once is looked at again first (with a label never photographed): a robot that
+        # misses a known object confirms it from another point while it is still near, where a label's second
+        # view can wait, the label being known to be there
+        rank = count.copy()
+        rank[len(world.all_codes):][rank[len(world.all_codes):] == 1] = 0
+        found = _snapshot_target(world, np.lexsort((d, rank)), d, count, cam, t, shots_of, last_of, resnap_s,
+                                 cosmax, walls, modules, size, places, checks_of, last_check)
+        if found is None:
             continue
+        target, is_place, ti = found
         # aim the head at the label (pan in the base frame, tilt up positive) with a pointing error
         rel = target.position - cam
         yaw_w = math.atan2(rel[1], rel[0])
@@ -431,23 +487,27 @@ def camera_snapshots(
         if abs(pan) > math.radians(170) or abs(tilt) > math.radians(45):
             continue
         n = modules[target.object_id].shape[0]
-        f_needed = TARGET_MODULE_PX * n * d[target_index(world, target)] / target.label_size
+        f_needed = TARGET_MODULE_PX * n * d[ti] / target.label_size
         zoom = float(np.clip(f_needed / (F0 * size[0] / 640.0), 1.0, ZOOM_MAX))
         zoom = round(zoom, 2)
         K = intrinsics(zoom, size)
         wRc, wtc = camera_pose_world(pose, pan, tilt)
         ids, corners, draw = readable_labels(world, modules, K, wRc, wtc, size)
-        if target.object_id not in ids:
+        if not is_place and target.object_id not in ids:
             continue
         last_shot = t
         for i in ids:
             last_of[i] = t
             shots_of.setdefault(i, []).append(cam)
+        if is_place:  # kept whatever it read: the place held empty is what the check is for
+            checks_of.setdefault(target.object_id, []).append(cam)
+            last_check[target.object_id] = t
         jpeg = b""
         if render:
             jpeg = render_image(world, modules, K, wRc, wtc, draw, rng, quality=jpeg_quality, size=size)
         tags = tuple((world.object(i).payload, corners[i] + 0.3 * rng.standard_normal((4, 2))) for i in ids)
-        out.append(Snapshot(t, pan, tilt, zoom, K, jpeg, tuple(ids), tags, target.object_id))
+        out.append(Snapshot(t, pan, tilt, zoom, K, jpeg, tuple(ids), tags, "" if is_place else target.object_id,
+                            checked_id=target.object_id if is_place else ""))
     return out
 
 

@@ -43,3 +43,4 @@ def test_simulated_days_write_logs_and_the_truth(tmp_path):
     assert [d["log"] for d in truth["days"]] == ["day_01.mcap", "day_02.mcap"]
     assert all((tmp_path / d["log"]).stat().st_size > 10_000 for d in truth["days"])
     assert truth["days"][1]["changes"] and truth["days"][1]["start_pose"] != truth["days"][0]["start_pose"]
+    assert truth["days"][0]["checked"] == {}  # day 1 has no map to check: the single-day household's camera

@@ -1,0 +1,99 @@
+"""A robot checks on the objects of its map: the simulated camera aims at a remembered object's place
+(``sim.sensors.camera_snapshots``' ``remembered``) and, where the object was removed, keeps an image that holds
+the place empty; the image's camera pose and intrinsics reach holoslam through the log, and
+``frustum.covering_images`` counts it as evidence of absence, so ``classify`` calls the object gone without
+any time in view. A present label that faces away from the camera is never counted, whatever is at its place."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from holoslam.lifelong.changes import ChangeConfig, classify
+from holoslam.lifelong.frustum import FrustumConfig, camera_views, covering_images, world_cameras
+from holoslam.store.records import ObjectState
+
+GONE = "O05"  # the cup on the coffee table, label at (1.8, 3.56, 0.5) facing -y
+TURNED = "O90"  # a box put at the cup's place the day after, its label facing away (+y)
+
+
+def _two_days():
+    """Day 1's world (the robot's map) and day 2's: the cup removed, a box at its place with its label turned
+    away; a 32 s drive past the place, 1 m in front of it, along +x."""
+    from holoslam.sim.world import reference_household
+
+    day1 = reference_household()
+    cup = day1.object(GONE)
+    box = dataclasses.replace(cup, object_id=TURNED, kind="box", label_yaw=math.pi / 2,
+                              payload=cup.payload.replace(GONE, TURNED).replace("cup", "box"))
+    day2 = dataclasses.replace(day1, objects=tuple(o for o in day1.objects if o.object_id != GONE) + (box,))
+    stamps = 1_700_000_000_000_000_000 + np.arange(0, 32 * 20 + 1, dtype=np.int64) * 50_000_000
+    s = np.linspace(0.0, 1.0, len(stamps))
+    wTb = np.stack([cup.position[0] - 0.6 + 1.2 * s, np.full_like(s, cup.position[1] - 1.0), np.zeros_like(s)], 1)
+    return day1, day2, box, stamps, wTb
+
+
+def _run(world, stamps, wTb, remembered):
+    from holoslam.sim import SimConfig
+    from holoslam.sim.core import SimulatedRun
+    from holoslam.sim.sensors import camera_snapshots, compass, laser_scans, odometry
+
+    def rng(k):
+        return np.random.default_rng(np.random.SeedSequence([7, k]))
+
+    snaps = camera_snapshots(world, stamps, wTb, rng(4), remembered=remembered)
+    return SimulatedRun(SimConfig(seed=7, duration_s=32.0), world, stamps, wTb, odometry(stamps, wTb, rng(1)),
+                        compass(world, stamps, wTb, rng(2)), laser_scans(world, stamps, wTb, rng(3)), tuple(snaps))
+
+
+def test_without_a_map_the_camera_aims_only_at_labels():
+    day1, day2, _box, stamps, wTb = _two_days()
+    run = _run(day2, stamps, wTb, ())
+    assert run.snapshots and all(s.target_id in s.visible_ids and not s.checked_id for s in run.snapshots)
+
+
+@pytest.fixture(scope="module")
+def day2_log(tmp_path_factory):
+    from holoslam.io.mcap import read_log
+    from holoslam.sim.writer import write_household_log
+
+    day1, day2, box, stamps, wTb = _two_days()
+    run = _run(day2, stamps, wTb, day1.objects)
+    path = tmp_path_factory.mktemp("days") / "day_02.mcap"
+    write_household_log(run, path)
+    log, _ = read_log(path, require=["odometry"])
+    return day1, box, stamps, wTb, run, log
+
+
+def test_the_camera_checks_the_remembered_place_and_keeps_it_empty(day2_log):
+    _day1, _box, _stamps, _wTb, run, _log = day2_log
+    checks = [s for s in run.snapshots if s.checked_id == GONE]
+    assert len(checks) >= 2  # a first view and a second from 0.5 m away, as for a label
+    assert all(GONE not in s.visible_ids and TURNED not in s.visible_ids and not s.target_id for s in checks)
+    assert all(s.jpeg for s in checks)  # real rendered images
+    # present objects of the map are read as labels, never "checked" empty
+    assert {s.checked_id for s in run.snapshots} <= {GONE, ""}
+
+
+def test_images_of_the_empty_place_reach_holoslam_and_make_it_gone(day2_log):
+    day1, box, stamps, wTb, run, log = day2_log
+    views = camera_views(log)
+    assert len(views) == len(run.snapshots)  # every image with its camera transform and intrinsics
+    wTc = world_cameras(views, stamps, wTb)
+    cup = day1.object(GONE)
+    facing = np.array([math.cos(cup.label_yaw), math.sin(cup.label_yaw)])  # the side it was seen from
+    n = covering_images(np.array(cup.position), facing, cup.payload, views, wTc, None, FrustumConfig())
+    assert n >= 2
+    # the box at the same place, its label seen before from the other side: its side never faces the camera
+    away = np.array([math.cos(box.label_yaw), math.sin(box.label_yaw)])
+    assert covering_images(np.array(box.position), away, box.payload, views, wTc, None, FrustumConfig()) == 0
+    stored = {o: ObjectState(o, k, p, "seen", np.array(xyz[:2]), xyz[2], np.eye(2) * 1e-4, 2, f"{o}#1", view=v)
+              for o, k, p, xyz, v in ((GONE, "cup", cup.payload, cup.position, facing),
+                                      (TURNED, "box", box.payload, box.position, away))}
+    images = {GONE: n, TURNED: 0}
+    far = np.full((len(stamps), 2), 50.0)  # no time in view: the images alone decide
+    assert classify(stored, {}, stamps, far, None, ChangeConfig(), None, images) == {GONE: "gone"}
+    assert classify(stored, {}, stamps, far, None, ChangeConfig(), None, {GONE: 0, TURNED: 0}) == {}
