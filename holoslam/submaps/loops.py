@@ -418,16 +418,18 @@ class LoopSearch:
         return cand
 
 
-_POOL: ThreadPoolExecutor | None = None
+_POOL: tuple[int, ThreadPoolExecutor] | None = None  # (the process that made it, the pool)
 
 
 def _threads() -> ThreadPoolExecutor:
-    """The threads the windowed searches of a node share (made on first use; up to 4, one per core)."""
+    """The threads the windowed searches of a node share (made on first use; up to 4, one per core). A process
+    forked from one that had them (a batch's worker processes) makes its own: a pool's threads do not survive a
+    fork, and the copied pool would wait for them forever."""
     global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)),
-                                   thread_name_prefix="holoslam-loops")
-    return _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)),
+                                                 thread_name_prefix="holoslam-loops"))
+    return _POOL[1]
 
 
 _LOST_M = 1e5  # m: a window this wide comes from a break of local SLAM (``relative_covariances``), not from drift

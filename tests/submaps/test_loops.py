@@ -396,3 +396,23 @@ def test_thinned_search_points_still_close_the_drifted_loop_and_refine_on_every_
     assert len(found) == 1
     e = g.between(g.between(wTm, wTn), found[0].mTn)
     assert math.hypot(e[0], e[1]) < 0.025 and abs(e[2]) < math.radians(0.3), e
+
+
+def _abs_in_search_threads() -> list[int]:
+    from holoslam.submaps import loops
+
+    out: list[int] = []
+    for _ in range(5):  # more work than the copied pool's idle count lets through without a thread
+        out = list(loops._threads().map(abs, [-1, -2, -3, -4, -5]))
+    return out
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(), reason="no fork")
+def test_the_search_threads_work_in_a_process_forked_after_a_search():
+    """A batch forks worker processes after the parent may have searched loops (its thread pool made): the child
+    must make its own pool, not wait forever on the parent's threads, which a fork does not copy."""
+    import multiprocessing
+
+    assert _abs_in_search_threads() == [1, 2, 3, 4, 5]  # the pool exists in this process
+    with multiprocessing.get_context("fork").Pool(1) as pool:  # measured: the copied pool hung here
+        assert pool.apply_async(_abs_in_search_threads).get(timeout=30) == [1, 2, 3, 4, 5]
