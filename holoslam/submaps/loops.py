@@ -349,15 +349,27 @@ class LoopSearch:
         targets.sort(key=lambda t: self.last_global.get(t[0], -np.inf))
         first = sorted((t for t in targets if t[0] in near), key=lambda t: near[t[0]])[: (count + 1) // 2]
         chosen = first + [t for t in targets if all(t[0] != f[0] for f in first)][: count - len(first)]
+        # the searches are independent: run in threads (compiled kernels without the GIL), their grids made
+        # here first, and counted and offered for agreement in the order chosen, as one after the other would be
+        grids = [(self._coarse(t[0]), self._precomputed(t[0])) for t in chosen]
+        t0 = time.perf_counter()
+
+        def one(q: int):
+            m, seed, wx, wy, _wth = chosen[q]
+            return self._global(*grids[q], m, n, nTr, cov_nTr, b_pts, g_pts, seed, wx, wy)
+
+        outs = list(_threads().map(one, range(len(chosen)))) if len(chosen) > 1 else [one(0)] if chosen else []
+        self.seconds["global"] += time.perf_counter() - t0
         out: list[LoopCandidate] = []
-        for m, seed, wx, wy, wth in chosen:
+        for (m, *_), (cand, reasons) in zip(chosen, outs, strict=True):
             self.last_global[m] = travelled
-            t0 = time.perf_counter()
-            cand = self._global(m, n, nTr, cov_nTr, b_pts, g_pts, seed, wx, wy, wth)
-            self.seconds["global"] += time.perf_counter() - t0
-            if cand is None:
-                continue
-            out.extend(self._agreed(replace(cand, travelled=travelled), est_wTa, travel, "global"))
+            for reason in reasons:
+                self._count(reason)
+            if reasons[:1] == ["global searches"]:
+                self.tried += 1
+            self.ambiguous += "global: ambiguous, kept with the peaks' spread" in reasons
+            if cand is not None:
+                out.extend(self._agreed(replace(cand, travelled=travelled), est_wTa, travel, "global"))
         return out
 
     def _hypothesis_distances(self, est_wTa: np.ndarray, wTr: np.ndarray) -> dict[int, float]:
@@ -380,51 +392,46 @@ class LoopSearch:
                 out[m] = min(out.get(m, np.inf), dm)
         return out
 
-    def _global(self, m: int, n: int, nTr, cov_nTr, b_pts, g_pts, seed, wx: float, wy: float,
-                wth: float) -> LoopCandidate | None:
-        """One global search (``global_search``): coarse over the whole of m's grid at every heading (the window
-        only chose m as a target: it may be too small, ``search``), fine around the coarse best, second peaks kept
-        in the covariance, refinement."""
+    def _global(self, pre, pre_fine, m: int, n: int, nTr, cov_nTr, b_pts, g_pts, seed, wx: float,
+                wy: float) -> tuple[LoopCandidate | None, list[str]]:
+        """One global search (``global_search``) against m's coarse and fine grids (``pre``, ``pre_fine``):
+        coarse over the whole of m's grid at every heading (the window only chose m as a target: it may be too
+        small, ``search``), fine around the coarse best, second peaks kept in the covariance, refinement. The
+        closure or None, and the outcome's reasons to count; reads the search's state only."""
         from holoslam.submaps.global_search import clip_window, coarse_match
 
         c = self.cfg
-        pre = self._coarse(m)
         clipped = clip_window(seed, _LOST_M, _LOST_M, pre.origin, pre.shape, pre.res)
         if clipped is None:
-            self._count("global: window off the submap")
-            return None
-        self.tried += 1
-        self._count("global searches")
+            return None, ["global: window off the submap"]
+        reasons = ["global searches"]
         centre, cx, cy = clipped
         coarse = coarse_match(pre, g_pts, centre, cx, cy, math.pi, c.global_coarse_min_score * self.scale,
                               c.global_max_range_m)
         if coarse is None:
-            self._count("global: no match above the score")
-            return None
-        win = SearchWindow(self._precomputed(m), b_pts, coarse.aTb, c.global_check_xy, math.radians(c.global_check_deg))
+            return None, reasons + ["global: no match above the score"]
+        win = SearchWindow(pre_fine, b_pts, coarse.aTb, c.global_check_xy, math.radians(c.global_check_deg))
         min_score, margin = c.global_min_score * self.scale, c.ambiguity_margin * self.scale
         hit = win.best(min_score, margin)
         if hit is None:
-            self._count("global: fine match below the score")
-            return None
+            return None, reasons + ["global: fine match below the score"]
         peaks = win.second_peaks(hit, margin, c.ambiguity_exclude_xy,
                                  math.radians(c.ambiguity_exclude_deg), c.global_ambiguity_peaks)
         if peaks:
-            self.ambiguous += 1
-            self._count("global: ambiguous, kept with the peaks' spread")
+            reasons.append("global: ambiguous, kept with the peaks' spread")
         cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, min_score, max(wx, wy))
         if cand is None:
-            self._count("global: refinement failed")
-        return cand
+            reasons.append("global: refinement failed")
+        return cand, reasons
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None  # (the process that made it, the pool)
 
 
 def _threads() -> ThreadPoolExecutor:
-    """The threads the windowed searches of a node share (made on first use; up to 4, one per core). A process
-    forked from one that had them (a batch's worker processes) makes its own: a pool's threads do not survive a
-    fork, and the copied pool would wait for them forever."""
+    """The threads the windowed and the global searches of a node share (made on first use; up to 4, one per
+    core). A process forked from one that had them (a batch's worker processes) makes its own: a pool's threads
+    do not survive a fork, and the copied pool would wait for them forever."""
     global _POOL
     if _POOL is None or _POOL[0] != os.getpid():
         _POOL = (os.getpid(), ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)),

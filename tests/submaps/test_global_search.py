@@ -82,10 +82,10 @@ def test_a_corridor_match_keeps_its_uncertainty_along_the_corridor():
     mTr = np.array([20.0, 2.0, 0.2])
     near = wall[np.hypot(*(wall - mTr[:2]).T) < 6.0]  # what a laser at the node sees: 6 m of either wall
     b_pts = g.transform_points(g.inverse(mTr), near)
-    cand = ls._global(0, 5, np.zeros(3), np.diag([1e-6, 1e-6, 1e-8]), b_pts, b_pts, np.array([15.0, 2.5, 0.0]),
-                      30.0, 30.0, math.pi)
-    assert cand is not None, ls.counts
-    assert ls.counts.get("global: ambiguous, kept with the peaks' spread") == 1
+    cand, reasons = ls._global(ls._coarse(0), ls._precomputed(0), 0, 5, np.zeros(3), np.diag([1e-6, 1e-6, 1e-8]),
+                               b_pts, b_pts, np.array([15.0, 2.5, 0.0]), 30.0, 30.0)
+    assert cand is not None, reasons
+    assert "global: ambiguous, kept with the peaks' spread" in reasons
     # across the corridor and in heading the match is right and sure; along it, it is as unsure as it is wrong
     mTn = cand.mTn  # nTr = identity: the node is the anchor
     assert abs(mTn[1] - 2.0) < 0.1 and abs(g.wrap(mTn[2] - 0.2)) < math.radians(1.0)
