@@ -355,8 +355,8 @@ class LoopSearch:
         t0 = time.perf_counter()
 
         def one(q: int):
-            m, seed, wx, wy, _wth = chosen[q]
-            return self._global(*grids[q], m, n, nTr, cov_nTr, b_pts, g_pts, seed, wx, wy)
+            m, seed, wx, wy, wth = chosen[q]
+            return self._global(*grids[q], m, n, nTr, cov_nTr, b_pts, g_pts, seed, wx, wy, wth)
 
         outs = list(_threads().map(one, range(len(chosen)))) if len(chosen) > 1 else [one(0)] if chosen else []
         self.seconds["global"] += time.perf_counter() - t0
@@ -393,11 +393,13 @@ class LoopSearch:
         return out
 
     def _global(self, pre, pre_fine, m: int, n: int, nTr, cov_nTr, b_pts, g_pts, seed, wx: float,
-                wy: float) -> tuple[LoopCandidate | None, list[str]]:
+                wy: float, wth: float = math.pi) -> tuple[LoopCandidate | None, list[str]]:
         """One global search (``global_search``) against m's coarse and fine grids (``pre``, ``pre_fine``):
         coarse over the whole of m's grid at every heading (the window only chose m as a target: it may be too
-        small, ``search``), fine around the coarse best, second peaks kept in the covariance, refinement. The
-        closure or None, and the outcome's reasons to count; reads the search's state only."""
+        small, ``search``), fine around the coarse best, second peaks kept in the covariance, refinement; a match
+        turned from the ``seed`` by more than the window's heading ``wth`` is dropped
+        (``global_within_heading_window``). The closure or None, and the outcome's reasons to count; reads the
+        search's state only."""
         from holoslam.submaps.global_search import clip_window, coarse_match
 
         c = self.cfg
@@ -415,6 +417,8 @@ class LoopSearch:
         hit = win.best(min_score, margin)
         if hit is None:
             return None, reasons + ["global: fine match below the score"]
+        if c.global_within_heading_window and abs(g.wrap(hit.aTb[2] - seed[2])) > wth:
+            return None, reasons + ["global: turned beyond the heading window"]
         peaks = win.second_peaks(hit, margin, c.ambiguity_exclude_xy,
                                  math.radians(c.ambiguity_exclude_deg), c.global_ambiguity_peaks)
         if peaks:

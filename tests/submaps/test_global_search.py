@@ -115,3 +115,32 @@ def test_the_submaps_a_waiting_closure_predicts_are_searched_first():
     assert sorted(near, key=near.get) == [2, 3, 1]  # within 15 m, nearest first
     assert near[2] == pytest.approx(3.0, abs=1e-6)
     assert 0 not in near and 4 not in near  # 23 m and 17 m away
+
+
+def test_a_global_match_turned_beyond_the_heading_window_is_dropped():
+    """The global search tries every heading, but a node that has not lost track cannot have turned further than
+    its window allows: the right pose, 137 deg from a seed whose window says +-40 deg, is not a closure; with
+    every heading allowed (after a break) it is."""
+    from holoslam.submaps.loops import LoopConfig, LoopSearch
+    from holoslam.submaps.probgrid import ProbGrid
+    from holoslam.submaps.scanmatch import MatchConfig
+
+    res = 0.05
+    prob = _room(res)
+    occ = np.argwhere(prob > 0.5)
+    wall = np.column_stack([(occ[:, 1] + 0.5) * res, (occ[:, 0] + 0.5) * res])
+    mTr = np.array([4.0, 3.0, math.radians(137.0)])
+    b_pts = g.transform_points(g.inverse(mTr), wall[::3])
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls.add_submap(0, ProbGrid(prob, (0.0, 0.0), res))
+    seed = np.array([5.0, 3.5, 0.0])
+    args = (ls._coarse(0), ls._precomputed(0), 0, 5, np.zeros(3), np.diag([1e-6, 1e-6, 1e-8]), b_pts, b_pts, seed,
+            3.0, 3.0)
+    cand, reasons = ls._global(*args, math.radians(40.0))
+    assert cand is None and reasons[-1] == "global: turned beyond the heading window"
+    cand, reasons = ls._global(*args, math.pi)
+    assert cand is not None, reasons
+    assert np.hypot(*(cand.mTn[:2] - mTr[:2])) < 0.1 and abs(g.wrap(cand.mTn[2] - mTr[2])) < math.radians(1.0)
+    gated = LoopSearch(LoopConfig(global_within_heading_window=False), MatchConfig())
+    gated.add_submap(0, ProbGrid(prob, (0.0, 0.0), res))
+    assert gated._global(gated._coarse(0), gated._precomputed(0), *args[2:], math.radians(40.0))[0] is not None
