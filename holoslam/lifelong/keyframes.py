@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SessionKeyframes", "stored_targets", "session_keyframes", "world_trajectory", "STORED_SIGMAS",
+__all__ = ["SessionKeyframes", "stored_keyframes", "session_keyframes", "world_trajectory", "STORED_SIGMAS",
            "KEYFRAME_CELL_M"]
 
 # sigmas (m, m, rad) of the prior that holds a stored anchor in the node solve: the stored map is held
@@ -47,7 +47,7 @@ class _Target:
 class SessionKeyframes:
     """The joined session's node solve: ``wTn`` (N, 3) its nodes in the world at ``stamps_ns``, ``wTa`` (K, 3)
     its anchors (the node at each anchor's stamp), the matches into its own submaps and into the stored ones, and
-    how many node-submap pairs were tried in the stored map."""
+    how many node-submap pairs were tried in the stored map, and the stage's wall time."""
 
     stamps_ns: np.ndarray
     wTn: np.ndarray
@@ -55,39 +55,37 @@ class SessionKeyframes:
     own_matches: int
     stored_matches: int
     stored_tried: int
+    seconds: float = 0.0
 
 
-def stored_targets(store: Any, stored: tuple, first_index: int) -> list[_Target]:
-    """The working ``stored`` submaps (with grids) as node-match targets numbered from ``first_index`` (in the
-    order of ``stored``), each with its keyframes from its session's stored trajectory (module docstring)."""
-    from holoslam.relocalise import _grid
-
+def stored_keyframes(store: Any, stored: tuple) -> list[np.ndarray]:
+    """Per ``stored`` submap (``StoredSubmap``, in that order) its keyframes in its anchor frame, (n, 3): its
+    session's stored poses hung from its anchor, one per ``KEYFRAME_CELL_M`` cell (module docstring)."""
+    out: list[np.ndarray] = [np.zeros((0, 3))] * len(stored)
     by_session: dict[int, list[int]] = {}
     for j, s in enumerate(stored):
         by_session.setdefault(int(s.session_id), []).append(j)
-    out: list[_Target] = []
     for sid, rows in sorted(by_session.items()):
         t = store.trajectory(sid)
         k, aTb = np.asarray(t.anchor_idx, np.int64), np.asarray(t.aTb, np.float64).reshape(-1, 3)
         for j in rows:
-            s, grid = stored[j], _grid(stored[j])
-            mine = aTb[k == int(s.idx)]
-            if grid is None or not len(mine):
-                continue
+            mine = aTb[k == int(stored[j].idx)]
             _u, first = np.unique(np.floor(mine[:, :2] / KEYFRAME_CELL_M).astype(np.int64), axis=0, return_index=True)
-            out.append(_Target(first_index + j, grid, mine[np.sort(first)]))
-    return sorted(out, key=lambda x: x.index)
+            out[j] = mine[np.sort(first)]
+    return out
 
 
-def session_keyframes(st: Any, wTa: np.ndarray, cov_wTa: np.ndarray | None, stored: tuple, targets: list[_Target],
-                      frontend: Any = None) -> SessionKeyframes | None:
+def session_keyframes(st: Any, wTa: np.ndarray, cov_wTa: np.ndarray | None, stored: tuple,
+                      keyframes: list[np.ndarray], frontend: Any = None) -> SessionKeyframes | None:
     """The node solve of the joined session ``st`` (``pipeline.SlamStages``) with its anchors at ``wTa`` (K, 3)
-    (the joint solve's, covariances ``cov_wTa``), matched into the ``stored`` submaps' ``targets``
-    (``stored_targets`` numbered from K) with the run's ``FrontEndConfig`` ``frontend``. None when the session has
-    no nodes or the keyframe stage is off."""
+    (the joint solve's, covariances ``cov_wTa``), matched into the ``stored`` submaps (with grids) that hold
+    ``keyframes`` (``stored_keyframes``) near its nodes, with the run's ``FrontEndConfig`` ``frontend``. None when
+    the session has no nodes or the keyframe stage is off."""
+    import time
     from dataclasses import replace
 
     from holoslam.graph.nodes import solve_nodes
+    from holoslam.relocalise import _grid
     from holoslam.submaps.frontend import FrontEndConfig
     from holoslam.submaps.revisits import NodeMatches, graph_nodes, match_nodes
 
@@ -97,9 +95,14 @@ def session_keyframes(st: Any, wTa: np.ndarray, cov_wTa: np.ndarray | None, stor
     nodes = st.revisits.nodes if st.revisits is not None else graph_nodes(st.fe.submaps)
     if not len(nodes):
         return None
+    t0 = time.perf_counter()
     own = st.revisits.matches if st.revisits is not None else _no_matches()
     K = len(wTa)
-    A = np.vstack([np.asarray(wTa, np.float64).reshape(-1, 3), np.array([s.wTa for s in stored]).reshape(-1, 3)])
+    first = K + fe_cfg.revisits.skip_recent + 1  # stored submap j is anchor first + j: never a node's chain neighbour
+    A = np.vstack([np.asarray(wTa, np.float64).reshape(-1, 3), np.zeros((first - K, 3)),
+                   np.array([s.wTa for s in stored]).reshape(-1, 3)])
+    targets = [_Target(first + j, _grid(s), kf) for j, (s, kf) in enumerate(zip(stored, keyframes, strict=True))
+               if len(kf) and _grid(s) is not None]
     rcfg = replace(fe_cfg.revisits, min_score=fe_cfg.revisits.min_score * st.fe.score_scale)
     cross = match_nodes(targets, nodes, A, rcfg, fe_cfg.local.match) if targets else _no_matches()
     used = np.unique(cross.submap)  # the stored anchors a node was matched into: held beside the new ones
@@ -118,7 +121,8 @@ def session_keyframes(st: Any, wTa: np.ndarray, cov_wTa: np.ndarray | None, stor
     k = np.clip(np.searchsorted(nodes.stamps_ns, stamps), 0, len(nodes) - 1)
     hit = nodes.stamps_ns[k] == stamps
     wTa_out = np.where(hit[:, None], sol.wTn[k], sol.wTa[:K])
-    return SessionKeyframes(nodes.stamps_ns, sol.wTn, wTa_out, len(own), len(cross), int(cross.tried))
+    return SessionKeyframes(nodes.stamps_ns, sol.wTn, wTa_out, len(own), len(cross), int(cross.tried),
+                            time.perf_counter() - t0)
 
 
 def _no_matches() -> Any:

@@ -302,10 +302,9 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
 def _onto_map(store: Any, st: Any, stored: tuple, js: Any, frontend: Any) -> tuple[Any, Any]:
     """The joined session's keyframe stage against its own and the held stored submaps
     (``keyframes.session_keyframes``) and its world trajectory from it; (None, None) when it has no nodes."""
-    from holoslam.lifelong.keyframes import session_keyframes, stored_targets, world_trajectory
+    from holoslam.lifelong.keyframes import session_keyframes, stored_keyframes, world_trajectory
 
-    targets = stored_targets(store, stored, len(js.new_wTa))
-    kf = session_keyframes(st, js.new_wTa, js.new_cov, stored, targets, frontend)
+    kf = session_keyframes(st, js.new_wTa, js.new_cov, stored, stored_keyframes(store, stored), frontend)
     return (None, None) if kf is None else (kf, world_trajectory(st, kf))
 
 
@@ -414,7 +413,7 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
                                    "cross_factors": len(p.cross)}
     if p.keyframes is not None:  # the keyframe stage onto the held map (``keyframes.session_keyframes``)
         joint.update(keyframe_matches_own=p.keyframes.own_matches, keyframe_matches_stored=p.keyframes.stored_matches,
-                     keyframe_tried_stored=p.keyframes.stored_tried)
+                     keyframe_tried_stored=p.keyframes.stored_tried, keyframe_s=round(p.keyframes.seconds, 3))
     return SessionSummary(
         store=str(store.path), session_id=sid, joined=joined, joined_by=("none" if reloc is None else reloc.joined_by),
         founded=founded, relocalisation_s=0.0 if reloc is None else round(reloc.seconds, 4),
