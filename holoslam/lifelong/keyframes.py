@@ -29,7 +29,8 @@ __all__ = ["SessionKeyframes", "stored_keyframes", "session_keyframes", "world_t
 # covariance (1 mm / 0.06 deg, ``solve_nodes``)
 STORED_SIGMAS = (1e-3, 1e-3, 1e-3)
 # m: a stored submap's keyframes are its session's poses hung from its anchor, one per cell of this size (the
-# keyframes only tell which submaps a node stands near: ``RevisitConfig.keyframe_distance_m`` is 6 m)
+# keyframes only tell which submaps a node stands near: ``RevisitConfig.keyframe_distance_m`` is 6 m); intel in 3
+# sessions scored 0.0210 m with 0.25, 0.5 and 1 m alike
 KEYFRAME_CELL_M = 0.5
 
 
