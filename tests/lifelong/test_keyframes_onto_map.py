@@ -14,10 +14,7 @@ import pytest
 from repo_paths import SHARED
 
 REALDATA = SHARED / "realdata"
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.skipif(not (REALDATA / "intel.mcap").exists(), reason="../shared/realdata is not here"),
-]
+needs_intel = pytest.mark.skipif(not (REALDATA / "intel.mcap").exists(), reason="../shared/realdata is not here")
 WINDOWS_MIN = ((4.0, 11.0), (26.5, 30.0))  # minutes from the log's first scan
 HIDDEN = (5.3, -3.1, 2.1)  # x m, y m, yaw rad: the second window's odometry (bench_lifelong's second session's)
 
@@ -73,6 +70,8 @@ def intel_two_sessions(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
+@needs_intel
 def test_the_new_sessions_keyframes_are_solved_onto_the_held_map(intel_two_sessions):
     rigid, solved = intel_two_sessions[False], intel_two_sessions[True]
     assert rigid.summary.joined and solved.summary.joined
@@ -85,6 +84,8 @@ def test_the_new_sessions_keyframes_are_solved_onto_the_held_map(intel_two_sessi
     assert j["keyframe_matches_stored"] >= 300 and j["keyframe_matches_own"] >= 100  # measured 623 and 203
 
 
+@pytest.mark.slow
+@needs_intel
 def test_the_session_is_stored_hung_from_its_solved_anchors(intel_two_sessions):
     """The store keeps what the run folder shows: every pose of the session hung from its world anchor
     (``export.session_trajectories`` composes them back) equals the node solve's trajectory."""
@@ -98,3 +99,22 @@ def test_the_session_is_stored_hung_from_its_solved_anchors(intel_two_sessions):
     # the anchors are the node solve's poses at their stamps: on the trajectory, not beside it
     k = np.searchsorted(u.trajectory.stamps_ns, np.asarray(s.second.fe.anchor_stamps_ns))
     assert np.hypot(*(wTb[k, :2] - s.placed.wTa[:, :2]).T).max() < 0.01
+
+
+def test_a_stored_submaps_keyframes_are_its_sessions_poses_hung_from_it():
+    """``stored_keyframes``: per stored submap, the poses of its session hung from its anchor (anchor_idx = its
+    idx), one per 0.5 m cell, in its anchor frame; a submap with no pose hung from it has none."""
+    from holoslam.lifelong.keyframes import stored_keyframes
+    from holoslam.store.records import StoredTrajectory
+
+    x = np.arange(0.0, 3.0, 0.1)  # 30 poses every 10 cm along x: 6 cells of 0.5 m
+    aTb = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    trajs = {1: StoredTrajectory(np.arange(60), np.repeat([0, 1], 30), np.vstack([aTb, aTb + [0, 5.0, 0]]),
+                                 np.zeros((60, 3))),
+             2: StoredTrajectory(np.arange(30), np.zeros(30, np.int64), aTb, np.zeros((30, 3)))}
+    store = SimpleNamespace(trajectory=lambda sid: trajs[sid])
+    stored = (SimpleNamespace(session_id=2, idx=0), SimpleNamespace(session_id=1, idx=1),
+              SimpleNamespace(session_id=1, idx=7))
+    kf = stored_keyframes(store, stored)
+    assert [len(k) for k in kf] == [6, 6, 0]
+    assert np.allclose(kf[0][:, 0], [0.0, 0.5, 1.0, 1.5, 2.0, 2.5]) and np.allclose(kf[1][:, 1], 5.0)
