@@ -76,7 +76,8 @@ class LifelongConfig:
     # (``keyframes.session_keyframes``): its nodes matched into the stored map and solved, its trajectory and
     # anchors taken from them as a run's are; False: each session submap stays rigid on its joint-solve anchor.
     # Measured on the real logs in 3 sessions (README): intel x1.38 -> x1.11 of the whole log (relations across
-    # sessions 1-2 0.046 -> 0.025 m), aces x1.14 -> x1.08, fr079 x1.00 -> x1.00; 0.6-6 s a session
+    # sessions 1-2 0.046 -> 0.025 m), aces x1.86 -> x1.08 (through the next
+    # session's settling, README), fr079 x1.00 -> x1.00; 0.6-6 s a session
     keyframes: bool = True
 
 
