@@ -122,8 +122,8 @@ def _print_changes(counts: dict, gone_fair: list, unseen_new: int) -> None:
               f"precision {tp / max(nd - unseen_new, 1):.3f}")
 
 
-def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:
-    from holoslam.lifelong.session import run_session
+def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: dict | None = None) -> None:
+    from holoslam.lifelong.session import LifelongConfig, run_session
     from holoslam.sim.days import household_days, simulate_days
 
     if not (out / "days.json").exists():
@@ -145,7 +145,7 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int) -> None:
     print("day  joined by       reloc s  run s   changes (truth | detected)")
     for d in truth["days"]:
         t0 = time.perf_counter()
-        r = run_session(out / d["log"], store)
+        r = run_session(out / d["log"], store, lifelong=LifelongConfig(**(lifelong or {})))
         run_s = time.perf_counter() - t0
         s = r.summary
         if d["day"] > 1:
@@ -431,7 +431,7 @@ def main() -> None:
     ap.add_argument("--growth-duration", type=float, default=150.0)
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--lifelong", type=json.loads, default=None,
-                    help='real: LifelongConfig settings as JSON, e.g. \'{"dense_closures": true}\'')
+                    help='sim and real: LifelongConfig settings as JSON, e.g. \'{"dense_closures": true}\'')
     a = ap.parse_args()
     out = a.out or Path(tempfile.mkdtemp(prefix="bench_lifelong_"))
     for part in a.parts:
@@ -439,7 +439,7 @@ def main() -> None:
         d.mkdir(parents=True, exist_ok=True)
         print(f"\n== {part} ({d})")
         if part == "sim":
-            sim_part(d, a.days, a.duration, a.seed)
+            sim_part(d, a.days, a.duration, a.seed, a.lifelong)
         elif part == "real":
             real_part(d, a.logs, a.compare_search, a.lifelong)
         elif part == "wrong":

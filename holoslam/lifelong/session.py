@@ -45,7 +45,8 @@ class LifelongConfig:
     # the run's loop search into the stored submaps near it (``crossmatch.session_closures``); False, the anchor
     # scans matched into the 3 nearest stored submaps (``relocalise.local_matches``). With the stored map held
     # (``hold_stored``) the closures bend only the new session onto it; measured on the real logs in 3 sessions
-    # (README): intel x1.38 of the whole log with them, x1.68 with the anchor scans' matches; aces x1.14. (Before
+    # (README, before the keyframe stage onto the held map, ``keyframes``): intel x1.38 of the whole log with them,
+    # x1.68 with the anchor scans' matches; aces x1.14. (Before
     # the stored map was held, they pulled it too: intel x3.14, aces x1.22.)
     dense_closures: bool = True
     # the stored working anchors pinned at their stored poses in the joint solve (``joint.joint_problem``). They
@@ -71,6 +72,13 @@ class LifelongConfig:
     # a stored submap leaves the working graph when the new session's submaps know this fraction of its known
     # cells (it stays in the store's history); the working graph then holds about one visit of each place
     retire_cover: float = 0.9
+    # the joined session's keyframe stage run again with the held stored submaps as old submaps beside its own
+    # (``keyframes.session_keyframes``): its nodes matched into the stored map and solved, its trajectory and
+    # anchors taken from them as a run's are; False: each session submap stays rigid on its joint-solve anchor.
+    # Measured on the real logs in 3 sessions (README): intel x1.38 -> x1.11 of the whole log (relations across
+    # sessions 1-2 0.046 -> 0.025 m), aces x1.86 -> x1.08 (through the next
+    # session's settling, README), fr079 x1.00 -> x1.00; 0.6-6 s a session
+    keyframes: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,6 +111,10 @@ class _Placed:
     graph: Any = None
     view_s: dict[str, float] = field(default_factory=dict)  # stored objects not located: camera s in view
     images: dict[str, int] = field(default_factory=dict)  # the same: images that held their place readable
+    # the session's trajectory in the world from its node solve (``keyframes.world_trajectory``: poses at the
+    # session's stamps, keyframe stamps, keyframes); None: hung from the anchors rigidly
+    traj: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    keyframes: Any = None  # keyframes.SessionKeyframes of a joined session (None: the stage did not run)
 
 
 def run_session(log_path: str | Path, store_path: str | Path, config: Any = None,
@@ -179,7 +191,7 @@ def place_session(store: Any, st: Any, lc: LifelongConfig, log: Any = None, fron
         placed = _unjoined(st, sTa, sobj)
         return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=0)
     reloc, closures = _settled(st, sTa, stored, reloc, lc, frontend)
-    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc, log, closures)
+    placed = _join(store, st, sTa, sobj, stored, latest, reloc, lc, log, closures, frontend)
     n_seen = sum(o.status == ObjectStatus.SEEN for o in placed.objects)
     return placed, reloc, _summary(store, sid, placed, reloc, founded=False, n_seen=n_seen)
 
@@ -248,7 +260,7 @@ def _unseen_images(latest: dict[str, ObjectState], located: dict, log: Any, st: 
 
 
 def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, latest: dict, reloc: Any,
-          lc: LifelongConfig, log: Any = None, closures: tuple = ()) -> _Placed:
+          lc: LifelongConfig, log: Any = None, closures: tuple = (), frontend: Any = None) -> _Placed:
     """The joined session: object changes, the joint solve, the session transform it implies, retirements."""
     from holoslam.lifelong.joint import joint_problem, retired_priors, solve_joint, working_factors
     from holoslam.lifelong.merge import merge_submaps
@@ -278,15 +290,26 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     jg = joint_problem(stored, working_factors(store.factors(), ids, lc.compose_retired), sightings, sTa, st.fe.problem.relative, lm, placement, h.wTs,
                        cross, init, priors, lc.hold_stored)
     js = solve_joint(jg, lc.joint_method)
-    wTs = fit_se2(sTa[:, :2], js.new_wTa[:, :2]) if len(sTa) >= 2 else g.compose(js.new_wTa[0], g.inverse(sTa[0]))
+    kf, traj = _onto_map(store, st, stored, js, frontend) if lc.keyframes else (None, None)
+    wTa = js.new_wTa if kf is None else kf.wTa
+    wTs = fit_se2(sTa[:, :2], wTa[:, :2]) if len(sTa) >= 2 else g.compose(wTa[0], g.inverse(sTa[0]))
     objs = _object_states(statuses, located, latest, placement, js)
     retire = _retire(stored, js, st, lc.retire_cover)
     # held stored anchors keep their pose and covariance (a pinned anchor's marginal is only the pin's)
     updates = {} if lc.hold_stored else {
         int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
         for n, k in enumerate(ids.tolist())}
-    return _Placed(js.new_wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, cross, js, jg,
-                   view_s, images or {})
+    return _Placed(wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, cross, js, jg,
+                   view_s, images or {}, traj, kf)
+
+
+def _onto_map(store: Any, st: Any, stored: tuple, js: Any, frontend: Any) -> tuple[Any, Any]:
+    """The joined session's keyframe stage against its own and the held stored submaps
+    (``keyframes.session_keyframes``) and its world trajectory from it; (None, None) when it has no nodes."""
+    from holoslam.lifelong.keyframes import session_keyframes, stored_keyframes, world_trajectory
+
+    kf = session_keyframes(st, js.new_wTa, js.new_cov, stored, stored_keyframes(store, stored), frontend)
+    return (None, None) if kf is None else (kf, world_trajectory(st, kf))
 
 
 def _settled(st: Any, sTa: np.ndarray, stored: tuple, reloc: Any, lc: LifelongConfig, frontend: Any
@@ -392,6 +415,9 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
                                    "anchors": int(len(js.stored_wTa) + len(js.new_wTa)), "rejected": js.rejected,
                                    "covariances_failed": js.covariances_failed,
                                    "cross_factors": len(p.cross)}
+    if p.keyframes is not None:  # the keyframe stage onto the held map (``keyframes.session_keyframes``)
+        joint.update(keyframe_matches_own=p.keyframes.own_matches, keyframe_matches_stored=p.keyframes.stored_matches,
+                     keyframe_tried_stored=p.keyframes.stored_tried, keyframe_s=round(p.keyframes.seconds, 3))
     return SessionSummary(
         store=str(store.path), session_id=sid, joined=joined, joined_by=("none" if reloc is None else reloc.joined_by),
         founded=founded, relocalisation_s=0.0 if reloc is None else round(reloc.seconds, 4),
@@ -421,10 +447,13 @@ def _in_world(st: Any, p: _Placed, log: Any) -> Any:
 
     sTa = np.asarray(st.sol.wTa, np.float64)
     anchors = np.asarray(st.fe.anchor_stamps_ns, np.int64)
-    wTb, _k, _a = _rehang(st.traj.stamps_ns, st.traj.wTb, anchors, sTa, p.wTa)
-    wTk, _k2, _a2 = _rehang(st.traj.key_stamps_ns, st.traj.wTk, anchors, sTa, p.wTa)
+    if p.traj is None:
+        wTb = _rehang(st.traj.stamps_ns, st.traj.wTb, anchors, sTa, p.wTa)[0]
+        key_t, wTk = st.traj.key_stamps_ns, _rehang(st.traj.key_stamps_ns, st.traj.wTk, anchors, sTa, p.wTa)[0]
+    else:
+        wTb, key_t, wTk = p.traj
     dr = g.compose(np.broadcast_to(p.wTs, st.traj.dead_reckoning_wTb.shape), st.traj.dead_reckoning_wTb)
-    traj = dataclasses.replace(st.traj, wTb=wTb, wTk=wTk, dead_reckoning_wTb=dr)
+    traj = dataclasses.replace(st.traj, wTb=wTb, key_stamps_ns=key_t, wTk=wTk, dead_reckoning_wTb=dr)
     R = g.rot2(float(p.wTs[2]))
     wl = g.transform_points(p.wTs, st.sol.w_landmarks.reshape(-1, 2)) if len(st.sol.w_landmarks) else st.sol.w_landmarks
     cl = None if st.sol.cov_w_landmarks is None else R @ st.sol.cov_w_landmarks @ R.T
@@ -463,6 +492,8 @@ def _update(log_name: str, sha: str, log: Any, st: Any, p: _Placed, reloc: Any, 
     lm_keep = [k for k, o in enumerate(lm.landmark) if o in p.placement]
     lm = lm.select(np.array(lm_keep, np.int64))
     _w, k, aTb = _rehang(st.traj.stamps_ns, st.traj.wTb, anchors, sTa, p.wTa)
+    if p.traj is not None:  # the node solve's world poses, hung from the session's world anchors
+        aTb = g.between(p.wTa[k], p.traj[0])
     traj = StoredTrajectory(st.traj.stamps_ns, k.astype(np.int32), aTb, st.traj.wTb)
     return SessionUpdate(
         log_name, sha, int(st.traj.stamps_ns[0]), int(st.traj.stamps_ns[-1]), summary.joined, summary.joined_by,

@@ -6,6 +6,7 @@ a margin of the best, so that the second-peak search resumes from them instead o
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -240,13 +241,18 @@ def _descend_py(prob, levels, starts, rows, cols, box, d_top, quant, best0, top,
 
 _bnb_fast: Any = None  # holoslam.submaps._bnb_fast once _kernels() has run (the compiled functions call into it)
 _KERNELS = None
+_KERNELS_LOCK = threading.Lock()
 
 
 def _kernels():
     """(``_top_py``, ``_descend_py``) compiled with numba on first use (this module does not import numba:
-    the front end's other users of it load it lazily too); cached on disk like ``_bnb_fast``."""
+    the front end's other users of it load it lazily too); cached on disk like ``_bnb_fast``. Under a lock: the
+    loop search's windows call it from a thread pool, and two threads compiling at once wrapped the same globals
+    twice (numba's "jit decorator called on an already jitted function")."""
     global _bnb_fast, _KERNELS
-    if _KERNELS is None:
+    with _KERNELS_LOCK:
+        if _KERNELS is not None:
+            return _KERNELS
         import numba as nb
 
         from holoslam._jit import JIT
