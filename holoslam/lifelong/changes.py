@@ -59,9 +59,11 @@ class ChangeConfig:
     # picture 10 % from its borders, the label's side facing the camera, its module >= 4 px, free space in
     # between) for an object not read there to be gone, whatever its time in view. A robot that checks on the
     # objects of its map aims its camera at their places (the simulated PTZ camera: ``sim.sensors``'
-    # ``remembered``, zoomed for a 5 px module, and, as for a label, a second view from 0.5 m away): two such
-    # images from two viewpoints. One is not enough: a place known to a few cm, a pointing error of 0.5 deg and
-    # the session's pose error can put one image's frustum on it while the label itself lay just outside
+    # ``remembered``, zoomed for a 5 px module, and a place found empty looked at again in a later image): two
+    # such images, each aimed on its own. One is not enough: a place known to a few cm, a pointing error of
+    # 0.5 deg and the session's pose error can put one image's frustum on it while the label itself lay just
+    # outside (the covering test asks the place 10 % of the picture from its borders, less than half a code
+    # zoomed to 5 px a module)
     min_images: int = 2
 
 
