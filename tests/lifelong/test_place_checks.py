@@ -145,3 +145,16 @@ def test_a_place_found_empty_is_looked_at_again_before_the_robot_leaves():
                                 np.eye(2) * 1e-4, 2, f"{GONE}#1", view=facing)}
     far = np.full((len(stamps), 2), 50.0)  # no time in view: the images alone decide
     assert classify(stored, {}, stamps, far, None, ChangeConfig(), None, {GONE: n}) == {GONE: "gone"}
+
+
+def test_the_route_stops_in_front_of_the_places_of_its_map():
+    """A robot that checks on the objects of its map stops in front of a remembered place no object stands at
+    (the removed cup's) as in front of an object; an object still at its place keeps its one station, and a first
+    day (no map) has the stations of its objects only."""
+    from holoslam.sim.route import plan_stations
+
+    day1, day2, _box, _s, _w = _two_days()
+    ids = [s.object_id for s in plan_stations(day2, remembered=day1.objects) if s.object_id]
+    assert ids.count(GONE) == 1 and len(ids) == len(set(ids))
+    alone = [s.object_id for s in plan_stations(day2) if s.object_id]
+    assert GONE not in alone and sorted(alone + [GONE]) == sorted(ids)
