@@ -104,11 +104,13 @@ SECOND_VIEW_BASELINE = 0.5  # m between the camera positions of a label's first 
 # m between the camera positions of a remembered place's first two checks. A label's second view is for
 # triangulation, a place's is not: it is a second look at a place found empty, re-aimed (its own pointing error
 # and zoom) in a later image. Asking 0.5 m of it left 12 of the 44 removals of 9 simulated days of seeds 1 and 2
-# (400 s) with one check: the first came while the robot stood at a station near the place (the route stops in
-# front of the objects there today, not the removed ones), and the robot had left the place's reach (3.5 m,
-# 60 deg, a small label's zoom limit) before it reached a point 0.5 m away. With 0 m and a place found empty
-# looked at again first (``camera_snapshots``), 3 (one image slot in the place's reach as the robot drove past);
-# labels photographed 572 against 574 label-days (snapshots alone, not rendered: their own pointing errors)
+# (400 s) with one check: the first came while the robot stood at a station near the place (the route then
+# stopped in front of the day's objects only), and the robot had left the place's reach (3.5 m, 60 deg, a small
+# label's zoom limit) before it reached a point 0.5 m away. With 0 m and a place found empty looked at again
+# first (``camera_snapshots``), 3 (one image slot in the place's reach as the robot drove past); labels
+# photographed 572 against 574 label-days (snapshots alone, not rendered: their own pointing errors). With the
+# route's stations at the places of the map too (``route.plan_stations``): none with 0 m (one not checked at
+# all), 4 with 0.5 m
 CHECK_BASELINE = 0.0
 
 
