@@ -14,7 +14,9 @@
   and read nothing there (``frustum``: the camera aimed at the place of an object of the map, the label's side
   facing it, its modules large enough, free space in between): the evidence of absence a robot that checks on
   the objects it knows collects;
-- **new**: located and unknown to the store (or gone from it before).
+- **new**: located and unknown to the store. An object the store called gone and located again is known by its
+  label: seen or moved against the place it was last known at, as any other (on the simulated days a gone
+  object seen again was a moved one not found on the day it moved, or a present label the camera had not read).
 
 Objects neither located nor in view keep their last state (no row for this session).
 Defaults from the simulator's camera, which stands for the robot's (``holoslam.sim.sensors``: labels are
@@ -59,9 +61,11 @@ class ChangeConfig:
     # picture 10 % from its borders, the label's side facing the camera, its module >= 4 px, free space in
     # between) for an object not read there to be gone, whatever its time in view. A robot that checks on the
     # objects of its map aims its camera at their places (the simulated PTZ camera: ``sim.sensors``'
-    # ``remembered``, zoomed for a 5 px module, and, as for a label, a second view from 0.5 m away): two such
-    # images from two viewpoints. One is not enough: a place known to a few cm, a pointing error of 0.5 deg and
-    # the session's pose error can put one image's frustum on it while the label itself lay just outside
+    # ``remembered``, zoomed for a 5 px module, and a place found empty looked at again in a later image): two
+    # such images, each aimed on its own. One is not enough: a place known to a few cm, a pointing error of
+    # 0.5 deg and the session's pose error can put one image's frustum on it while the label itself lay just
+    # outside (the covering test asks the place 10 % of the picture from its borders, less than half a code
+    # zoomed to 5 px a module)
     min_images: int = 2
 
 
@@ -175,7 +179,7 @@ def classify(stored: Mapping[str, ObjectState], located: Mapping[str, Located], 
             out[oid] = ObjectStatus.GONE
     for oid, loc in located.items():
         old = stored.get(oid)
-        if old is None or old.status == ObjectStatus.GONE or old.w_xy is None:
+        if old is None or old.w_xy is None:
             out[oid] = ObjectStatus.NEW
             continue
         d = loc.w_xy - old.w_xy

@@ -163,7 +163,8 @@ def simulate_household(config: SimConfig = SimConfig(), world: World | None = No
     another household (default: the reference household with the config's extras); ``start_pose`` (x, y, yaw
     in map): where the robot starts (default ``route.START_POSE``); ``t0_ns``: the first stamp (another day);
     ``remembered``: the robot's map of the home (``WorldObject`` records where it believes objects are), whose
-    places the snapshot camera checks (``sensors.camera_snapshots``; empty: none, a first day)."""
+    places the route stops at (``route.plan_stations``) and the snapshot camera checks
+    (``sensors.camera_snapshots``; empty: none, a first day)."""
     from holoslam.sim.route import START_POSE, household_trajectory
     from holoslam.sim.sensors import camera_snapshots, compass, laser_scans, odometry
     from holoslam.sim.world import reference_household
@@ -171,7 +172,8 @@ def simulate_household(config: SimConfig = SimConfig(), world: World | None = No
     if world is None:
         world = reference_household(config.wall_codes, config.sizeless_labels)
     start = START_POSE if start_pose is None else (float(start_pose[0]), float(start_pose[1]), float(start_pose[2]))
-    traj = household_trajectory(world, config.duration_s, config.odom_rate_hz, config.seed, t0_ns, start)
+    traj = household_trajectory(world, config.duration_s, config.odom_rate_hz, config.seed, t0_ns, start,
+                                tuple(remembered))
 
     def rng(stream: int) -> np.random.Generator:
         return np.random.default_rng(np.random.SeedSequence([config.seed, stream]))

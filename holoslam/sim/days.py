@@ -15,7 +15,8 @@ standable place with a random heading; its odometry starts at the identity there
 is unknown to the log. ``days.json`` beside the logs holds per day the log, the start pose, the changes (before
 and after positions), every object's true position, the labels photographed and the remembered places checked.
 
-The robot checks on the objects it knows: from day 2 its camera also aims at the places of the objects of its map
+The robot checks on the objects it knows: from day 2 its route also stops in front of the places of the objects of
+its map that no object of the day stands at (``route.plan_stations``), and its camera aims at those places
 (``sensors.camera_snapshots``' ``remembered``). The simulator stands the day before's true objects in for that map
 (the store's knowledge of the home after the day before's session); an image of a place whose object was moved or
 removed holds it empty. Day 1 has no map, so its log is the single-day household's."""

@@ -3,7 +3,10 @@
 The route is a tour of "stations": for every object with a small label (``STATION_MAX_LABEL``) a viewing
 spot about a metre in front of it, where the robot stops, turns to face the label and dwells (so the PTZ
 camera can take its zoomed snapshot; bigger labels are read in passing), and the rooms in an order that
-passes every doorway several times and comes back to places already seen (loops).
+passes every doorway several times and comes back to places already seen (loops). A robot that checks on the
+objects of its map (``remembered``: where it believes they are) also stops in front of each of their places
+that no object of the day stands at (a moved object's old place, a removed one's), as it would in front of the
+object, so that its camera checks the place from there (``sensors.camera_snapshots``).
 Consecutive stations are joined by A* paths on the free-space raster with a cost that keeps the robot
 away from walls and furniture; the joined path is smoothed and time-parameterised with Pioneer-like
 limits (``V_MAX`` forward speed, ``W_MAX`` turn rate, ``A_MAX`` acceleration) and sampled at the odometry
@@ -109,8 +112,10 @@ def _view_spot(world: World, fs, obj) -> Station | None:
     return None
 
 
-def plan_stations(world: World, start: tuple[float, float, float] = START_POSE) -> list[Station]:
-    """The ordered stations of one tour from ``start``."""
+def plan_stations(world: World, start: tuple[float, float, float] = START_POSE, remembered: tuple = ()
+                  ) -> list[Station]:
+    """The ordered stations of one tour from ``start``; ``remembered``: the robot's map (``WorldObject``
+    records), whose places that no object of ``world`` with the same id stands at get a station too."""
     fs = free_space(world, resolution=0.05)
     centres = {r.name: ((r.xmin + r.xmax) / 2, (r.ymin + r.ymax) / 2) for r in world.rooms}
     centres["living_room"] = (3.2, 5.2)
@@ -121,7 +126,8 @@ def plan_stations(world: World, start: tuple[float, float, float] = START_POSE) 
     centres["bedroom_2"] = (4.9, 8.0)
     centres["study"] = (7.0, 7.9)
     spots: dict[str, list[Station]] = {}
-    for o in world.objects:
+    here = {o.object_id: o.position for o in world.objects}
+    for o in tuple(world.objects) + tuple(r for r in remembered if here.get(r.object_id) != r.position):
         if o.label_size > STATION_MAX_LABEL:
             continue  # big labels are read in passing; the operator stops for the small ones
         s = _view_spot(world, fs, o)
@@ -219,12 +225,14 @@ def household_trajectory(
     seed: int = 2,
     t0_ns: int = 1_700_000_000_000_000_000,
     start: tuple[float, float, float] = START_POSE,
+    remembered: tuple = (),
 ) -> Trajectory:
     """The true trajectory of the tour from ``start`` (x, y, yaw in map), looped or cut to ``duration_s`` (None:
-    exactly one tour), sampled at ``rate_hz``.
+    exactly one tour), sampled at ``rate_hz``; ``remembered``: the robot's map, whose places get stations too
+    (``plan_stations``).
 
     ``seed`` varies the operator's cruising speed per leg (0.3 m/s to ``V_MAX``) and the dwell times."""
-    P, T, t_end = _keyframes(world, seed, duration_s, start)
+    P, T, t_end = _keyframes(world, seed, duration_s, start, remembered)
     if duration_s is None:
         duration_s = t_end
     n = int(math.floor(duration_s * rate_hz)) + 1
@@ -243,7 +251,8 @@ def tour_duration_s(world: World, seed: int = 2) -> float:
 
 
 def _keyframes(world: World, seed: int, duration_s: float | None,
-               start: tuple[float, float, float] = START_POSE) -> tuple[np.ndarray, np.ndarray, float]:
+               start: tuple[float, float, float] = START_POSE, remembered: tuple = ()
+               ) -> tuple[np.ndarray, np.ndarray, float]:
     """Keyframe poses and times of the tour until ``duration_s`` (None: one tour) and the end time."""
     one_tour = duration_s is None
     limit = math.inf if duration_s is None else duration_s
@@ -252,7 +261,7 @@ def _keyframes(world: World, seed: int, duration_s: float | None,
     clear = fs.clearance
     weights = np.where(clear >= PLAN_CLEARANCE, 1.0 + 6.0 * np.clip(0.7 - clear, 0, None) / 0.4, np.inf)
     weights = np.ascontiguousarray(weights, dtype=np.float32)
-    stations = plan_stations(world, start)
+    stations = plan_stations(world, start, remembered)
     poses: list[np.ndarray] = [np.array([start], dtype=np.float64)]
     times: list[np.ndarray] = [np.array([0.0])]
     t = 0.0

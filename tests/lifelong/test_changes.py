@@ -26,12 +26,14 @@ def _robot_line(x0, x1, y, seconds):
 def test_statuses():
     stored = {"A": _state("A", (0, 0)), "B": _state("B", (5, 0)), "C": _state("C", (20, 20)),
               "D": _state("D", (9, 9)), "G": _state("G", (1, 1), status="gone"),
+              "H": _state("H", (2, 2), status="gone"),
               "E": _state("E", (3, 0), sigma=0.5)}
     located = {"A": _loc("A", (0.02, 0.0)), "B": _loc("B", (5.5, 0.0)), "N": _loc("N", (4, 4)),
-               "G": _loc("G", (1, 1)), "E": _loc("E", (3.4, 0.0), sigma=0.5)}
+               "G": _loc("G", (1, 1)), "E": _loc("E", (3.4, 0.0), sigma=0.5), "H": _loc("H", (2.0, 2.8))}
     t, xy = _robot_line(20.5, 22.0, 20.0, 30.0)  # 30 s on C's seen side, nothing else in view
     out = classify(stored, located, t, xy, None, ChangeConfig())
-    assert out == {"A": "seen", "B": "moved", "N": "new", "G": "new", "E": "seen", "C": "gone"}
+    # G and H were called gone and are located again: known by their labels, not new
+    assert out == {"A": "seen", "B": "moved", "N": "new", "G": "seen", "H": "moved", "E": "seen", "C": "gone"}
     # D (far away) keeps its state: no row
     stored["F"] = _state("F", (23.0, 20.0), view=(-1.0, 0.0))  # a second object in view: C gets half the camera
     t, xy = _robot_line(20.5, 22.0, 20.0, 12.0)

@@ -97,3 +97,64 @@ def test_images_of_the_empty_place_reach_holoslam_and_make_it_gone(day2_log):
     far = np.full((len(stamps), 2), 50.0)  # no time in view: the images alone decide
     assert classify(stored, {}, stamps, far, None, ChangeConfig(), None, images) == {GONE: "gone"}
     assert classify(stored, {}, stamps, far, None, ChangeConfig(), None, {GONE: 0, TURNED: 0}) == {}
+
+
+def _standing(seconds=14.0):
+    """The robot stands 1 m in front of the cup's place, facing it (a station near it), then the log ends."""
+    from holoslam.sim.world import reference_household
+
+    cup = reference_household().object(GONE)
+    stamps = 1_700_000_000_000_000_000 + np.arange(0, int(seconds * 20) + 1, dtype=np.int64) * 50_000_000
+    wTb = np.tile([cup.position[0], cup.position[1] - 1.0, math.pi / 2], (len(stamps), 1))
+    return stamps, wTb
+
+
+def _views_of(snaps):
+    """The snapshots as holoslam reads them from a log: stamps, base -> camera transforms, intrinsics, sizes."""
+    from holoslam.lifelong.frustum import CameraViews
+    from holoslam.sim.camera import camera_pose_world
+
+    bTc = np.repeat(np.eye(4)[None], len(snaps), 0)
+    for k, s in enumerate(snaps):
+        bTc[k, :3, :3], bTc[k, :3, 3] = camera_pose_world(np.zeros(3), s.pan, s.tilt)
+    return CameraViews(np.array([s.stamp_ns for s in snaps], np.int64), bTc, np.array([s.K for s in snaps]),
+                       np.repeat([[640.0, 480.0]], len(snaps), 0))
+
+
+def test_a_place_found_empty_is_looked_at_again_before_the_robot_leaves():
+    """The removed objects' places of the simulated days got one check where the robot stood at a station near
+    them and left before a point 0.5 m away (a label's second-view baseline): a place's second look needs no
+    baseline and comes before the labels never photographed, so two images hold it and it is gone."""
+    from holoslam.sim.sensors import camera_snapshots
+
+    day1, day2, _box, _s, _w = _two_days()
+    stamps, wTb = _standing()
+    snaps = camera_snapshots(day2, stamps, wTb, np.random.default_rng(3), render=False, remembered=day1.objects)
+    checks = [k for k, s in enumerate(snaps) if s.checked_id == GONE]
+    assert checks[:2] == [0, 1]  # the first image and, next, its second look (not the nearby labels first)
+    assert len(checks) == 2  # later ones only after resnap_s
+    targets = [s.target_id for s in snaps if s.target_id]
+    assert targets and len(targets) == len(set(targets))  # a label's second view still waits for 0.5 m
+    views = _views_of(snaps)
+    wTc = world_cameras(views, stamps, wTb)
+    cup = day1.object(GONE)
+    facing = np.array([math.cos(cup.label_yaw), math.sin(cup.label_yaw)])
+    n = covering_images(np.array(cup.position), facing, cup.payload, views, wTc, None, FrustumConfig())
+    assert n == 2
+    stored = {GONE: ObjectState(GONE, "cup", cup.payload, "seen", np.array(cup.position[:2]), cup.position[2],
+                                np.eye(2) * 1e-4, 2, f"{GONE}#1", view=facing)}
+    far = np.full((len(stamps), 2), 50.0)  # no time in view: the images alone decide
+    assert classify(stored, {}, stamps, far, None, ChangeConfig(), None, {GONE: n}) == {GONE: "gone"}
+
+
+def test_the_route_stops_in_front_of_the_places_of_its_map():
+    """A robot that checks on the objects of its map stops in front of a remembered place no object stands at
+    (the removed cup's) as in front of an object; an object still at its place keeps its one station, and a first
+    day (no map) has the stations of its objects only."""
+    from holoslam.sim.route import plan_stations
+
+    day1, day2, _box, _s, _w = _two_days()
+    ids = [s.object_id for s in plan_stations(day2, remembered=day1.objects) if s.object_id]
+    assert ids.count(GONE) == 1 and len(ids) == len(set(ids))
+    alone = [s.object_id for s in plan_stations(day2) if s.object_id]
+    assert GONE not in alone and sorted(alone + [GONE]) == sorted(ids)
