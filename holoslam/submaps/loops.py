@@ -187,6 +187,7 @@ class LoopSearch:
             # covariance 3.4 m / 14 deg; so the global search covers the whole old submap (``_global``)
             if self._is_global(wx, wy, wth):
                 globals_.append((m, seed, wx, wy, wth))
+            across = max(wx, wy) >= _LOST_M  # reached only across a break of local SLAM
             wx, wy = min(wx, c.max_window_xy), min(wy, c.max_window_xy)
             wth = min(wth, math.radians(c.max_window_deg))
             wxy = max(wx, wy)
@@ -202,7 +203,7 @@ class LoopSearch:
             searched += not wide
             # a weak match (``agree_min_score``) counts only with others from nodes min_separation_m apart: one
             # low-floor search of an old submap per that much travel (the lower floor prunes less: ~4x the cost)
-            weak = (c.agree_min_score > 0 and self.scale < 1.0 and travel is not None
+            weak = (c.agree_min_score > 0 and self.scale < 1.0 and travel is not None and not across
                     and travelled - self.last_weak.get(m, -np.inf) >= c.consistency.min_separation_m)
             if weak:
                 self.last_weak[m] = travelled

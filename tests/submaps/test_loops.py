@@ -163,6 +163,27 @@ def test_a_weak_match_closes_only_once_others_agree(household_place):
     assert math.hypot(e[0], e[1]) < 0.03 and 0.5 < found[2][0].score < 0.95
 
 
+def test_no_weak_match_is_sought_across_a_break_of_local_slam(household_place):
+    """Across a break (the robot carried, the log cut) the window cannot bound the estimate: a weak windowed match
+    there is an alias as likely as not, and three of them agreed on a wrong join of kidnapped aces (the parts
+    2.2 m apart on average, 70 m at most). Only the global search, with its map check, may join the parts."""
+    segs, grid, wTm, wTn, wTr = household_place
+    est = np.zeros((6, 3))
+    est[0], est[5] = wTm, wTn
+    nTr = g.between(wTn, wTr)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(4)))
+    rel_cov = np.zeros((6, 3, 3))
+    rel_cov[0] = np.diag([1e12, 1e12, math.pi ** 2])  # submap 0 reached only across a break
+    ls = LoopSearch(LoopConfig(min_score=0.95, min_score_wide=0.95, agree_min_score=0.5, max_per_pair=10),
+                    MatchConfig())
+    ls.add_submap(0, grid)
+    ls.scale = 0.99
+    for t in (0.0, 5.0, 10.0):
+        ls.search(5, nTr, np.eye(3) * 1e-6, b_pts, est, np.full(6, 2.0), t, rel_cov=rel_cov, travel=np.zeros(6))
+    assert ls.counts["windowed searches"] == 3
+    assert not any(k.startswith("windowed weak") or "weak, offered" in k for k in ls.counts), ls.counts
+
+
 # --- ambiguity: a second peak in the window ---
 
 
