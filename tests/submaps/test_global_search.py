@@ -44,13 +44,18 @@ def _room(res: float = 0.05):
     return p
 
 
-def test_a_scan_is_found_anywhere_in_the_whole_submap_at_any_heading():
-    res = 0.05
+def _room_scan(aTb: np.ndarray, res: float):
+    """The L-shaped room's grid and every third of its wall cells seen from pose ``aTb`` (base frame points)."""
     prob = _room(res)
     occ = np.argwhere(prob > 0.5)
     wall = np.column_stack([(occ[:, 1] + 0.5) * res, (occ[:, 0] + 0.5) * res])
+    return prob, g.transform_points(g.inverse(aTb), wall[::3])
+
+
+def test_a_scan_is_found_anywhere_in_the_whole_submap_at_any_heading():
+    res = 0.05
     aTb = np.array([4.0, 3.0, math.radians(137.0)])
-    b_pts = g.transform_points(g.inverse(aTb), wall[::3])
+    prob, b_pts = _room_scan(aTb, res)
     pre = bnb.precompute(pool_grid(prob, 4), 7, origin=(0.0, 0.0), res=4 * res)
     centre, wx, wy = clip_window(np.array([0.0, 0.0, 0.0]), 100.0, 100.0, (0.0, 0.0), pre.shape, pre.res)
     hit = coarse_match(pre, b_pts, centre, wx, wy, math.pi, 0.6, 15.0)
@@ -126,11 +131,8 @@ def test_a_global_match_turned_beyond_the_heading_window_is_dropped():
     from holoslam.submaps.scanmatch import MatchConfig
 
     res = 0.05
-    prob = _room(res)
-    occ = np.argwhere(prob > 0.5)
-    wall = np.column_stack([(occ[:, 1] + 0.5) * res, (occ[:, 0] + 0.5) * res])
     mTr = np.array([4.0, 3.0, math.radians(137.0)])
-    b_pts = g.transform_points(g.inverse(mTr), wall[::3])
+    prob, b_pts = _room_scan(mTr, res)
     ls = LoopSearch(LoopConfig(), MatchConfig())
     ls.add_submap(0, ProbGrid(prob, (0.0, 0.0), res))
     seed = np.array([5.0, 3.5, 0.0])
