@@ -15,6 +15,15 @@ standable place with a random heading; its odometry starts at the identity there
 is unknown to the log. ``days.json`` beside the logs holds per day the log, the start pose, the changes (before
 and after positions), every object's true position, the labels photographed and the remembered places checked.
 
+Before the objects change, ``furniture`` (lo, hi) pieces of free-standing furniture (``FURNITURE_MOVES`` by
+default) are carried to a new free place in their room, turned or not (``holoslam.sim.furniture_moves``: mostly
+chairs, a table or the armchair now and then, the sofa rarely; the route still drives), with the labels on them:
+each of those labels is a "moved" change of the day (they move at least ``MIN_MOVE_M``; any that moved less than
+``MOVED_M`` would not be) and is not changed again that day. ``days.json`` holds per day the pieces moved
+(``furniture``: footprint before and after, shift, turn, the labels on it). The furniture's draws have their own
+random stream, so the objects' draws of a seed are those of a household whose furniture stays put up to the first
+day a piece moves (from then on the free spots on the surfaces, and so the draws' outcomes, differ).
+
 The robot checks on the objects it knows: from day 2 its route also stops in front of the places of the objects of
 its map that no object of the day stands at (``route.plan_stations``), and its camera aims at those places
 (``sensors.camera_snapshots``' ``remembered``). The simulator stands the day before's true objects in for that map
@@ -29,16 +38,21 @@ from typing import Any
 
 import numpy as np
 
+from holoslam.sim.furniture_moves import FurnitureChange, move_furniture
 from holoslam.sim.world import World, WorldObject
 
 __all__ = ["DayChange", "Day", "household_days", "simulate_days", "SURFACES", "MIN_MOVE_M", "MIN_SPACING_M", "NEW_KINDS",
-           "DAY_NS"]
+           "DAY_NS", "MOVED_M", "FURNITURE_MOVES"]
 
 # the furniture objects are put on (tables, counters, desk, nightstands, cabinet, TV stand, sofa, beds...)
 SURFACES = ("coffee_table", "tv_stand", "balcony_table", "counter", "cabinet", "dining_table", "nightstand_1",
             "nightstand_2", "desk", "sofa", "armchair", "bed_1", "bed_2", "washing_machine")
 MIN_MOVE_M = 0.6  # m: a moved object lands this far from its place at least (twice the 0.3 m "moved")
 MIN_SPACING_M = 0.4  # m between two labels (two cups side by side still read apart)
+MOVED_M = 0.3  # m: a label that moved more is a "moved" change (the change detection's and benchmark's threshold)
+# pieces of furniture moved before each later day, drawn uniformly from (lo, hi): one a day on average, mostly a
+# chair (holoslam.sim.furniture_moves.MOVABLE), so a chair moves on about two days of three and the sofa rarely
+FURNITURE_MOVES = (0, 2)
 NEW_KINDS = (("cup", 60, "g=handle,m=0.3"), ("book", 50, "g=side,m=0.6"), ("remote", 50, "g=top,m=0.2"),
              ("phone", 50, "g=side,m=0.2"), ("bottle", 60, "g=side,m=1.0"), ("toy", 60, "g=top,m=0.4"))
 DAY_NS = 86_400 * 10**9
@@ -47,28 +61,34 @@ DAY_NS = 86_400 * 10**9
 @dataclass(frozen=True, slots=True)
 class DayChange:
     """One change before ``day``: ``kind`` moved / removed / added, label centres before and after (None when
-    absent)."""
+    absent); ``furniture``: the piece of furniture the label moved with (None: the object itself was moved)."""
 
     day: int
     object_id: str
     kind: str
     before: tuple[float, float, float] | None
     after: tuple[float, float, float] | None
+    furniture: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"day": self.day, "id": self.object_id, "change": self.kind,
-                "before": None if self.before is None else list(self.before),
-                "after": None if self.after is None else list(self.after)}
+        d = {"day": self.day, "id": self.object_id, "change": self.kind,
+             "before": None if self.before is None else list(self.before),
+             "after": None if self.after is None else list(self.after)}
+        if self.furniture is not None:
+            d["with"] = self.furniture
+        return d
 
 
 @dataclass(frozen=True, eq=False)
 class Day:
-    """One day: its world, the start pose (x, y, yaw in map) and the changes made before it."""
+    """One day: its world, the start pose (x, y, yaw in map), the changes of objects made before it (those moved
+    with a piece of furniture included) and the furniture moved before it."""
 
     day: int
     world: World
     start: tuple[float, float, float]
     changes: tuple[DayChange, ...]
+    furniture: tuple[FurnitureChange, ...] = ()
 
 
 def _spots(world: World, fs: Any) -> list[tuple[str, tuple[float, float, float], float]]:
@@ -117,13 +137,14 @@ def _label(oid: str, kind: str, mm: int, attrs: str) -> str:
     return encode_label(ObjectLabel(oid, kind, pairs))
 
 
-def _change_day(rng: np.random.Generator, day: int, world: World, spots: list, n_changes: int, next_id: int
-                ) -> tuple[World, tuple[DayChange, ...], int]:
-    """The world of ``day`` from the day before's, with ``n_changes`` changes."""
+def _change_day(rng: np.random.Generator, day: int, world: World, spots: list, n_changes: int, next_id: int,
+                done: tuple[DayChange, ...] = ()) -> tuple[World, tuple[DayChange, ...], int]:
+    """The world of ``day`` from the day before's, with ``n_changes`` changes after ``done`` (the labels moved with
+    the furniture: not changed again)."""
     from holoslam.sim.route import STATION_MAX_LABEL
 
     objs = list(world.objects)
-    changes: list[DayChange] = []
+    changes: list[DayChange] = list(done)
     for _ in range(n_changes):
         kind = ("moved", "removed", "added")[int(rng.choice(3, p=[0.5, 0.3, 0.2]))]
         small = [k for k, o in enumerate(objs) if o.label_size <= STATION_MAX_LABEL
@@ -168,13 +189,27 @@ def _start(rng: np.random.Generator, fs: Any) -> tuple[float, float, float]:
     return (round(float(xy[0]), 3), round(float(xy[1]), 3), round(float(rng.uniform(-math.pi, math.pi)), 4))
 
 
-def household_days(days: int, seed: int = 0, changes: tuple[int, int] = (5, 10)) -> tuple[Day, ...]:
-    """``days`` days of the reference household (module docstring); ``changes`` (lo, hi): changes per day, drawn
-    uniformly. Deterministic for a seed."""
+def _carried(day: int, before: World, after: World, moves: tuple[FurnitureChange, ...]) -> tuple[DayChange, ...]:
+    """The labels carried with the moved furniture as "moved" changes (those that moved more than ``MOVED_M``)."""
+    out = []
+    for m in moves:
+        for oid in m.objects:
+            a, b = before.object(oid).position, after.object(oid).position
+            if math.dist(a[:2], b[:2]) > MOVED_M:
+                out.append(DayChange(day, oid, "moved", a, b, m.name))
+    return tuple(out)
+
+
+def household_days(days: int, seed: int = 0, changes: tuple[int, int] = (5, 10),
+                   furniture: tuple[int, int] = FURNITURE_MOVES) -> tuple[Day, ...]:
+    """``days`` days of the reference household (module docstring); ``changes`` (lo, hi): changes of small objects
+    per day, ``furniture`` (lo, hi): pieces of furniture moved per day, each drawn uniformly. Deterministic for a
+    seed."""
     from holoslam.sim.route import START_POSE
     from holoslam.sim.world import free_space, reference_household
 
     rng = np.random.default_rng(np.random.SeedSequence([seed, 2701]))
+    rng_f = np.random.default_rng(np.random.SeedSequence([seed, 2702]))  # the furniture's own stream
     world = reference_household()
     fs = free_space(world, resolution=0.05)
     spots = _spots(world, fs)
@@ -182,8 +217,12 @@ def household_days(days: int, seed: int = 0, changes: tuple[int, int] = (5, 10))
     next_id = len(world.objects) + 1
     for d in range(2, days + 1):
         n = int(rng.integers(changes[0], changes[1] + 1))
-        world, ch, next_id = _change_day(rng, d, world, spots, n, next_id)
-        out.append(Day(d, world, _start(rng, fs), ch))
+        moved, moves = move_furniture(rng_f, d, world, int(rng_f.integers(furniture[0], furniture[1] + 1)))
+        if moves:  # the surfaces' free edges and the standable places are those of the new arrangement
+            fs = free_space(moved, resolution=0.05)
+            spots = _spots(moved, fs)
+        world, ch, next_id = _change_day(rng, d, moved, spots, n, next_id, _carried(d, world, moved, moves))
+        out.append(Day(d, world, _start(rng, fs), ch, moves))
     return tuple(out)
 
 
@@ -199,7 +238,8 @@ def _checks(snapshots: Any) -> dict[str, list[int]]:
 
 
 def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | None = None,
-                  changes: tuple[int, int] = (5, 10), config: Any = None) -> dict[str, Any]:
+                  changes: tuple[int, int] = (5, 10), config: Any = None,
+                  furniture: tuple[int, int] = FURNITURE_MOVES) -> dict[str, Any]:
     """Write ``day_01.mcap`` ... and ``days.json`` (the ground truth of every change) into ``out_dir`` (created);
     each day a ``SimConfig`` run (``config``, default settings) with seed ``seed + day``, ``duration_s`` of
     robot time (None: one whole tour), its own start pose and its stamps a day after the day before's. Returns
@@ -215,7 +255,7 @@ def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | No
     base = config or SimConfig()
     summary: dict[str, Any] = {"format": "holoslam-days-1", "seed": seed, "days": []}
     remembered: tuple = ()  # the robot's map: the day before's objects where they stood (module docstring)
-    for day in household_days(days, seed, changes):
+    for day in household_days(days, seed, changes, furniture):
         cfg = replace(base, seed=seed + day.day, duration_s=duration_s)
         run = simulate_household(cfg, world=day.world, start_pose=day.start, t0_ns=T0_NS + (day.day - 1) * DAY_NS,
                                  remembered=remembered)
@@ -225,6 +265,7 @@ def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | No
         summary["days"].append({
             "day": day.day, "log": name, "start_pose": list(day.start),
             "changes": [c.to_dict() for c in day.changes],
+            "furniture": [m.to_dict() for m in day.furniture],
             "objects": {o.object_id: list(o.position) for o in day.world.objects},
             "photographed": sorted({i for s in run.snapshots for i in s.visible_ids}),
             "checked": _checks(run.snapshots)})
