@@ -23,10 +23,13 @@ def cmd_simulate(a: argparse.Namespace) -> int:
         return EXIT_OK
 
     if a.days is not None:
-        days = simulate_days(a.output, a.days, seed=a.seed, duration_s=a.duration, changes=tuple(a.changes))
+        days = simulate_days(a.output, a.days, seed=a.seed, duration_s=a.duration, changes=tuple(a.changes),
+                             furniture=None if a.furniture is None else tuple(a.furniture))
         print(_json(days) if a.json else "\n".join(
             f"day {d['day']}: {a.output / d['log']}, start {d['start_pose']}, changes: "
-            + (", ".join(f"{c['id']} {c['change']}" for c in d["changes"]) or "none") for d in days["days"]))
+            + (", ".join(f"{c['id']} {c['change']}" for c in d["changes"]) or "none")
+            + "".join(f"; {m['name']} moved {m['shift_m']:.2f} m, turned {m['turn_deg']:.0f} deg"
+                      for m in d["furniture"]) for d in days["days"]))
         return EXIT_OK
 
     summary = simulate(

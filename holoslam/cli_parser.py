@@ -135,12 +135,15 @@ def _add_simulate(sub: Any) -> None:
     s.add_argument("--sizeless-labels", type=int, default=0, help="labels printed without their size (0-8)")
     s.add_argument("--days", type=int, default=None, metavar="N",
                    help="N days of the household into the folder -o: objects moved, removed and added between days, "
-                   "a different start each day, the truth in days.json (holoslam.sim.days)")
+                   "furniture moved, a different start each day, the truth in days.json (holoslam.sim.days)")
     s.add_argument("--building", action="store_true",
                    help="a large building instead of the household: a 350 m floor of long corridors and 300+ rooms, "
                    "a 1.4 Hz 180-beam laser, 80 minutes unless --duration (holoslam.sim.building)")
     s.add_argument("--changes", type=int, nargs=2, default=[5, 10], metavar=("LO", "HI"),
                    help="with --days: changes per day, drawn from LO..HI (default 5 10)")
+    s.add_argument("--furniture", type=int, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="with --days: pieces of furniture moved per day, drawn from LO..HI (default 0 2: mostly "
+                   "chairs; holoslam.sim.furniture_moves)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_simulate)
 

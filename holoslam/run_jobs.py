@@ -203,8 +203,10 @@ def simulate_building(output: str | Path, seed: int = 26, duration_s: float | No
 
 
 def simulate_days(output: str | Path, days: int, seed: int = 0, duration_s: float | None = None,
-                  changes: tuple[int, ...] = (5, 10)) -> dict[str, Any]:
-    """``days`` simulated days of the household into the folder ``output`` (``holoslam.sim.days``)."""
+                  changes: tuple[int, ...] = (5, 10), furniture: tuple[int, ...] | None = None) -> dict[str, Any]:
+    """``days`` simulated days of the household into the folder ``output`` (``holoslam.sim.days``); ``furniture``
+    (lo, hi): pieces of furniture moved per day (None: ``days.FURNITURE_MOVES``)."""
+    from holoslam.sim.days import FURNITURE_MOVES
     from holoslam.sim.days import simulate_days as _days
 
     if not 1 <= days <= 1000:
@@ -213,7 +215,11 @@ def simulate_days(output: str | Path, days: int, seed: int = 0, duration_s: floa
         raise ConfigError(f"--changes LO HI must satisfy 0 <= LO <= HI <= 20, got {list(changes)}")
     if duration_s is not None and not duration_s > 0:
         raise ConfigError(f"--duration must be a positive number of seconds, got {duration_s}")
-    return _days(output, days, seed=seed, duration_s=duration_s, changes=(int(changes[0]), int(changes[1])))
+    furniture = FURNITURE_MOVES if furniture is None else furniture
+    if len(furniture) != 2 or not 0 <= furniture[0] <= furniture[1] <= 5:
+        raise ConfigError(f"--furniture LO HI must satisfy 0 <= LO <= HI <= 5, got {list(furniture)}")
+    return _days(output, days, seed=seed, duration_s=duration_s, changes=(int(changes[0]), int(changes[1])),
+                 furniture=(int(furniture[0]), int(furniture[1])))
 
 
 def plan_to_object(
