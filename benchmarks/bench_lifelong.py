@@ -1,7 +1,7 @@
 """Lifelong household maps (issue 27): relocalisation, joining, object change detection and growth of a map store.
 
     .venv/bin/python benchmarks/bench_lifelong.py [--parts sim real growth] [--days 10] [--duration S]
-        [--logs intel aces fr079] [--growth-days 30] [--growth-duration S] [--out DIR]
+        [--furniture LO HI] [--logs intel aces fr079] [--growth-days 30] [--growth-duration S] [--out DIR]
 
 ``sim``: ``--days`` simulated days of the household (``holoslam.sim.days``: 5-10 changes a day, a new start
 each day), each day's log run into one store (``holoslam.lifelong.session.run_session``, what
@@ -11,7 +11,11 @@ object the store did not know before and sees for the first time counts as a fal
 added), the unchanged objects' position RMSE in the world (world -> map by day 1's start pose, the store's frame)
 against the same day's single-session result (the session's own solve, moved to the map by the true start
 pose), and the joint solve of the last day re-solved by batch LM and by iSAM2 over the whole graph (median of 3,
-interleaved, and the largest anchor difference).
+interleaved, and the largest anchor difference). For every piece of furniture moved before a day
+(``holoslam.sim.furniture_moves``), the store's merged map (``holoslam.lifelong.export.merged_map``) before and after
+that day's session: the share of the old footprint's edge cells it no longer holds occupied and of the new
+footprint's it holds occupied (``holoslam.evaluate_footprints``; the truth put in the store's world by the map's
+frame fitted to the unchanged objects so far, as below).
 
 ``real``: each shared real log (../shared/realdata) cut into 3 equal windows in memory; the 2nd and 3rd have
 their odometry moved by a hidden transform (metres, any heading) and no pose prior; each window run into a
@@ -122,17 +126,80 @@ def _print_changes(counts: dict, gone_fair: list, unseen_new: int) -> None:
               f"precision {tp / max(nd - unseen_new, 1):.3f}")
 
 
-def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: dict | None = None) -> None:
+def _store_map(store: Path):
+    """The store's merged map now (what ``holoslam export`` pictures)."""
+    from holoslam.lifelong.export import merged_map
+    from holoslam.store.db import MapStore
+
+    with MapStore.open(store, create=False) as s:
+        return merged_map(s.submaps(working=True, grids=True))
+
+
+def _truth_to_world(detail: list, w2m) -> np.ndarray:
+    """The map frame's pose in the store's world: day 1's true start, corrected by the SE(2) fitted to the unchanged
+    objects located so far (``_aligned``: the store's frame is the first session's, centimetres off the truth)."""
+    from holoslam import geometry as g
+    from holoslam.relocalise import fit_se2
+
+    a = np.array([v for x in detail for v in x["xy_store"].values()], float).reshape(-1, 4)
+    T = fit_se2(a[:, :2], a[:, 2:]) if len(a) >= 3 else np.zeros(3)  # store's map xy -> true map xy
+    return g.compose(g.inverse(np.asarray(w2m, float)), g.inverse(T))
+
+
+def _furniture(day, before, store: Path, wTm, rows: list) -> None:
+    """Per piece moved before ``day`` (a ``holoslam.sim.days.Day``): the footprint shares on the store's merged map
+    ``before`` the day's session and after it (and the day's own map), added to ``rows`` and printed."""
+    from holoslam.evaluate_footprints import footprint_shares
+    from holoslam.lifelong.export import merged_map
+    from holoslam.store.db import MapStore
+
+    with MapStore.open(store, create=False) as s:
+        subs = s.submaps(working=True, grids=True)
+    last = max(x.session_id for x in subs)
+    after, own = merged_map(subs), merged_map([x for x in subs if x.session_id == last])
+    for m in day.furniture:
+        a = footprint_shares(before, after, m, day.world, wTm, own)
+        rows.append({"day": day.day, "name": m.name, "shift_m": m.shift_m, "turn_deg": float(np.degrees(m.turn_rad)),
+                     **dataclasses.asdict(a)})
+        print(f"     {m.name} moved {m.shift_m:.2f} m, turned {np.degrees(m.turn_rad):.0f} deg: old edge "
+              f"{a.old_cells} cells, {a.old_held} held occupied before, freed {a.old_freed:.2f} ({a.old_seen} seen "
+              f"by the day: freed {a.old_freed_seen:.2f}); new edge {a.new_cells} cells, occupied "
+              f"{a.new_occupied:.2f}, free {a.new_free:.2f} ({a.new_seen} seen by the day: occupied "
+              f"{a.new_occupied_seen:.2f})")
+
+
+def _print_furniture(rows: list) -> None:
+    if not rows:
+        print("furniture: no piece moved on these days")
+        return
+
+    def pooled(n: str, f: str) -> str:  # the shares over every piece's cells
+        k = np.array([r[n] for r in rows], float)
+        v = np.array([r[f] for r in rows], float)
+        ok = k > 0
+        return f"{np.sum(k[ok] * v[ok]) / max(np.sum(k[ok]), 1):.3f} of {int(k.sum())}"
+
+    print(f"furniture moved: {len(rows)} pieces; old edge cells held occupied before the day and freed after: "
+          f"{pooled('old_held', 'old_freed')} ({pooled('old_seen', 'old_freed_seen')} of those the day saw); new "
+          f"edge cells occupied after {pooled('new_cells', 'new_occupied')}, free {pooled('new_cells', 'new_free')} "
+          f"(occupied {pooled('new_seen', 'new_occupied_seen')} of those the day saw)")
+
+
+def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: dict | None = None,
+             furniture: tuple[int, int] | None = None) -> None:
     from holoslam.lifelong.session import LifelongConfig, run_session
     from holoslam.sim.days import household_days, simulate_days
 
     if not (out / "days.json").exists():
-        simulate_days(out, days, seed=seed, duration_s=duration)
+        simulate_days(out, days, seed=seed, duration_s=duration, **({"furniture": furniture} if furniture else {}))
     truth = json.loads((out / "days.json").read_text())
     store = out / "home.holomap"
     store.unlink(missing_ok=True)
     w2m = truth["days"][0]["start_pose"]
-    worlds = [d.world for d in household_days(len(truth["days"]), truth["seed"])]
+    sim_days = household_days(len(truth["days"]), truth["seed"], tuple(truth.get("changes", (5, 10))),
+                              tuple(truth.get("furniture_moves", (0, 0))))
+    worlds = [d.world for d in sim_days]
+    furniture_rows: list = []
     counts = {k: [0, 0, 0] for k in KINDS.values()}  # true positives, detected, true
     # "gone" scored by what the robot could know: a detected gone is right when the object is not in the home
     # that day (removed that day or before, and not yet detected); a removal counts for recall when the simulated
@@ -144,6 +211,7 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: 
     unseen_new = 0  # "new" objects there from the start that no earlier session had located (not a change)
     print("day  joined by       reloc s  run s   changes (truth | detected)")
     for d in truth["days"]:
+        before = _store_map(store) if sim_days[d["day"] - 1].furniture else None
         t0 = time.perf_counter()
         r = run_session(out / d["log"], store, lifelong=LifelongConfig(**(lifelong or {})))
         run_s = time.perf_counter() - t0
@@ -172,9 +240,13 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: 
                        "unseen_in_images": s.unseen_in_images, "checked": d.get("checked", {}),
                        "err_store_m": e_life, "err_single_m": e_single, "xy_store": p_life, "xy_single": p_single,
                        "reloc_s": s.relocalisation_s, "run_s": run_s, "joined_by": s.joined_by})
+        if before is not None:
+            _furniture(sim_days[d["day"] - 1], before, store, _truth_to_world(detail, w2m), furniture_rows)
         (out / "sim_detail.json").write_text(json.dumps(detail, indent=1))
+        (out / "sim_furniture.json").write_text(json.dumps(furniture_rows, indent=1))
         last = r
     _print_changes(counts, gone_fair, unseen_new)
+    _print_furniture(furniture_rows)
     rm = lambda e: float(np.sqrt(np.mean(np.square(e)))) if e else float("nan")  # noqa: E731
     per_day = [(x["day"], rm(list(x["err_store_m"].values())), rm(list(x["err_single_m"].values()))) for x in detail]
     print("unchanged objects per day, RMSE mm (store | that day alone): " +
@@ -424,6 +496,8 @@ def main() -> None:
     ap.add_argument("--days", type=int, default=10)
     ap.add_argument("--duration", type=float, default=None, help="s of each simulated day (default: a whole tour)")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--furniture", type=int, nargs=2, default=None, metavar=("LO", "HI"),
+                    help="sim: pieces of furniture moved per day (default holoslam.sim.days.FURNITURE_MOVES)")
     ap.add_argument("--logs", nargs="+", default=["intel", "aces", "fr079"])
     ap.add_argument("--compare-search", action="store_true",
                     help="real: each session's relocalisation also by the full-resolution search (3 runs each, slow)")
@@ -439,7 +513,7 @@ def main() -> None:
         d.mkdir(parents=True, exist_ok=True)
         print(f"\n== {part} ({d})")
         if part == "sim":
-            sim_part(d, a.days, a.duration, a.seed, a.lifelong)
+            sim_part(d, a.days, a.duration, a.seed, a.lifelong, a.furniture and tuple(a.furniture))
         elif part == "real":
             real_part(d, a.logs, a.compare_search, a.lifelong)
         elif part == "wrong":

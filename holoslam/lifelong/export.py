@@ -13,7 +13,8 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.store.records import ObjectState, ObjectStatus
 
-__all__ = ["StoreExport", "ObjectHistory", "store_export", "object_history", "session_trajectories", "where_now"]
+__all__ = ["StoreExport", "ObjectHistory", "store_export", "object_history", "session_trajectories", "where_now",
+           "merged_map"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,19 +110,26 @@ def where_now(ex: StoreExport, object_id: str) -> dict[str, Any]:
     return out
 
 
+def merged_map(subs: Any) -> Any:
+    """The merged grid (``holoslam.lifelong.merge.MergedGrid``) of stored submaps with their grids (a store's
+    working ones: ``MapStore.submaps(working=True, grids=True)``), each in the world by its anchor."""
+    from holoslam.lifelong.merge import merge_submaps
+
+    return merge_submaps(np.array([s.wTa for s in subs]).reshape(-1, 3),
+                         [(s.prob, s.known, s.origin, s.resolution) for s in subs], [s.session_id for s in subs])
+
+
 def store_export(store_path: str | Path, maps: bool = True, config: Any = None) -> StoreExport:
     """Everything ``holoslam export STORE`` writes, computed (nothing written here); ``maps``: with the
     holographic and planning graphs of the merged map (``config``: their settings, a ``RunConfig``)."""
-    from holoslam.lifelong.merge import merge_submaps, to_occupancy_grid
+    from holoslam.lifelong.merge import to_occupancy_grid
     from holoslam.maps.settings import TopologyConfig
     from holoslam.maps.topology import topology_from_settings
     from holoslam.store.db import MapStore
 
     with MapStore.open(store_path, create=False) as store:
         subs = store.submaps(working=True, grids=True)
-        merged = merge_submaps(np.array([s.wTa for s in subs]).reshape(-1, 3),
-                               [(s.prob, s.known, s.origin, s.resolution) for s in subs], [s.session_id for s in subs])
-        grid = to_occupancy_grid(merged)
+        grid = to_occupancy_grid(merged_map(subs))
         topology = topology_from_settings(grid, TopologyConfig(), anchors_wTa=np.array([s.wTa for s in subs]))
         latest = store.latest_objects()
         holo, planning = _maps(grid, topology, subs, latest, config) if maps else (None, None)

@@ -253,7 +253,8 @@ def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | No
 
     out = prepare_output_folder(Path(out_dir))
     base = config or SimConfig()
-    summary: dict[str, Any] = {"format": "holoslam-days-1", "seed": seed, "days": []}
+    summary: dict[str, Any] = {"format": "holoslam-days-1", "seed": seed, "changes": list(changes),
+                               "furniture_moves": list(furniture), "days": []}
     remembered: tuple = ()  # the robot's map: the day before's objects where they stood (module docstring)
     for day in household_days(days, seed, changes, furniture):
         cfg = replace(base, seed=seed + day.day, duration_s=duration_s)
