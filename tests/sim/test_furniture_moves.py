@@ -119,3 +119,14 @@ def test_days_json_holds_the_moved_furniture(tmp_path):
     moved = {c["id"]: c for c in truth["days"][1]["changes"] if c.get("with") == m["name"]}
     assert set(moved) == set(m["objects"])
     assert all(truth["days"][1]["objects"][k] == c["after"] for k, c in moved.items())
+
+
+def test_the_command_line_moves_furniture(tmp_path, capsys):
+    from holoslam.cli import main
+
+    assert main(["simulate", "--days", "2", "--duration", "3", "--seed", "2", "--furniture", "1", "1",
+                 "-o", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    assert "day 2:" in out and " moved " in out and " deg" in out
+    assert json.loads((tmp_path / "d" / "days.json").read_text())["furniture_moves"] == [1, 1]
+    assert main(["simulate", "--days", "2", "--furniture", "2", "1", "-o", str(tmp_path / "e")]) != 0
