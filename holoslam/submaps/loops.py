@@ -399,7 +399,8 @@ class LoopSearch:
         coarse over the whole of m's grid at every heading (the window only chose m as a target: it may be too
         small, ``search``), fine around the coarse best, second peaks kept in the covariance, refinement; a match
         turned from the ``seed`` by more than the window's heading ``wth`` is dropped
-        (``global_within_heading_window``). The closure or None, and the outcome's reasons to count; reads the
+        (``global_within_heading_window``), and one further from it than ``global_window_ratio`` times the window
+        (``global_ambiguous_window_ratio`` when it has second peaks). The closure or None, and the outcome's reasons to count; reads the
         search's state only."""
         from holoslam.submaps.global_search import clip_window, coarse_match
 
@@ -422,6 +423,9 @@ class LoopSearch:
             return None, reasons + ["global: turned beyond the heading window"]
         peaks = win.second_peaks(hit, margin, c.ambiguity_exclude_xy,
                                  math.radians(c.ambiguity_exclude_deg), c.global_ambiguity_peaks)
+        ratio = max(abs(hit.aTb[0] - seed[0]) / max(wx, 1e-9), abs(hit.aTb[1] - seed[1]) / max(wy, 1e-9))
+        if ratio > (c.global_ambiguous_window_ratio if peaks else c.global_window_ratio):
+            return None, reasons + ["global: ambiguous beyond the window" if peaks else "global: beyond the window"]
         if peaks:
             reasons.append("global: ambiguous, kept with the peaks' spread")
         cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, min_score, max(wx, wy))

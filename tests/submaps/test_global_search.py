@@ -146,3 +146,26 @@ def test_a_global_match_turned_beyond_the_heading_window_is_dropped():
     gated = LoopSearch(LoopConfig(global_within_heading_window=False), MatchConfig())
     gated.add_submap(0, ProbGrid(prob, (0.0, 0.0), res))
     assert gated._global(gated._coarse(0), gated._precomputed(0), *args[2:], math.radians(40.0))[0] is not None
+
+
+def test_a_global_match_far_beyond_the_position_window_is_dropped():
+    """The global search covers the whole old submap, but a match must lie within ``global_window_ratio`` times the
+    window of the seed: the right pose, 3 m from a seed (x) whose window says +-1 m (3x), is not a closure; with a
+    window of +-2.5 m (1.2x) it is. In a building of identical corridors and rooms the aliases lay 3-11x their window
+    away."""
+    from holoslam.submaps.loops import LoopConfig, LoopSearch
+    from holoslam.submaps.probgrid import ProbGrid
+    from holoslam.submaps.scanmatch import MatchConfig
+
+    res = 0.05
+    mTr = np.array([4.0, 3.0, math.radians(20.0)])
+    prob, b_pts = _room_scan(mTr, res)
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls.add_submap(0, ProbGrid(prob, (0.0, 0.0), res))
+    seed = np.array([1.0, 2.0, math.radians(20.0)])  # 3.0 m off in x, 1.0 m in y
+    head = (ls._coarse(0), ls._precomputed(0), 0, 5, np.zeros(3), np.diag([1e-6, 1e-6, 1e-8]), b_pts, b_pts, seed)
+    cand, reasons = ls._global(*head, 1.0, 1.0, math.radians(30.0))
+    assert cand is None and reasons[-1] in ("global: beyond the window", "global: ambiguous beyond the window")
+    cand, reasons = ls._global(*head, 2.5, 2.5, math.radians(30.0))
+    assert cand is not None, reasons
+    assert np.hypot(*(cand.mTn[:2] - mTr[:2])) < 0.1
