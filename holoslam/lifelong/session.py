@@ -197,9 +197,12 @@ def place_session(store: Any, st: Any, lc: LifelongConfig, log: Any = None, fron
 
 
 def _founding(st: Any, sTa: np.ndarray, sobj: dict) -> _Placed:
+    """The first joined session: its frame is the world; each object with the side it was seen from (the view
+    tests of later sessions, ``changes`` and ``frustum``, need it as for an object of any other session)."""
     cov = None if st.sol.cov_wTa is None else np.asarray(st.sol.cov_wTa)
+    views = _located(st, sobj, np.zeros(3), None)
     objs = tuple(ObjectState(k, o.object_type, o.payload, ObjectStatus.NEW, xy, float(o.w_position[2]), c,
-                             int(o.sightings), f"{k}#1") for k, (xy, c, o) in sobj.items())
+                             int(o.sightings), f"{k}#1", view=views[k].view) for k, (xy, c, o) in sobj.items())
     return _Placed(sTa, cov, np.zeros(3), None, objs, {k: f"{k}#1" for k in sobj}, {}, (), (), None)
 
 
@@ -214,7 +217,7 @@ def _robot_world(st: Any, wTs: np.ndarray) -> np.ndarray:
     return g.compose(np.broadcast_to(wTs, st.traj.wTb.shape), st.traj.wTb)[:, :2]
 
 
-def _located(st: Any, sobj: dict, wTs: np.ndarray, cov_wTs: np.ndarray) -> dict[str, Located]:
+def _located(st: Any, sobj: dict, wTs: np.ndarray, cov_wTs: np.ndarray | None) -> dict[str, Located]:
     """The session's objects in the world under the relocalisation's wTs, with the side each was seen from."""
     w = {k: to_world(xy, c, wTs, cov_wTs) for k, (xy, c, _o) in sobj.items()}
     obs = st.seen.observations
