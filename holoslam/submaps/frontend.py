@@ -257,7 +257,8 @@ def _local_slam(
 ) -> tuple[list[Submap], AnchorGraph, LoopSearch]:
     """Steps 2-3: local SLAM over the scans and the revisit search; returns the finished submaps (by index), the
     relative-pose graph between their anchors and the loop search (its counts)."""
-    slam = LocalSlam(cfg.local, run.bTs)
+    grid = cfg.local.grid.for_rate(scan_rate_hz(np.array([s.stamp_ns for s in run.scans], np.int64)))
+    slam = LocalSlam(replace(cfg.local, grid=grid), run.bTs)
     loops = LoopSearch(cfg.loops, cfg.local.match)
     graph = AnchorGraph(run.dr_wTb[0])
     records: list[Future[Submap]] = []
@@ -359,6 +360,17 @@ def _problem(
                           headings=headings if headings is not None else HeadingMeasurements.empty(),
                           landmarks=landmarks, initial_wTa=init, initial_landmarks=init_lm, stamps_ns=anchors)
     return problem, skipped, drop
+
+
+def scan_rate_hz(stamps_ns: np.ndarray, span: int = 10) -> float:
+    """The laser's scan rate (Hz): the inverse of the median period over ``span`` consecutive scans, which
+    neither stops (a gap) nor bursts of stamps (intel's log stamps scans in bursts 1 ms apart) move; 0 for fewer
+    than span + 1 scans."""
+    t = np.asarray(stamps_ns, np.int64)
+    if len(t) <= span:
+        return 0.0
+    period = float(np.median((t[span:] - t[:-span]).astype(np.float64))) / span / 1e9
+    return 1.0 / period if period > 0 else 0.0
 
 
 def _headings(hst, hyaw, hsig, anchors):

@@ -402,3 +402,14 @@ def test_the_anchors_are_re_solved_only_for_a_closure_the_estimate_contradicts()
     assert not G.disagree([agrees], min_d2)
     assert G.disagree([agrees, contradicts], min_d2)
     assert G.disagree([agrees], 0.0)  # 0: always re-solved
+
+
+def test_the_scan_rate_ignores_bursts_of_stamps_and_stops():
+    """``scan_rate_hz``: 5 Hz scans, some stamped in bursts 1 ms apart (as intel's log) and a 60 s stop: 5 Hz."""
+    from holoslam.submaps.frontend import scan_rate_hz
+
+    t = np.arange(600) * 0.2
+    t[100:110] = t[100] + np.arange(10) * 0.001  # a burst, then the next scans at their times
+    t[300:] += 60.0  # a stop
+    assert scan_rate_hz((t * 1e9).astype(np.int64)) == pytest.approx(5.0, rel=0.02)
+    assert scan_rate_hz(np.arange(5, dtype=np.int64)) == 0.0

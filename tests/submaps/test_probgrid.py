@@ -132,3 +132,24 @@ def test_freeze_crops_to_the_known_cells():
     # an empty builder freezes to an empty grid
     empty = GridBuilder(CFG).freeze()
     assert empty.prob.size == 0 and empty.known_bounds()[0] == empty.known_bounds()[2]
+
+
+def test_a_slower_laser_gets_stronger_odds_updates():
+    """``GridConfig.for_rate``: at or above the reference rate the settings are kept; a laser at a quarter of it gets
+    four times the log-odds of a hit and of a miss, so a wall gathers the same evidence per metre travelled."""
+    import math
+
+    from holoslam.submaps.probgrid import GridConfig
+
+    cfg = GridConfig()
+    assert cfg.for_rate(cfg.reference_rate_hz) is cfg and cfg.for_rate(10.0) is cfg and cfg.for_rate(0.0) is cfg
+    slow = cfg.for_rate(cfg.reference_rate_hz / 4)
+
+    def logit(p):
+        return math.log(p / (1 - p))
+
+    assert logit(slow.hit_probability) == pytest.approx(4 * logit(cfg.hit_probability), rel=1e-12)
+    assert logit(slow.miss_probability) == pytest.approx(4 * logit(cfg.miss_probability), rel=1e-12)
+    assert 0.69 < slow.hit_probability < 0.70 and 0.46 < slow.miss_probability < 0.47
+    off = GridConfig(reference_rate_hz=0.0)
+    assert off.for_rate(1.0) is off
