@@ -264,8 +264,9 @@ def global_match(stored, points: np.ndarray, cfg: RelocaliseConfig, pre=None):
                                                 math.radians(cfg.coarse_check_deg), cfg.min_score)
     if hit is None:
         return None
+    # a search around a hypothesis, not tracking from odometry: the window's best seeds the refinement (seed_margin 0)
     refine = MatchConfig(linear_window=0.5, angular_window_deg=3.0, translation_delta_weight=1e3,
-                         rotation_delta_weight=1e3, min_score=0.0)
+                         rotation_delta_weight=1e3, min_score=0.0, seed_margin=0.0)
     ref = match_scan(prob, origin, res, np.asarray(points, np.float64), hit.aTb, refine)
     if ref.score < cfg.min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * res:
         return None
@@ -281,7 +282,8 @@ def local_matches(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs:
 
     if cfg.close_per_submap <= 0:
         return []
-    mc = MatchConfig(linear_window=cfg.consistent_xy_m, angular_window_deg=cfg.consistent_deg, min_score=0.0)
+    mc = MatchConfig(linear_window=cfg.consistent_xy_m, angular_window_deg=cfg.consistent_deg, min_score=0.0,
+                     seed_margin=0.0)  # the placement is a hypothesis: its window's best seeds the refinement
     anchors = np.array([s.wTa for s in stored_submaps]).reshape(-1, 3)
     out: list[LaserMatch] = []
     for k, sm in enumerate(session_submaps):
