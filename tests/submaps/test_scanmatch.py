@@ -215,7 +215,7 @@ def test_a_scan_reaching_past_the_mapped_walls_is_not_pulled_back():
     poses = [np.array([x, 1.0, 0.0]) for x in np.arange(-2.0, 0.01, 0.4)]
     grid = grid_from(CORRIDOR, poses, BEAMS_LMS, rng, 0.01)
     keep, seeded = [], []
-    for trial in range(10):
+    for _ in range(10):
         true = np.array([0.4, 1.0 + rng.normal(0, 0.02), rng.normal(0, 0.005)])
         pts = points(ray_scan(CORRIDOR, true, BEAMS_LMS, rng, 0.01), BEAMS_LMS)
         keep.append(match(grid, pts, true).aTb[0] - true[0])
