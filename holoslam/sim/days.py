@@ -217,7 +217,8 @@ def household_days(days: int, seed: int = 0, changes: tuple[int, int] = (5, 10),
     next_id = len(world.objects) + 1
     for d in range(2, days + 1):
         n = int(rng.integers(changes[0], changes[1] + 1))
-        moved, moves = move_furniture(rng_f, d, world, int(rng_f.integers(furniture[0], furniture[1] + 1)))
+        moved, moves = move_furniture(rng_f, d, world, int(rng_f.integers(furniture[0], furniture[1] + 1)),
+                                      MIN_MOVE_M, MIN_SPACING_M)
         if moves:  # the surfaces' free edges and the standable places are those of the new arrangement
             fs = free_space(moved, resolution=0.05)
             spots = _spots(moved, fs)

@@ -136,11 +136,11 @@ def _fits(world: World, f: Furniture, poly: np.ndarray, fs_rest: Any) -> bool:
     return bool(near.size) and float(near.min()) >= FURNITURE_GAP_M + fs_rest.resolution / 2
 
 
-def _place(rng: np.random.Generator, world: World, f: Furniture, labels: list[WorldObject]
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
-    """A place for ``f`` by the rules of the module docstring: (centroid before, after, new polygon, turn), or
-    None after ``TRIES`` draws."""
-    from holoslam.sim.days import MIN_MOVE_M, MIN_SPACING_M
+def _place(rng: np.random.Generator, world: World, f: Furniture, labels: list[WorldObject], min_move_m: float,
+           min_spacing_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
+    """A place for ``f`` by the rules of the module docstring (``min_move_m``, ``min_spacing_m``: the days'
+    ``MIN_MOVE_M`` and ``MIN_SPACING_M``): (centroid before, after, new polygon, turn), or None after ``TRIES``
+    draws."""
     from holoslam.sim.world import free_space
 
     room = next(r for r in world.rooms if r.name == f.room)
@@ -156,9 +156,9 @@ def _place(rng: np.random.Generator, world: World, f: Furniture, labels: list[Wo
         turn = float(rng.uniform(-math.pi, math.pi))
         poly = _turned(P, c, c_new, turn)
         new_lxy = _turned(lxy, c, c_new, turn)
-        if math.dist(c, c_new) < MIN_MOVE_M or (len(lxy) and (
-                np.min(np.hypot(*(new_lxy - lxy).T)) < MIN_MOVE_M
-                or np.min(np.hypot(*(new_lxy[:, None] - others[None]).transpose(2, 0, 1))) < MIN_SPACING_M)):
+        if math.dist(c, c_new) < min_move_m or (len(lxy) and (
+                np.min(np.hypot(*(new_lxy - lxy).T)) < min_move_m
+                or np.min(np.hypot(*(new_lxy[:, None] - others[None]).transpose(2, 0, 1))) < min_spacing_m)):
             continue
         if not _fits(world, f, poly, fs_rest):
             continue
@@ -183,10 +183,11 @@ def _with_piece(world: World, f: Furniture, c: np.ndarray, c_new: np.ndarray, tu
                    objects=tuple(objs))
 
 
-def move_furniture(rng: np.random.Generator, day: int, world: World, n_moves: int
-                   ) -> tuple[World, tuple[FurnitureChange, ...]]:
+def move_furniture(rng: np.random.Generator, day: int, world: World, n_moves: int, min_move_m: float,
+                   min_spacing_m: float) -> tuple[World, tuple[FurnitureChange, ...]]:
     """The world of ``day`` with ``n_moves`` pieces of ``MOVABLE`` moved (each at most once a day; fewer when no
-    place fits) and the changes; the labels on a moved piece move with it (their ``reachable`` computed again)."""
+    place fits; each and its labels at least ``min_move_m``, the labels ``min_spacing_m`` from every other) and the
+    changes; the labels on a moved piece move with it (their ``reachable`` computed again)."""
     from holoslam.sim.world import ARM_REACH, free_space
 
     out: list[FurnitureChange] = []
@@ -198,7 +199,7 @@ def move_furniture(rng: np.random.Generator, day: int, world: World, n_moves: in
             name = left[int(rng.choice(len(left), p=w / w.sum()))]
             f = next(x for x in world.furniture if x.name == name)
             labels = [o for o in world.objects if o.furniture == name]
-            placed = _place(rng, world, f, labels)
+            placed = _place(rng, world, f, labels, min_move_m, min_spacing_m)
             if placed is None:
                 left.remove(name)
                 continue

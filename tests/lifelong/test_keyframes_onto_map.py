@@ -76,10 +76,11 @@ def test_the_new_sessions_keyframes_are_solved_onto_the_held_map(intel_two_sessi
     rigid, solved = intel_two_sessions[False], intel_two_sessions[True]
     assert rigid.summary.joined and solved.summary.joined
     assert rigid.across.n_matched == solved.across.n_matched >= 130  # 141 relations across the two windows
-    # measured 0.052 m with each session submap rigid on its anchor, 0.032 m with the keyframe stage
-    assert rigid.across.translation_mean_m > 0.045
-    assert solved.across.translation_mean_m < 0.038
-    assert solved.all.translation_mean_m < 0.026  # every relation (660): measured 0.0278 -> 0.0236 m
+    # measured (2026-12-04, with the matcher's seed_margin) 0.0314 m with each session submap rigid on its anchor,
+    # 0.0257 m with the keyframe stage (before the seed margin: 0.052 and 0.032 m)
+    assert solved.across.translation_mean_m < 0.9 * rigid.across.translation_mean_m
+    assert solved.across.translation_mean_m < 0.031
+    assert solved.all.translation_mean_m < 0.025  # every relation (660): measured 0.0225 -> 0.0212 m
     j = solved.summary.joint
     assert j["keyframe_matches_stored"] >= 300 and j["keyframe_matches_own"] >= 100  # measured 623 and 203
 

@@ -115,13 +115,14 @@ def test_relations_between_passes_through_one_place_improve_on_a_real_log(intel_
     """The first 900 s of intel: 898 relations, 311 of them between poses >= 30 s apart (passes through one
     place). Measured 2026-12-02: those 0.048 m with rigid submaps -> 0.034 m with the keyframes solved (1,462 of
     1,959 node matches kept); the others 0.0233 -> 0.0226 m; all 0.0318 -> 0.0266 m (Cartographer, whole log:
-    0.0229). Bounds about 1.3x the measurement, so a 2x regression fails."""
+    0.0229). Bounds about 1.3x the measurement, so a 2x regression fails. 2026-12-04, with the matcher's
+    seed_margin the rigid submaps are better: far relations 0.0320 -> 0.0272 m (0.85x)."""
     rigid, solved, far, matches, _ = intel_cut
     assert solved.n_matched == solved.n_relations >= 850
     t_r, t_s = rigid.translation_m, solved.translation_m
     assert far.sum() >= 300
     assert np.nanmean(t_s[far]) < 0.045
-    assert np.nanmean(t_s[far]) < 0.85 * np.nanmean(t_r[far])
+    assert np.nanmean(t_s[far]) < 0.9 * np.nanmean(t_r[far])
     assert np.nanmean(t_s[~far]) < 1.05 * np.nanmean(t_r[~far])
     assert solved.translation_mean_m < 0.032 and solved.translation_max_m < 0.6
     assert len(matches) > 0.5 * matches.tried
