@@ -174,6 +174,9 @@ def finish_run(log: Any, ingest_report: Any, st: SlamStages, cfg: RunConfig, clo
     from holoslam.mapping import build_maps
     from holoslam.objects import located_by
     from holoslam.report_build import build_report
+    from holoslam.warmup import wait_for_kernels
+
+    wait_for_kernels("holoslam.maps", "holoslam.planning", "holoslam._common_fast")  # a first run's pool: not twice
 
     fe, sol, seen, traj, objects = st.fe, st.sol, st.seen, st.traj, st.objects
     maps = build_maps(log, fe, sol, traj, objects, cfg, clock)

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["KernelSignature", "SIGNATURES_FILE", "load_signatures", "pending", "warm_up", "record_signatures",
-           "compile_in_background", "estimate_seconds"]
+           "compile_in_background", "estimate_seconds", "wait_for_kernels"]
 
 SIGNATURES_FILE = Path(__file__).with_name("_kernel_signatures.txt")
 
@@ -251,9 +251,28 @@ def warm_up(
         return [r for rs in pool.map(_compile_module, groups) for r in rs]
 
 
-# the kernel modules of the front end, the first stage that calls kernels and the one that compiles the most:
-# a first run waits for them (compiled over every core), then runs while the rest compiles in the background
-FRONT_END = ("holoslam.submaps",)
+# the kernel modules local SLAM calls from its first scan: a first run waits for them, then runs while the rest
+# compiles in the background; the stages that call the others wait for theirs (``wait_for_kernels``: the loop
+# search and the wide search for the branch and bound's, the maps stages for theirs) instead of compiling them a
+# second time beside the pool
+FRONT_END = ("holoslam.submaps._grid_fast", "holoslam.submaps._fast", "holoslam._common_fast")
+
+#: module -> its compile task in the first run's pool (``compile_in_background``), until the task is done
+_BACKGROUND: dict[str, Any] = {}
+
+
+def wait_for_kernels(*prefixes: str) -> None:
+    """Block until the first run's pool has compiled the kernel modules named by ``prefixes`` (at once when no
+    pool compiles, or when those are done): otherwise the caller would compile them itself, a second time."""
+    if not _BACKGROUND:
+        return
+    for module, fut in list(_BACKGROUND.items()):
+        if module.startswith(prefixes):
+            try:
+                fut.result()
+            except Exception:  # noqa: BLE001 - a failed compile: the caller compiles on first call, as without a pool
+                pass
+            _BACKGROUND.pop(module, None)
 
 
 def compile_in_background(
@@ -274,10 +293,16 @@ def compile_in_background(
     def first(module: str) -> bool:
         return module.startswith(wait_for)
 
-    groups = sorted(by_module.values(), key=lambda g: (not first(g[0].module), -sum(s.seconds for s in g)))
+    # the modules waited for first (the largest first), then the loop search's (needed once a submap is finished),
+    # then the rest
+    groups = sorted(by_module.values(), key=lambda g: (not first(g[0].module),
+                                                       not g[0].module.startswith("holoslam.submaps"),
+                                                       -sum(s.seconds for s in g)))
     pool = ProcessPoolExecutor(max_workers=workers or os.cpu_count() or 1,
                                mp_context=multiprocessing.get_context("spawn"))
     futures = [(pool.submit(_compile_module, g), first(g[0].module)) for g in groups]
+    _BACKGROUND.clear()
+    _BACKGROUND.update({g[0].module: f for g, (f, _w) in zip(groups, futures, strict=True)})
     wait([f for f, w in futures if w])
     return pool
 

@@ -53,3 +53,31 @@ def test_compiling_a_signature_fills_the_cache(tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["1", "1", "''", "0"]
     assert any(tmp_path.rglob("*.nbi"))
+
+
+def test_a_stage_waits_for_the_pools_compile_of_its_kernels_instead_of_compiling_them_again():
+    """``wait_for_kernels``: blocks until the first run's pool has finished the modules named (then forgets them),
+    leaves the others waiting, and returns at once when no pool compiles."""
+    import threading
+    import time
+    from concurrent.futures import Future
+
+    from holoslam import warmup
+
+    maps, submaps = Future(), Future()
+    warmup._BACKGROUND.clear()
+    warmup._BACKGROUND.update({"holoslam.maps._thin_fast": maps, "holoslam.submaps._bnb_fast": submaps})
+    try:
+        threading.Timer(0.2, maps.set_result, ([],)).start()
+        t0 = time.perf_counter()
+        warmup.wait_for_kernels("holoslam.maps", "holoslam.planning")
+        assert time.perf_counter() - t0 >= 0.15 and maps.done()
+        assert list(warmup._BACKGROUND) == ["holoslam.submaps._bnb_fast"]  # not waited for, still there
+        submaps.set_exception(RuntimeError("a compile failed"))  # the caller then compiles it on first call
+        warmup.wait_for_kernels("holoslam.submaps")
+        assert not warmup._BACKGROUND
+    finally:
+        warmup._BACKGROUND.clear()
+    t0 = time.perf_counter()
+    warmup.wait_for_kernels("holoslam.maps")
+    assert time.perf_counter() - t0 < 0.05

@@ -159,6 +159,9 @@ class LoopSearch:
         drift allowance); ``bundle`` makes the points of the node and those behind it (``global_bundle_m``, node
         frame) that the global search matches, called only when a global round runs. Closures of windowed searches are returned at once; those of global ones
         when another agrees (``loop_consistency``)."""
+        from holoslam.warmup import wait_for_kernels
+
+        wait_for_kernels("holoslam.submaps")  # a first run's pool compiling the branch and bound: not twice
         c = self.cfg
         wTr = g.compose(est_wTa[n], nTr)
         olds = [m for m in self.grids if m < n - c.skip_recent and self.pairs.get((m, n), 0) < c.max_per_pair]

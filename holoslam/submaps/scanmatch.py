@@ -218,6 +218,9 @@ def _wide_search(prob, origin, res, pts, pred, cfg: MatchConfig, min_score: floa
                  pyramid: WidePyramid | None = None) -> np.ndarray | None:
     """Branch-and-bound over the wide window (a shallow pyramid: the window is a few dozen cells)."""
     from holoslam.submaps import bnb
+    from holoslam.warmup import wait_for_kernels
+
+    wait_for_kernels("holoslam.submaps._bnb_fast")  # a first run's pool compiling it: not twice
 
     def build():
         return bnb.precompute(prob, cfg.wide_depth, origin=origin, res=res)
