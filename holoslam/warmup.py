@@ -266,13 +266,12 @@ def wait_for_kernels(*prefixes: str) -> None:
     pool compiles, or when those are done): otherwise the caller would compile them itself, a second time."""
     if not _BACKGROUND:
         return
-    for module, fut in list(_BACKGROUND.items()):
-        if module.startswith(prefixes):
-            try:
-                fut.result()
-            except Exception:  # noqa: BLE001 - a failed compile: the caller compiles on first call, as without a pool
-                pass
-            _BACKGROUND.pop(module, None)
+    from concurrent.futures import wait
+
+    mine = {m: f for m, f in _BACKGROUND.items() if m.startswith(prefixes)}
+    wait(mine.values())  # done, failed or cancelled: a kernel not compiled is compiled by the caller on first call
+    for module in mine:
+        _BACKGROUND.pop(module, None)
 
 
 def compile_in_background(

@@ -403,8 +403,8 @@ class LoopSearch:
         small, ``search``), fine around the coarse best, second peaks kept in the covariance, refinement; a match
         turned from the ``seed`` by more than the window's heading ``wth`` is dropped
         (``global_within_heading_window``), and one further from it than ``global_window_ratio`` times the window
-        (``global_ambiguous_window_ratio`` when it has second peaks). The closure or None, and the outcome's reasons to count; reads the
-        search's state only."""
+        (``global_ambiguous_window_ratio`` when it has second peaks). The closure or None, and the outcome's
+        reasons to count; reads the search's state only."""
         from holoslam.submaps.global_search import clip_window, coarse_match
 
         c = self.cfg
