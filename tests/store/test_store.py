@@ -1,6 +1,6 @@
-"""The map store: round trip of a session, schema version and migration, refusals with one-line errors, one
-transaction per session (an exception or a SIGKILL anywhere inside leaves the previous state), and the committed
-fixture store of schema 1 opening and extending."""
+"""The map store: round trip of a session, schema version and migration (schema 1 -> 2: the label normals),
+refusals with one-line errors, one transaction per session (an exception or a SIGKILL anywhere inside leaves the
+previous state), and the committed fixture store of schema 1 opening and extending."""
 
 from __future__ import annotations
 
@@ -57,6 +57,9 @@ def test_a_session_round_trips(tmp_path):
         h = st.object_history(object_id="O07")
         assert len(h) == 1 and h[0].status == "moved"
         np.testing.assert_allclose(h[0].displacement, [0.5, 0.1])
+        assert h[0].normal is None and np.isnan(h[0].normal_sigma_rad)  # a label whose normal is not known
+        o5 = st.latest_objects()["O05"]
+        assert o5.normal is not None and np.allclose(o5.normal, [0.6, 0.8]) and o5.normal_sigma_rad == 0.03
         t = st.trajectory(1)
         assert np.array_equal(t.stamps_ns, u.trajectory.stamps_ns)
         np.testing.assert_allclose(t.aTb, u.trajectory.aTb, atol=1e-6)
@@ -133,28 +136,62 @@ def test_the_fixture_store_of_schema_1_opens_and_extends(tmp_path):
         assert after["sessions"] == before["sessions"] + 1 and after["submaps"] == before["submaps"] + 4
 
 
-def test_a_migration_runs_once_when_a_later_schema_opens_an_older_store(tmp_path, monkeypatch):
+def test_the_schema_1_fixture_migrates_to_label_normals_and_keeps_them(tmp_path):
+    """Schema 2 adds the label's normal to the object history: the schema-1 fixture opens with every normal
+    unknown (its objects keep their seen side), and a session added after it stores and reads back its
+    normals; a new store has the same tables as a migrated one."""
     p = tmp_path / "home.holomap"
     shutil.copy(FIXTURE, p)
+    v1 = {r[1] for r in sqlite3.connect(FIXTURE).execute("PRAGMA table_info(object_history)")}
+    assert not {"normal_x", "normal_y", "normal_sigma"} & v1
+    with MapStore.open(p) as st:
+        assert st.schema_version == 2
+        old = st.object_history()
+        assert old and all(o.normal is None and np.isnan(o.normal_sigma_rad) for o in old)
+        assert any(o.view is not None for o in old)
+        st.add_session(make_update(8, stored_ids=(st.submaps()[0].id,), expected_id=3))
+        o5 = st.latest_objects()["O05"]
+        assert o5.session_id == 3 and np.allclose(o5.normal, [0.6, 0.8]) and o5.normal_sigma_rad == 0.03
+    new = tmp_path / "new.holomap"
+    MapStore.open(new).close()
+    tables = "SELECT name, sql FROM sqlite_master WHERE type IN ('table', 'index') ORDER BY name"
+    cols = "SELECT name, type FROM pragma_table_info(?)"
 
-    def v1_to_v2(con: sqlite3.Connection) -> None:
+    def shape(path: Path) -> list:
+        con = sqlite3.connect(path)
+        return [(n, con.execute(cols, (n,)).fetchall()) for n, _sql in con.execute(tables).fetchall()]
+
+    assert shape(new) == shape(p)
+
+
+def test_a_migration_runs_once_when_a_later_schema_opens_an_older_store(tmp_path, monkeypatch):
+    """A later schema (this one + 1, its migration a stand-in) opens the schema-1 fixture through every
+    migration in one transaction; without the last migration the store stays at schema 1, not half-migrated."""
+    p = tmp_path / "home.holomap"
+    shutil.copy(FIXTURE, p)
+    now = schema.SCHEMA_VERSION
+
+    def later(con: sqlite3.Connection) -> None:
         con.execute("ALTER TABLE sessions ADD COLUMN operator TEXT")
 
-    monkeypatch.setattr(schema, "SCHEMA_VERSION", 2)
-    monkeypatch.setitem(schema.MIGRATIONS, 1, v1_to_v2)
+    monkeypatch.setattr(schema, "SCHEMA_VERSION", now + 1)
+    monkeypatch.setitem(schema.MIGRATIONS, now, later)
     import holoslam.store.db as db
 
-    monkeypatch.setattr(db, "SCHEMA_VERSION", 2)
+    monkeypatch.setattr(db, "SCHEMA_VERSION", now + 1)
     with MapStore.open(p) as st:
-        assert st.schema_version == 2 and len(st.sessions()) == 2
-    cols = [r[1] for r in sqlite3.connect(p).execute("PRAGMA table_info(sessions)")]
-    assert "operator" in cols
-    monkeypatch.delitem(schema.MIGRATIONS, 1)
+        assert st.schema_version == now + 1 and len(st.sessions()) == 2
+    con = sqlite3.connect(p)
+    assert "operator" in [r[1] for r in con.execute("PRAGMA table_info(sessions)")]
+    assert "normal_x" in [r[1] for r in con.execute("PRAGMA table_info(object_history)")]
+    monkeypatch.delitem(schema.MIGRATIONS, now)
     q = tmp_path / "again.holomap"
     shutil.copy(FIXTURE, q)
-    with pytest.raises(StoreError, match="no migration from map store schema 1"):
+    with pytest.raises(StoreError, match=f"no migration from map store schema {now}"):
         MapStore.open(q)
-    assert sqlite3.connect(q).execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()[0] == "1"
+    con = sqlite3.connect(q)
+    assert con.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()[0] == "1"
+    assert "normal_x" not in [r[1] for r in con.execute("PRAGMA table_info(object_history)")]
 
 
 def _child_env() -> dict[str, str]:
