@@ -11,8 +11,9 @@ Per day and object, what the robot could have known (the simulator's truth again
 - a **gone** that was wrong (the object still at its place) and a removal missed: the store's camera time in view
   and the images that held the place readable (what ``changes.classify`` decided on), and for a present object
   the angle between the direction the store saw its label from (``ObjectState.view``, the mean over its
-  sightings) and the label's true normal, and the largest angle from that normal of the robot poses the view
-  test counted (the simulated camera reads to 60 deg);
+  sightings) and the label's true normal, the stored normal's error (``ObjectState.normal``, from the readings'
+  PnP poses) and its sigma, and the largest angle from the true normal of the robot poses the view test counted
+  (the simulated camera reads to 60 deg);
 - **new**: for every object first located after day 1 (added or not), the images of each earlier session that
   held its place readable (``frustum.covering_images``), and the seconds the robot had it in view
   (``changes.in_view_seconds``, unshared): whether an earlier session could tell "there all along" from "added".

@@ -1,6 +1,6 @@
 """The map store: round trip of a session, schema version and migration (schema 1 -> 2: the label normals),
 refusals with one-line errors, one transaction per session (an exception or a SIGKILL anywhere inside leaves the
-previous state), and the committed fixture store of schema 1 opening and extending."""
+previous state), and the committed fixture stores of schemas 1 and 2 opening and extending."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from holoslam.store.codec import pack, pack_prob, unpack, unpack_prob
 from holoslam.store.db import MapStore
 
 FIXTURE = Path(__file__).with_name("fixture_v1.holomap")
+FIXTURE_V2 = Path(__file__).with_name("fixture_v2.holomap")  # with the label normals
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -120,9 +121,10 @@ def test_refusals_are_one_line_store_errors(tmp_path):
         MapStore.open(newer)
 
 
-def test_the_fixture_store_of_schema_1_opens_and_extends(tmp_path):
+@pytest.mark.parametrize("fixture", [FIXTURE, FIXTURE_V2], ids=["schema1", "schema2"])
+def test_the_fixture_stores_open_and_extend(tmp_path, fixture):
     p = tmp_path / "home.holomap"
-    shutil.copy(FIXTURE, p)
+    shutil.copy(fixture, p)
     with MapStore.open(p) as st:
         assert st.schema_version == schema.SCHEMA_VERSION
         sessions = st.sessions()
@@ -152,6 +154,12 @@ def test_the_schema_1_fixture_migrates_to_label_normals_and_keeps_them(tmp_path)
         st.add_session(make_update(8, stored_ids=(st.submaps()[0].id,), expected_id=3))
         o5 = st.latest_objects()["O05"]
         assert o5.session_id == 3 and np.allclose(o5.normal, [0.6, 0.8]) and o5.normal_sigma_rad == 0.03
+    shutil.copy(FIXTURE_V2, tmp_path / "v2.holomap")
+    with MapStore.open(tmp_path / "v2.holomap", create=False) as v2:  # schema 2: every located label has a normal
+        located = [o for o in v2.object_history() if o.status in ("new", "seen", "moved")]
+        assert located and all(o.normal is not None and 0 < o.normal_sigma_rad < 0.5 for o in located)
+        # 19 of its 20 rows within 1.3 deg; O12's one reading on day 1 could not tell the flip apart (15 deg)
+        assert sum(o.normal_sigma_rad < np.radians(2.5) for o in located) == len(located) - 1 == 19
     new = tmp_path / "new.holomap"
     MapStore.open(new).close()
     tables = "SELECT name, sql FROM sqlite_master WHERE type IN ('table', 'index') ORDER BY name"
@@ -254,9 +262,11 @@ def test_a_session_killed_after_its_commit_is_kept(tmp_path):
         assert len(st.trajectory(1).stamps_ns) == 5000
 
 
-def test_the_bounded_reads_give_what_the_whole_history_gives():
+def test_the_bounded_reads_give_what_the_whole_history_gives(tmp_path):
     """latest_objects / sightings(ids) / placements() select in SQL what reading every row would give."""
-    with MapStore.open(FIXTURE, create=False) as st:
+    p = tmp_path / "home.holomap"
+    shutil.copy(FIXTURE, p)  # a copy: opening the committed schema-1 fixture migrates it
+    with MapStore.open(p, create=False) as st:
         joined = {s.id for s in st.sessions() if s.joined}
         whole: dict = {}
         for o in st.object_history():
