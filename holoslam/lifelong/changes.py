@@ -57,10 +57,10 @@ class ChangeConfig:
     # the plane with 31 deg of elevation is 53 deg in 3-D; 41 deg of elevation at 0.8 m: 58), and the normal errs
     # by its sigma (at most ``normal_max_sigma_deg``)
     normal_facing_deg: float = 45.0
-    # deg: the normal is used only when its sigma is within this (else the seen direction): two sigmas within the
-    # 5 deg between ``FrustumConfig.normal_facing_deg`` (55) and the camera's 60. On seed 1's ten simulated days
-    # the store's normals had sigmas of 0.44 deg (median), 1.0 (95th percentile), 6.2 (largest; 2 of 299 over 2.5),
-    # and erred by 0.18 deg (median) and 0.74 at most against the simulator's true normals
+    # deg: the normal is used only when its sigma is within this (else the seen direction): two sigmas of it and
+    # the place's 2 deg leave the images' test (``FrustumConfig.normal_facing_deg``) 53 of the camera's 60. On seed
+    # 1's ten simulated days the store's normals had sigmas of 0.44 deg (median), 1.0 (95th percentile), 6.2
+    # (largest; 2 of 299 over 2.5), and erred by 0.18 deg (median) and 0.74 at most against the true normals
     normal_max_sigma_deg: float = 2.5
     # deg: a session's normal within this of the stored one is averaged with it; farther, the label was turned in
     # place (a chair turned less than ``moved_m`` away) and the session's replaces it. Twice the outlier angle of

@@ -52,9 +52,10 @@ def test_the_normal_keeps_the_view_test_where_the_camera_reads():
 
 def test_an_image_counts_only_within_the_normals_facing_angle_in_3d():
     """Cameras 1.5 m from a 60 mm label at 0.8 m, at 1.10 m height (11 deg above it), each aimed at it, at 0-70
-    deg from its normal in the plane: with the normal (55 deg in 3-D) the images at 0-50 deg count (50 in the
-    plane is 51 in 3-D, 55 is 56); with the seen direction at 50 deg (45 around it) those at 5-70 deg, also the
-    two the camera could not read (65 and 70 deg: 65 and 70 in 3-D)."""
+    deg from its normal in the plane: with the normal known to 1 deg (the camera's 60 less two sigmas and 2 deg
+    of the place's error: 56 deg in 3-D) the images at 0-55 deg count (55 in the plane is 55.8 in 3-D, 60 is
+    60.9); to 2.5 deg (53), those at 0-50 (50.9); with the seen direction at 50 deg (45 around it) those at 5-70
+    deg, also the two the camera could not read (65 and 70 deg)."""
     payload = "HL1;O05;cup;s=60"
     angles = np.arange(0.0, 71.0, 5.0)
     p = np.array([0.0, 0.0, 0.8])
@@ -75,7 +76,9 @@ def test_an_image_counts_only_within_the_normals_facing_angle_in_3d():
         return [a for k, a in enumerate(angles)
                 if covering_images(p, view, payload, _one(views, k), wTc[k:k + 1], None, cfg, normal, sigma)]
 
-    assert held(_unit(50.0), _unit(0.0), math.radians(1.0)) == [float(x) for x in range(0, 51, 5)]
+    assert cfg.normal_facing_deg(math.radians(1.0)) == pytest.approx(56.0)
+    assert held(_unit(50.0), _unit(0.0), math.radians(1.0)) == [float(x) for x in range(0, 56, 5)]
+    assert held(_unit(50.0), _unit(0.0), math.radians(2.5)) == [float(x) for x in range(0, 51, 5)]
     assert held(_unit(50.0), None, math.nan) == [float(x) for x in range(5, 71, 5)]
 
 
