@@ -63,9 +63,9 @@ class ChangeConfig:
     # (largest; 2 of 299 over 2.5), and erred by 0.18 deg (median) and 0.74 at most against the true normals
     normal_max_sigma_deg: float = 2.5
     # deg: a session's normal within this of the stored one is averaged with it; farther, the label was turned in
-    # place (a chair turned less than ``moved_m`` away) and the session's replaces it. Twice the outlier angle of
-    # one session's readings (``vision.normals.OUTLIER_DEG``) would keep a turn of 60 deg: 30 is the largest
-    # angle a reading's flip is kept out at, the same
+    # place (a chair turned but carried less than ``moved_m``) and the session's replaces it. The same angle as a
+    # session's outlier test (``vision.normals.OUTLIER_DEG``): the store's normals erred by at most 0.92 deg on
+    # the simulated days, so two sessions of an unturned label agree far within it
     normal_agree_deg: float = 30.0
     # deg from horizontal: a reading whose normal tilts more (a label lying flat) has no side in the plane
     normal_max_tilt_deg: float = 60.0
