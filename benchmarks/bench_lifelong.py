@@ -15,7 +15,8 @@ interleaved, and the largest anchor difference). For every piece of furniture mo
 (``holoslam.sim.furniture_moves``), the store's merged map (``holoslam.lifelong.export.merged_map``) before and after
 that day's session: the share of the old footprint's edge cells it no longer holds occupied and of the new
 footprint's it holds occupied (``holoslam.evaluate_footprints``; the truth put in the store's world by the map's
-frame fitted to the unchanged objects so far, as below).
+frame fitted to the unchanged objects so far, as below). The label normals the store holds for the day's located
+objects (``ObjectState.normal``) against the simulator's true normals: median, 95th percentile and largest angle.
 
 ``real``: each shared real log (../shared/realdata) cut into 3 equal windows in memory; the 2nd and 3rd have
 their odometry moved by a hidden transform (metres, any heading) and no pose prior; each window run into a
@@ -97,6 +98,29 @@ def _positions(r, d: dict, w2m) -> tuple[dict, dict]:
         if o.object_id in d["objects"] and o.object_id not in changed:
             p_single[o.object_id] = (*_map_xy(d["start_pose"], o.w_position[:2])[0], *d["objects"][o.object_id][:2])
     return p_life, p_single
+
+
+def _normal_errors(r, world, w2m) -> dict[str, float]:
+    """The day's located objects with a label normal in the store (``ObjectState.normal``): object -> the angle
+    (deg) between it (world -> map by day 1's true start heading) and the label's true normal in the day's home."""
+    out = {}
+    for o in r.update.objects:
+        if o.status in ("seen", "moved", "new") and o.normal is not None:
+            yaw = float(np.arctan2(o.normal[1], o.normal[0])) + w2m[2]
+            d = (yaw - world.object(o.object_id).label_yaw + np.pi) % (2 * np.pi) - np.pi
+            out[o.object_id] = round(float(np.degrees(abs(d))), 3)
+    return out
+
+
+def _print_normals(detail: list) -> None:
+    e = np.array([v for x in detail for v in x["normal_err_deg"].values()])
+    n_located = sum(x["located"] for x in detail)
+    if not len(e):
+        print(f"label normals: none known (of {n_located} located object-days)")
+        return
+    print(f"label normals against the truth: {len(e)} of {n_located} located object-days have one; error median "
+          f"{np.median(e):.2f} deg, p95 {np.percentile(e, 95):.2f}, max {e.max():.2f}; over 5 deg: "
+          f"{int((e > 5).sum())}")
 
 
 def _score_gone(det: dict, tru: dict, d: dict, world_before, log: Path, acc: list) -> None:
@@ -236,7 +260,10 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: 
         e_single = {k: float(np.hypot(v[0] - v[2], v[1] - v[3])) for k, v in p_single.items()}
         errs_life += list(e_life.values())
         errs_single += list(e_single.values())
+        normal_err = _normal_errors(r, worlds[d["day"] - 1], w2m)
+        n_located = sum(o.status in ("seen", "moved", "new") for o in r.update.objects)
         detail.append({"day": d["day"], "truth": tru, "detected": det, "unseen_in_view_s": s.unseen_in_view_s,
+                       "normal_err_deg": normal_err, "located": n_located,
                        "unseen_in_images": s.unseen_in_images, "checked": d.get("checked", {}),
                        "err_store_m": e_life, "err_single_m": e_single, "xy_store": p_life, "xy_single": p_single,
                        "reloc_s": s.relocalisation_s, "run_s": run_s, "joined_by": s.joined_by})
@@ -246,6 +273,7 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: 
         (out / "sim_furniture.json").write_text(json.dumps(furniture_rows, indent=1))
         last = r
     _print_changes(counts, gone_fair, unseen_new)
+    _print_normals(detail)
     _print_furniture(furniture_rows)
     rm = lambda e: float(np.sqrt(np.mean(np.square(e)))) if e else float("nan")  # noqa: E731
     per_day = [(x["day"], rm(list(x["err_store_m"].values())), rm(list(x["err_single_m"].values()))) for x in detail]

@@ -11,8 +11,9 @@ Per day and object, what the robot could have known (the simulator's truth again
 - a **gone** that was wrong (the object still at its place) and a removal missed: the store's camera time in view
   and the images that held the place readable (what ``changes.classify`` decided on), and for a present object
   the angle between the direction the store saw its label from (``ObjectState.view``, the mean over its
-  sightings) and the label's true normal, and the largest angle from that normal of the robot poses the view
-  test counted (the simulated camera reads to 60 deg);
+  sightings) and the label's true normal, the stored normal's error (``ObjectState.normal``, from the readings'
+  PnP poses) and its sigma, and the largest angle from the true normal of the robot poses the view test counted
+  (the simulated camera reads to 60 deg);
 - **new**: for every object first located after day 1 (added or not), the images of each earlier session that
   held its place readable (``frustum.covering_images``), and the seconds the robot had it in view
   (``changes.in_view_seconds``, unshared): whether an earlier session could tell "there all along" from "added".
@@ -64,15 +65,21 @@ def _gone_misses(truth: dict, detail: list, worlds: list, hist: dict, trajs: dic
             row = f"  day {d['day']:>2} {oid}: {'gone, present' if gone else 'absent, not gone'}, in view {s} s, " \
                   f"images {x['unseen_in_images'].get(oid)}"
             prev = [h for h in hist.get(oid, ()) if h.session_id < d["day"] and h.w_xy is not None]
-            if gone and prev and prev[-1].view is not None and oid not in x["truth"]:  # at its place
+            if gone and prev and (prev[-1].view is not None or prev[-1].normal is not None) \
+                    and oid not in x["truth"]:  # at its place
+                p = prev[-1]
                 normal = math.degrees(worlds[d["day"] - 1].object(oid).label_yaw)
-                seen = _world_angle(w2m, prev[-1].view)
                 t, wTb, _ = trajs[d["day"]]
                 tt, xy = _thin(t, wTb[:, :2], ChangeConfig().view_step_s)
-                m = in_view_mask(prev[-1].w_xy, prev[-1].view, xy, merged, ChangeConfig())
-                rel = xy[m] - prev[-1].w_xy
+                m = in_view_mask(p.w_xy, p.view, xy, merged, ChangeConfig(), p.normal, p.normal_sigma_rad)
+                rel = xy[m] - p.w_xy
                 worst = max((_diff(_world_angle(w2m, r), normal) for r in rel), default=float("nan"))
-                row += f"; seen from {_diff(seen, normal):.0f} deg off its normal, in view up to {worst:.0f} deg"
+                if p.view is not None:
+                    row += f"; seen from {_diff(_world_angle(w2m, p.view), normal):.0f} deg off its normal"
+                if p.normal is not None:
+                    row += (f"; stored normal {_diff(_world_angle(w2m, p.normal), normal):.1f} deg off the true one "
+                            f"(sigma {math.degrees(p.normal_sigma_rad):.1f})")
+                row += f", in view up to {worst:.0f} deg from the true normal"
             print(row)
 
 

@@ -240,7 +240,9 @@ class GroundTruthWorld:
 class ObjectObservation:
     """A QR-tagged object located from one image (or a pair): the label centre in the base frame at
     ``stamp_ns`` (``b_position`` (3,) metres) with its covariance ``cov_b_position`` (3x3), produced by the
-    vision layer for the backend's landmark factors (Eq. 16). ``payload`` is the decoded label text."""
+    vision layer for the backend's landmark factors (Eq. 16). ``payload`` is the decoded label text.
+    ``b_normal`` (3,) is the label's outward normal (unit, out of its printed face) in the base frame, from the
+    pose of its corners (None when unknown), with the standard deviation of its direction ``normal_sigma_rad``."""
 
     stamp_ns: int
     object_id: str
@@ -249,6 +251,8 @@ class ObjectObservation:
     cov_b_position: np.ndarray
     method: str = "pnp"  # "pnp" (single view, known label size) or "triangulation" (two views)
     source: str = ""  # where the sighting came from: "images" (decoded here), "tags" (the robot's topic)
+    b_normal: np.ndarray | None = None
+    normal_sigma_rad: float = float("nan")
 
     def __post_init__(self) -> None:
         object.__setattr__(
@@ -257,6 +261,9 @@ class ObjectObservation:
         object.__setattr__(
             self, "cov_b_position", _readonly(np.asarray(self.cov_b_position, dtype=np.float64).reshape(3, 3))
         )
+        if self.b_normal is not None:
+            n = np.asarray(self.b_normal, dtype=np.float64).reshape(3)
+            object.__setattr__(self, "b_normal", _readonly(n / max(float(np.linalg.norm(n)), 1e-12)))
 
 
 Record = (

@@ -6,8 +6,9 @@
   displacement under its covariance (``moved_chi2``): both, so neither a poorly located object nor a millimetre
   jitter of a well located one counts;
 - **gone**: not located although its place was in the robot's view: in view = within ``view_range_m`` of the
-  robot, on the side its label was seen from before (within ``view_facing_deg`` of that direction), with no
-  occupied cell of the store's merged grid between them; the camera's time is shared among the objects in view
+  robot, in front of its label (within ``normal_facing_deg`` of the label's normal when the readings told it,
+  else within ``view_facing_deg`` of the direction it was seen from before: ``holoslam.lifelong.facing``), with
+  no occupied cell of the store's merged grid between them; the camera's time is shared among the objects in view
   at once that it still has to read (a camera aimed at one label at a time reads one of them per snapshot; a
   label read ``competing_reads`` times in the session no longer competes), and an object is gone when its
   share reaches ``view_min_s``, or when at least ``min_images`` of the session's images held its place readable
@@ -33,9 +34,11 @@ from typing import Any
 import numpy as np
 
 from holoslam import geometry as g
+from holoslam.lifelong.facing import Facing, facing, facing_cos
 from holoslam.store.records import ObjectState, ObjectStatus
 
-__all__ = ["ChangeConfig", "Located", "classify", "in_view_seconds", "unseen_view_seconds", "view_directions", "to_world"]
+__all__ = ["ChangeConfig", "Located", "classify", "in_view_mask", "in_view_seconds", "label_facing",
+           "unseen_view_seconds", "view_directions", "to_world"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,10 +46,29 @@ class ChangeConfig:
     moved_m: float = 0.3  # m: the issue's "moved" (> 0.3 m)
     moved_chi2: float = 13.82  # chi-square(2) 0.999: the displacement is beyond what its covariance explains
     view_range_m: float = 2.5  # m from the robot's base (the simulated camera reads labels to 3.5 m)
-    # deg from the direction it was seen from. The camera reads within 60 deg of the label's normal, but that
-    # direction is a mean of the sightings' directions, not the normal: a label seen obliquely (a wardrobe's, at
-    # 1.1 m) lay 35-45 deg off it at the places the simulated camera could not read it; 20 keeps inside
+    # deg from the direction it was seen from (when no normal is known). The camera reads within 60 deg of the
+    # label's normal, but that direction is a mean of the sightings' directions, not the normal: a label seen
+    # obliquely (a wardrobe's, at 1.1 m) lay 35-45 deg off it at the places the simulated camera could not read
+    # it; 20 keeps inside
     view_facing_deg: float = 20.0
+    # deg from the label's normal (``facing``), in the plane from the robot's base. The camera reads within 60 deg
+    # of the normal in 3-D; the planar angle is smaller by the camera's height above or below the label (the
+    # simulated PTZ at 1.10 m, labels at 0.38-2.0 m: up to 31 deg of elevation at 1.5 m of range, and 45 deg in
+    # the plane with 31 deg of elevation is 53 deg in 3-D; 41 deg of elevation at 0.8 m: 58), and the normal errs
+    # by its sigma (at most ``normal_max_sigma_deg``)
+    normal_facing_deg: float = 45.0
+    # deg: the normal is used only when its sigma is within this (else the seen direction): two sigmas of it and
+    # the place's 2 deg leave the images' test (``FrustumConfig.normal_facing_deg``) 53 of the camera's 60. On seed
+    # 1's ten simulated days the store's normals had sigmas of 0.44 deg (median), 1.0 (95th percentile), 6.2
+    # (largest; 2 of 299 over 2.5), and erred by 0.18 deg (median) and 0.74 at most against the true normals
+    normal_max_sigma_deg: float = 2.5
+    # deg: a session's normal within this of the stored one is averaged with it; farther, the label was turned in
+    # place (a chair turned but carried less than ``moved_m``) and the session's replaces it. The same angle as a
+    # session's outlier test (``vision.normals.OUTLIER_DEG``): the store's normals erred by at most 0.92 deg on
+    # the simulated days, so two sessions of an unturned label agree far within it
+    normal_agree_deg: float = 30.0
+    # deg from horizontal: a reading whose normal tilts more (a label lying flat) has no side in the plane
+    normal_max_tilt_deg: float = 60.0
     # s of the camera's time (shared among the labels in view it still has to read): on 7 simulated days (seed 1,
     # 400 s each) the present labels the camera did not read reached 7.5-8.4 s; the absent ones not yet called
     # gone 2-44 s (10 or more in 14 of 25 cases); two and a half periods of the one-snapshot-per-4-s camera
@@ -83,6 +105,8 @@ class Located:
     kind: str
     payload: str
     read_ns: tuple[int, ...] = ()  # the stamps of the session's readings of its label, in order
+    normal: np.ndarray | None = None  # its label's normal in the world (``facing.session_normals``), unit (2,)
+    normal_sigma_rad: float = math.nan
 
 
 def to_world(s_xy: np.ndarray, cov_s_xy: np.ndarray, wTs: np.ndarray, cov_wTs: np.ndarray | None
@@ -121,16 +145,23 @@ def view_directions(obs_stamps_ns: np.ndarray, obs_ids: tuple[str, ...], stamps_
     return out
 
 
+def label_facing(view: np.ndarray | None, normal: np.ndarray | None, normal_sigma_rad: float,
+                 cfg: ChangeConfig) -> Facing:
+    """The side the view test counts (``facing.facing`` with ``cfg``'s angles)."""
+    return facing(view, normal, normal_sigma_rad, cfg.view_facing_deg, cfg.normal_facing_deg,
+                  cfg.normal_max_sigma_deg)
+
+
 def in_view_mask(w_xy: np.ndarray, view: np.ndarray | None, w_xy_robot: np.ndarray, merged,
-                 cfg: ChangeConfig) -> np.ndarray:
-    """Per robot pose, whether the object's place was in view (module docstring): within range, on its seen side
-    (any side when ``view`` is None), and no occupied cell of ``merged`` (a ``MergedGrid``) in between."""
+                 cfg: ChangeConfig, normal: np.ndarray | None = None, normal_sigma_rad: float = math.nan
+                 ) -> np.ndarray:
+    """Per robot pose, whether the object's place was in view (module docstring): within range, in front of its
+    label (within ``normal_facing_deg`` of ``normal`` when known, else ``view_facing_deg`` of the seen side
+    ``view``, else any side), and no occupied cell of ``merged`` (a ``MergedGrid``) in between."""
     d = w_xy_robot - np.asarray(w_xy)[None]
     r = np.hypot(d[:, 0], d[:, 1])
     ok = r <= cfg.view_range_m
-    if view is not None:
-        cosang = (d @ np.asarray(view)) / np.maximum(r, 1e-9)
-        ok &= cosang >= math.cos(math.radians(cfg.view_facing_deg))
+    ok &= facing_cos(label_facing(view, normal, normal_sigma_rad, cfg), d)
     idx = np.flatnonzero(ok)
     if idx.size and merged is not None:
         blocked = merged.occupied_between(w_xy_robot[idx], np.broadcast_to(w_xy, (len(idx), 2)), cfg.p_occupied,
@@ -145,11 +176,12 @@ def _dt(stamps_ns: np.ndarray) -> np.ndarray:
 
 
 def in_view_seconds(w_xy: np.ndarray, view: np.ndarray | None, stamps_ns: np.ndarray, w_xy_robot: np.ndarray,
-                    merged, cfg: ChangeConfig) -> float:
+                    merged, cfg: ChangeConfig, normal: np.ndarray | None = None,
+                    normal_sigma_rad: float = math.nan) -> float:
     """Seconds the robot spent with the object's place in view (``in_view_mask``), not shared."""
     if not len(stamps_ns):
         return 0.0
-    return float(_dt(stamps_ns)[in_view_mask(w_xy, view, w_xy_robot, merged, cfg)].sum())
+    return float(_dt(stamps_ns)[in_view_mask(w_xy, view, w_xy_robot, merged, cfg, normal, normal_sigma_rad)].sum())
 
 
 def _thin(stamps_ns: np.ndarray, w_xy_robot: np.ndarray, step_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -196,9 +228,10 @@ def unseen_view_seconds(stored: Mapping[str, ObjectState], located: Mapping[str,
     if not missing or not len(stamps_ns):
         return dict.fromkeys(missing, 0.0)
     t, xy = _thin(stamps_ns, w_xy_robot, cfg.view_step_s)
-    places: list[tuple[Any, Any]] = [(stored[k].w_xy, stored[k].view) for k in missing]
-    places += [(o.w_xy, o.view) for o in located.values()]
-    masks = np.array([in_view_mask(p, v, xy, merged, cfg) for p, v in places])
+    places: list[tuple[Any, Any, Any, float]] = [
+        (stored[k].w_xy, stored[k].view, stored[k].normal, stored[k].normal_sigma_rad) for k in missing]
+    places += [(o.w_xy, o.view, o.normal, o.normal_sigma_rad) for o in located.values()]
+    masks = np.array([in_view_mask(p, v, xy, merged, cfg, n, sn) for p, v, n, sn in places])
     for j, o in enumerate(located.values()):  # read enough: no longer competing for the camera
         if cfg.competing_reads > 0 and len(o.read_ns) >= cfg.competing_reads:
             masks[len(missing) + j, t > o.read_ns[cfg.competing_reads - 1]] = False

@@ -9,8 +9,9 @@ images per place:
 
 - **frustum**: the label's centre (its stored x, y and height) projects inside the image, ``edge_margin`` of its
   size away from every border (the code's own extent and the pose's error at the place);
-- **facing**: the camera within ``facing_deg`` of the side the label was seen from before (its outward normal,
-  as far as the sightings tell);
+- **facing**: the camera within ``readable_deg`` of the label's normal (in 3-D, the normal horizontal) less two
+  of the normal's sigmas and the place's error, when its readings told it, else within ``facing_deg`` of the
+  side it was seen from before (``lifelong.facing``);
 - **resolution**: the label's module would span ``min_module_px`` pixels (its printed side from its payload's
   ``s`` attribute, the module count of its QR code from the payload);
 - **laser free space**: no occupied cell of the store's merged grid on the line from the camera to the place (the
@@ -37,6 +38,21 @@ class FrustumConfig:
     # the simulated camera reads a label facing it within 60 deg (holoslam.sim.sensors.MAX_FACING_DEG); the
     # direction the label was seen from is a mean over its sightings, hence a margin
     facing_deg: float = 45.0
+    # deg from the label's normal, in 3-D from the camera, that the camera reads at (the simulated camera's
+    # MAX_FACING_DEG; QR decoders read to about 60 deg off frontal). An image counts within this less
+    # ``normal_sigmas`` of the normal's sigma and ``normal_margin_deg``: the checks of a place the simulated
+    # camera aims at it come at up to 60 deg from the true normal (seed 1 day 7: O17's two at 52 and 54 deg; seed
+    # 3 day 9: O46's at 36 and 57), and the store's normals erred by at most 0.92 deg on seeds 1-3
+    readable_deg: float = 60.0
+    normal_sigmas: float = 2.0
+    # deg: the direction from the place to the camera errs by the place's error over the range (2-3 cm at a metre
+    # or more: 1-2 deg)
+    normal_margin_deg: float = 2.0
+    normal_max_sigma_deg: float = 2.5  # deg: a less certain normal is not used (``ChangeConfig``'s)
+
+    def normal_facing_deg(self, normal_sigma_rad: float) -> float:
+        """The largest angle (deg) from a normal of this sigma at which an image counts."""
+        return self.readable_deg - self.normal_sigmas * math.degrees(normal_sigma_rad) - self.normal_margin_deg
     # px per module: holoslam.sim.sensors reads a label from 3 px (MIN_MODULE_PX) and zooms to 5 (TARGET_MODULE_PX);
     # 4 leaves a margin for the place's error
     min_module_px: float = 4.0
@@ -128,9 +144,13 @@ def world_cameras(views: CameraViews, stamps_ns: np.ndarray, w_wTb: np.ndarray) 
 
 
 def covering_images(w_xyz: np.ndarray, view: np.ndarray | None, payload: str, views: CameraViews,
-                    wTc: np.ndarray, merged: Any, cfg: FrustumConfig = FrustumConfig()) -> int:
+                    wTc: np.ndarray, merged: Any, cfg: FrustumConfig = FrustumConfig(),
+                    normal: np.ndarray | None = None, normal_sigma_rad: float = math.nan) -> int:
     """How many of the session's images held the place ``w_xyz`` (x, y, label height) readable (module
-    docstring); ``view`` the unit direction it was seen from (None: any), ``wTc`` from ``world_cameras``."""
+    docstring); ``normal`` the label's horizontal normal in the world with its sigma (None: not known), ``view``
+    the unit direction it was seen from (the fallback; None: any side), ``wTc`` from ``world_cameras``."""
+    from holoslam.lifelong.facing import facing, facing_cos
+
     if not len(views):
         return 0
     p = np.asarray(w_xyz, np.float64)
@@ -138,10 +158,9 @@ def covering_images(w_xyz: np.ndarray, view: np.ndarray | None, payload: str, vi
     d = p[None] - cam
     rng = np.linalg.norm(d, axis=1)
     ok = (rng <= cfg.max_range_m) & (rng > 0.1)
-    if view is not None:
-        dxy = cam[:, :2] - p[None, :2]
-        cosang = (dxy @ np.asarray(view)) / np.maximum(np.hypot(dxy[:, 0], dxy[:, 1]), 1e-9)
-        ok &= cosang >= math.cos(math.radians(cfg.facing_deg))
+    f = facing(view, normal, normal_sigma_rad, cfg.facing_deg, cfg.normal_facing_deg(normal_sigma_rad),
+               cfg.normal_max_sigma_deg)
+    ok &= facing_cos(f, -d if f.from_normal else (cam[:, :2] - p[None, :2]))
     c = np.einsum("nji,nj->ni", wTc[:, :3, :3], d)  # the place in each camera frame (z forward)
     z = c[:, 2]
     ok &= z > 0.1

@@ -202,7 +202,8 @@ def _founding(st: Any, sTa: np.ndarray, sobj: dict) -> _Placed:
     cov = None if st.sol.cov_wTa is None else np.asarray(st.sol.cov_wTa)
     views = _located(st, sobj, np.zeros(3), None)
     objs = tuple(ObjectState(k, o.object_type, o.payload, ObjectStatus.NEW, xy, float(o.w_position[2]), c,
-                             int(o.sightings), f"{k}#1", view=views[k].view) for k, (xy, c, o) in sobj.items())
+                             int(o.sightings), f"{k}#1", view=views[k].view, normal=views[k].normal,
+                             normal_sigma_rad=views[k].normal_sigma_rad) for k, (xy, c, o) in sobj.items())
     return _Placed(sTa, cov, np.zeros(3), None, objs, {k: f"{k}#1" for k in sobj}, {}, (), (), None)
 
 
@@ -217,17 +218,24 @@ def _robot_world(st: Any, wTs: np.ndarray) -> np.ndarray:
     return g.compose(np.broadcast_to(wTs, st.traj.wTb.shape), st.traj.wTb)[:, :2]
 
 
-def _located(st: Any, sobj: dict, wTs: np.ndarray, cov_wTs: np.ndarray | None) -> dict[str, Located]:
-    """The session's objects in the world under the relocalisation's wTs, with the side each was seen from."""
+def _located(st: Any, sobj: dict, wTs: np.ndarray, cov_wTs: np.ndarray | None,
+             cfg: ChangeConfig | None = None) -> dict[str, Located]:
+    """The session's objects in the world under the relocalisation's wTs, with the side each was seen from and
+    its label's normal (``facing.session_normals``)."""
+    from holoslam.lifelong.facing import session_normals
+
     w = {k: to_world(xy, c, wTs, cov_wTs) for k, (xy, c, _o) in sobj.items()}
     obs = st.seen.observations
     views = view_directions(np.array([o.stamp_ns for o in obs], np.int64), tuple(o.object_id for o in obs),
                             st.traj.stamps_ns, _robot_world(st, wTs), {k: v[0] for k, v in w.items()})
+    normals = session_normals(obs, st.traj.stamps_ns, g.compose(np.broadcast_to(wTs, st.traj.wTb.shape), st.traj.wTb),
+                              (cfg or ChangeConfig()).normal_max_tilt_deg)
     reads: dict[str, list[int]] = {}
     for ob in obs:
         reads.setdefault(ob.object_id, []).append(int(ob.stamp_ns))
     return {k: Located(k, w[k][0], w[k][1], float(o.w_position[2]), int(o.sightings), views.get(k),
-                       o.object_type, o.payload, tuple(sorted(reads.get(k, ())))) for k, (_xy, _c, o) in sobj.items()}
+                       o.object_type, o.payload, tuple(sorted(reads.get(k, ()))),
+                       *normals.get(k, (None, float("nan")))) for k, (_xy, _c, o) in sobj.items()}
 
 
 def _placements(statuses: dict[str, str], latest: dict[str, ObjectState], all_placements: set[str]
@@ -258,7 +266,7 @@ def _unseen_images(latest: dict[str, ObjectState], located: dict, log: Any, st: 
         if k in located or o.status == ObjectStatus.GONE or o.w_xy is None or not np.isfinite(o.z):
             continue
         out[k] = covering_images(np.array([o.w_xy[0], o.w_xy[1], o.z]), o.view, o.payload, views, wTc, merged,
-                                 cfg)
+                                 cfg, o.normal, o.normal_sigma_rad)
     return out
 
 
@@ -272,7 +280,7 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     ids = np.array([s.id for s in stored], np.int64)
     merged = merge_submaps(np.array([s.wTa for s in stored]), [(s.prob, s.known, s.origin, s.resolution)
                                                                 for s in stored], [s.session_id for s in stored])
-    located = _located(st, sobj, h.wTs, h.cov_wTs)
+    located = _located(st, sobj, h.wTs, h.cov_wTs, lc.changes)
     view_s: dict[str, float] = {}
     images = _unseen_images(latest, located, log, st, h.wTs, merged, lc.frustum)
     statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), merged, lc.changes, view_s,
@@ -296,7 +304,7 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     kf, traj = _onto_map(store, st, stored, js, frontend) if lc.keyframes else (None, None)
     wTa = js.new_wTa if kf is None else kf.wTa
     wTs = fit_se2(sTa[:, :2], wTa[:, :2]) if len(sTa) >= 2 else g.compose(wTa[0], g.inverse(sTa[0]))
-    objs = _object_states(statuses, located, latest, placement, js)
+    objs = _object_states(statuses, located, latest, placement, js, lc.changes)
     retire = _retire(stored, js, st, lc.retire_cover)
     # held stored anchors keep their pose and covariance (a pinned anchor's marginal is only the pin's)
     updates = {} if lc.hold_stored else {
@@ -353,13 +361,19 @@ def _kept_landmarks(st: Any) -> Any:
 
 
 def _object_states(statuses: dict[str, str], located: dict[str, Located], latest: dict[str, ObjectState],
-                   placement: dict[str, str], js: Any) -> tuple[ObjectState, ...]:
+                   placement: dict[str, str], js: Any, cfg: ChangeConfig | None = None
+                   ) -> tuple[ObjectState, ...]:
+    """The session's object states: a gone object keeps its stored place, side and normal; a located one gets
+    the joint solve's position, and its label's normal: the session's, averaged with the stored one when it was
+    seen at its place (``facing.updated_normal``)."""
+    from holoslam.lifelong.facing import updated_normal
+
     out = []
     for oid, s in sorted(statuses.items()):
         if s == ObjectStatus.GONE:
             old = latest[oid]
             out.append(ObjectState(oid, old.kind, old.payload, s, old.w_xy, old.z, old.cov_w_xy, 0, old.placement,
-                                   view=old.view))
+                                   view=old.view, normal=old.normal, normal_sigma_rad=old.normal_sigma_rad))
             continue
         loc = located[oid]
         xy, cov = js.placements.get(placement[oid], (loc.w_xy, loc.cov_w_xy))
@@ -370,8 +384,12 @@ def _object_states(statuses: dict[str, str], located: dict[str, Located], latest
             oxy, ocov = js.placements.get(old.placement, (old.w_xy, old.cov_w_xy))
             ocov = old.cov_w_xy if ocov is None else ocov
             d, cd = np.asarray(xy) - np.asarray(oxy), np.asarray(cov) + np.asarray(ocov)
+        normal, sigma = loc.normal, loc.normal_sigma_rad
+        if s == ObjectStatus.SEEN and oid in latest:
+            normal, sigma = updated_normal(latest[oid].normal, latest[oid].normal_sigma_rad, normal, sigma,
+                                           (cfg or ChangeConfig()).normal_agree_deg)
         out.append(ObjectState(oid, loc.kind, loc.payload, s, np.asarray(xy), loc.z, np.asarray(cov), loc.sightings,
-                               placement[oid], d, cd, loc.view))
+                               placement[oid], d, cd, loc.view, normal=normal, normal_sigma_rad=sigma))
     return tuple(out)
 
 

@@ -55,8 +55,10 @@ def _state(r: Any) -> ObjectState:
     xy = None if r[5] is None else np.array([r[5], r[6]])
     d = None if r[9] is None else np.array([r[9], r[10]])
     view = None if r[13] is None else np.array([r[13], r[14]])
+    normal = None if r[16] is None else np.array([r[16], r[17]])
     return ObjectState(r[1], r[2], r[3], r[4], xy, np.nan if r[7] is None else r[7], _opt(r[8], "object cov"),
-                       r[12], r[15] or "", d, _opt(r[11], "object cov_d"), view, r[0])
+                       r[12], r[15] or "", d, _opt(r[11], "object cov_d"), view, r[0], normal,
+                       np.nan if r[18] is None else float(r[18]))
 
 
 def _opt(blob: bytes | None, where: str) -> np.ndarray | None:
@@ -227,7 +229,7 @@ class MapStore:
                        ) -> tuple[ObjectState, ...]:
         """Object states by session, then object id; filtered by object and/or session."""
         sql = ("SELECT session_id, object_id, kind, payload, status, x, y, z, cov, dx, dy, cov_d, sightings, "
-               "view_x, view_y, placement FROM object_history")
+               "view_x, view_y, placement, normal_x, normal_y, normal_sigma FROM object_history")
         cond: list[str] = []
         args: list[Any] = []
         if object_id is not None:
@@ -244,7 +246,8 @@ class MapStore:
         """Each object's state in the latest joined session that has a row for it (gone ones included): one row
         per object, chosen by the database (the history's index on object and session)."""
         sql = ("SELECT h.session_id, h.object_id, h.kind, h.payload, h.status, h.x, h.y, h.z, h.cov, h.dx, h.dy, "
-               "h.cov_d, h.sightings, h.view_x, h.view_y, h.placement FROM object_history h "
+               "h.cov_d, h.sightings, h.view_x, h.view_y, h.placement, h.normal_x, h.normal_y, h.normal_sigma "
+               "FROM object_history h "
                "WHERE h.session_id = (SELECT MAX(h2.session_id) FROM object_history h2 JOIN sessions e "
                "ON e.id = h2.session_id WHERE e.joined = 1 AND h2.object_id = h.object_id) ORDER BY h.object_id")
         return {st.object_id: st for st in (_state(r) for r in self._con.execute(sql))}
@@ -349,10 +352,14 @@ class MapStore:
             return None if a is None else float(a[k])
 
         con.executemany(
-            "INSERT INTO object_history VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "INSERT INTO object_history (session_id, object_id, kind, payload, status, x, y, z, cov, dx, dy, cov_d, "
+            "sightings, view_x, view_y, placement, normal_x, normal_y, normal_sigma) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             [(sid, o.object_id, o.kind, o.payload, o.status, opt(o.w_xy, 0), opt(o.w_xy, 1),
               None if not np.isfinite(o.z) else float(o.z),
               None if o.cov_w_xy is None else pack(np.asarray(o.cov_w_xy, np.float64)),
               opt(o.displacement, 0), opt(o.displacement, 1),
               None if o.cov_displacement is None else pack(np.asarray(o.cov_displacement, np.float64)),
-              int(o.sightings), opt(o.view, 0), opt(o.view, 1), o.placement) for o in objects])
+              int(o.sightings), opt(o.view, 0), opt(o.view, 1), o.placement, opt(o.normal, 0), opt(o.normal, 1),
+              None if o.normal is None or not np.isfinite(o.normal_sigma_rad) else float(o.normal_sigma_rad))
+             for o in objects])

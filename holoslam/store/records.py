@@ -103,7 +103,9 @@ class ObjectState:
     """One object in one session: its world position (x, y) and height z with the 2x2 covariance, its status
     (``ObjectStatus``), the displacement from its previous place and its covariance when it moved, how often it
     was seen, the mean direction from the object to the robot when it was seen (unit vector; None when not
-    seen), and its placement (the landmark variable of the joint graph)."""
+    seen), its placement (the landmark variable of the joint graph), and its label's outward normal: the
+    horizontal unit direction in the world out of its printed face, from the pose of its readings (None when
+    not known), with the standard deviation of that direction in rad."""
 
     object_id: str
     kind: str
@@ -118,6 +120,8 @@ class ObjectState:
     cov_displacement: np.ndarray | None = None
     view: np.ndarray | None = None
     session_id: int = 0
+    normal: np.ndarray | None = None
+    normal_sigma_rad: float = float("nan")
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,6 +23,10 @@ that created the store and the one that last wrote it. Version 1 tables:
 - ``trajectories``: per session, the base poses at every odometry and scan stamp, as the pose in the anchor
   frame of the submap they hang from (so a later re-solve of the anchors moves them along).
 
+Version 2 adds to ``object_history`` the label's normal as far as the sessions' readings tell (``normal_x``,
+``normal_y``: its horizontal direction in the world, a unit vector; ``normal_sigma``: the standard deviation of
+that direction in rad), NULL where it is not known (every row of a version-1 store).
+
 Arrays are BLOBs (``holoslam.store.codec``). A migration ``MIGRATIONS[v]`` turns a version-v store into a
 version v+1 store inside the transaction that opens it; a store newer than this holoslam is refused.
 """
@@ -34,7 +38,7 @@ from collections.abc import Callable
 
 __all__ = ["SCHEMA_VERSION", "SCHEMA_V1", "MIGRATIONS", "create_schema"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 SCHEMA_V1 = """
 CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -115,14 +119,24 @@ CREATE INDEX sightings_submap ON sightings (submap_id);
 CREATE INDEX history_object ON object_history (object_id, session_id);
 """
 
-# MIGRATIONS[v](connection) turns a version-v store into version v + 1 (run inside the opening transaction).
-# Version 1 is the first: none yet. A change of the tables adds SCHEMA_VERSION + 1, its migration here, and a
-# fixture store of the old version under tests/store/ that the tests open and extend.
-MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {}
+
+def _v1_to_v2(con: sqlite3.Connection) -> None:
+    """Version 2: the label's normal in ``object_history`` (unknown for the rows already there)."""
+    for column in ("normal_x REAL", "normal_y REAL", "normal_sigma REAL"):
+        con.execute(f"ALTER TABLE object_history ADD COLUMN {column}")
+
+
+# MIGRATIONS[v](connection) turns a version-v store into version v + 1 (run inside the opening transaction). A
+# change of the tables adds SCHEMA_VERSION + 1, its migration here, and a fixture store of the old version under
+# tests/store/ that the tests open and extend. A new store is made as version 1 and migrated in the same
+# transaction, so a new store and an upgraded one have the same tables.
+MIGRATIONS: dict[int, Callable[[sqlite3.Connection], None]] = {1: _v1_to_v2}
 
 
 def create_schema(con: sqlite3.Connection) -> None:
-    """The tables of a new store (the caller holds the transaction)."""
+    """The tables of a new store at ``SCHEMA_VERSION`` (the caller holds the transaction)."""
     for statement in SCHEMA_V1.split(";"):
         if statement.strip():
             con.execute(statement)
+    for v in range(1, SCHEMA_VERSION):
+        MIGRATIONS[v](con)

@@ -224,6 +224,28 @@ def _laser_ranged(
     return drop, ranged
 
 
+def _base_normal(v: View) -> np.ndarray | None:
+    return None if v.b_normal is None else np.asarray(v.b_normal, np.float64)
+
+
+def _point_normal(p: MultiViewPoint, views: Sequence[View], wTb: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """The label's normal of a triangulated point in the world: the robust weighted mean of its views' normals
+    (``holoslam.vision.normals.mean_direction``), each turned by its view's base heading; (None, NaN) when no view
+    has one."""
+    from holoslam.vision.normals import mean_direction
+
+    rows = [(n, views[n]) for n in p.views if views[n].b_normal is not None]
+    if not rows:
+        return None, float("nan")
+    w = []
+    for n, v in rows:
+        R3 = np.eye(3)
+        R3[:2, :2] = g.rot2(float(wTb[n, 2]))
+        w.append(R3 @ np.asarray(v.b_normal, np.float64))
+    m, sigma, _ = mean_direction(np.array(w), np.array([v.normal_sigma_rad for _n, v in rows]))
+    return m, sigma
+
+
 class _LandmarkRows:
     """The landmark measurements and observations as they are collected (``TriangulatedLandmarks``' fields)."""
 
@@ -255,20 +277,21 @@ class _LandmarkRows:
         C3 = np.diag([0.0, 0.0, LASER_RANGE_SIGMA_M**2])
         C3[:2, :2] = C2
         self.obs.append(ObjectObservation(v.stamp_ns, v.object_id, v.payload, b, Rb.T @ C3 @ Rb,
-                                          "laser_range", v.source))
+                                          "laser_range", v.source, _base_normal(v), v.normal_sigma_rad))
 
     def add_point(self, p: MultiViewPoint, k: int, a: np.ndarray, R: np.ndarray, wTb_r: np.ndarray,
-                  source: Any) -> None:
+                  source: Any, w_normal: tuple[np.ndarray | None, float] = (None, float("nan"))) -> None:
         """Point ``p`` in anchor ``k``'s frame (``a``; ``R`` the anchor's rotation), observed from its
-        reference view's pose ``wTb_r``."""
+        reference view's pose ``wTb_r``; ``w_normal`` its label's normal in the world and its sigma (rad)."""
         self._add(k, p.object_id, a, R.T @ p.cov_w_position[:2, :2] @ R, float(p.w_position[2]),
                   p.w_position[:2].copy())
         Rb = g.rot2(wTb_r[2])
         b = np.r_[Rb.T @ (p.w_position[:2] - wTb_r[:2]), p.w_position[2]]
         Rb3 = np.eye(3)
         Rb3[:2, :2] = Rb
+        b_normal = None if w_normal[0] is None else Rb3.T @ w_normal[0]
         self.obs.append(ObjectObservation(p.stamp_ns, p.object_id, p.payload, b, Rb3.T @ p.cov_w_position @ Rb3,
-                                          "triangulation", source))
+                                          "triangulation", source, b_normal, w_normal[1]))
 
     def result(self, points: Sequence[MultiViewPoint], report: MultiViewReport,
                n_ranged: int) -> TriangulatedLandmarks:
@@ -322,7 +345,7 @@ def triangulated_landmarks(
         a = R.T @ (p.w_position[:2] - wTa[k, :2])
         if np.hypot(*a) < 1e-3:  # at the anchor's origin: no bearing (never for a code seen from a robot)
             continue
-        rows.add_point(p, k, a, R, wTb[r], views[r].source)
+        rows.add_point(p, k, a, R, wTb[r], views[r].source, _point_normal(p, views, wTb))
     return rows.result(points, report, len(ranged))
 
 

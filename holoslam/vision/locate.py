@@ -12,10 +12,19 @@ the code centre).
 Label frame ``o`` (as in ``holoslam.sim.label_views``): origin at the code centre, x right along the printed top
 edge, y up, z out of the printed face; corners TL, TR, BR, BL at (-s/2, s/2), (s/2, s/2), (s/2, -s/2),
 (-s/2, -s/2): the order ``cv2.SOLVEPNP_IPPE_SQUARE`` expects.
+
+The label's **normal** (its z axis, out of the printed face) comes with the PnP pose: the lifelong view tests use
+it as the side the label can be read from. Its standard deviation ``normal_sigma_rad`` is first order in the
+rotation's covariance; a square seen small is the planar pose's two-fold ambiguity (IPPE's two solutions, the
+normal mirrored about the line of sight), and when the second solution's reprojection error is not worse by
+``AMBIGUITY_CHI2`` (under ``sigma_px``) the sigma covers both normals (half the angle between them). The normal
+does not depend on the printed size (scaling the square scales the translation only), so a label without one
+gets it too (``label_normal``).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -29,7 +38,9 @@ __all__ = [
     "LabelPose",
     "Triangulation",
     "DEFAULT_SIGMA_PX",
+    "AMBIGUITY_CHI2",
     "pnp_label",
+    "label_normal",
     "triangulate",
     "transform_position",
     "base_to_submap",
@@ -38,17 +49,29 @@ __all__ = [
 ]
 
 DEFAULT_SIGMA_PX = 0.5
+# chi-square (1 dof, 0.95): the second IPPE solution's sum of squared corner residuals must exceed the best's by
+# this many sigma_px^2 for the reading to tell the two normals apart (on the simulated days' readings of 5-15 cm
+# labels at 5 px a module, the second solution's RMS was 0.36-12.6 px against 0.005-0.17 px for the best: all
+# apart; in real images the corners' noise is larger and near-frontal small labels are not)
+AMBIGUITY_CHI2 = 3.84
 
 
 @dataclass(frozen=True, slots=True)
 class LabelPose:
     """A label located in one view: ``cTo`` (4x4 pose of the label in the camera's optical frame), the centre
-    ``c_position`` (3,) and its covariance ``cov_c_position`` (3x3), the reprojection RMS (px)."""
+    ``c_position`` (3,) and its covariance ``cov_c_position`` (3x3), the reprojection RMS (px), and the
+    standard deviation of its normal's direction (rad; the module docstring: the flip ambiguity included)."""
 
     cTo: np.ndarray
     c_position: np.ndarray
     cov_c_position: np.ndarray
     reprojection_rms: float
+    normal_sigma_rad: float = math.nan
+
+    @property
+    def c_normal(self) -> np.ndarray:
+        """The label's outward normal (3,), unit, in the camera's optical frame (towards the camera)."""
+        return self.cTo[:3, 2].copy()
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,7 +113,8 @@ def pnp_label(
     )
     if n == 0:
         raise VisionError("PnP found no label pose for these corners (degenerate quadrilateral?)")
-    k = int(np.argmin(np.asarray(errs).ravel())) if errs is not None else 0
+    order = np.argsort(np.asarray(errs).ravel()) if errs is not None else np.arange(n)
+    k = int(order[0])
     rvec, tvec = rvecs[k].reshape(3, 1).copy(), tvecs[k].reshape(3, 1).copy()
     rvec, tvec = cv2.solvePnPRefineLM(obj, c.reshape(4, 1, 2), camera.K, D, rvec, tvec)
     proj, jac = cv2.projectPoints(obj, rvec, tvec, camera.K, D)
@@ -107,7 +131,40 @@ def pnp_label(
     if T[2, 3] <= 0:
         raise VisionError("PnP put the label behind the camera; check the corner order (TL, TR, BR, BL)")
     cov_t = 0.5 * (cov[3:, 3:] + cov[3:, 3:].T)
-    return LabelPose(T, T[:3, 3].copy(), cov_t, float(np.sqrt(np.mean(resid**2))))
+    sigma_n = _normal_sigma(rvec, cov[:3, :3])
+    if n > 1:  # the other IPPE solution: the normal mirrored about the line of sight
+        alt = int(order[1])
+        r_alt, _ = cv2.projectPoints(obj, rvecs[alt], tvecs[alt], camera.K, D)
+        ssr_alt = float(np.sum((r_alt.reshape(4, 2) - c) ** 2))
+        if ssr_alt - float(np.sum(resid**2)) < AMBIGUITY_CHI2 * sigma_px**2:
+            n_alt = cv2.Rodrigues(rvecs[alt])[0][:, 2]
+            sigma_n = max(sigma_n, 0.5 * math.acos(float(np.clip(n_alt @ R[:, 2], -1.0, 1.0))))
+    return LabelPose(T, T[:3, 3].copy(), cov_t, float(np.sqrt(np.mean(resid**2))), sigma_n)
+
+
+def _normal_sigma(rvec: np.ndarray, cov_rvec: np.ndarray) -> float:
+    """The standard deviation (rad) of the direction of R(rvec)'s z axis under the rotation vector's covariance:
+    first order, the Jacobian by central differences (the normal is a unit vector: its covariance's trace is the
+    direction's variance)."""
+    import cv2
+
+    r = np.asarray(rvec, np.float64).reshape(3)
+    Jn = np.zeros((3, 3))
+    h = 1e-6
+    for i in range(3):
+        d = np.zeros(3)
+        d[i] = h
+        Jn[:, i] = (cv2.Rodrigues(r + d)[0][:, 2] - cv2.Rodrigues(r - d)[0][:, 2]) / (2 * h)
+    return float(math.sqrt(max(float(np.trace(Jn @ cov_rvec @ Jn.T)), 0.0)))
+
+
+def label_normal(corners: np.ndarray, camera: PinholeCamera, sigma_px: float = DEFAULT_SIGMA_PX
+                 ) -> tuple[np.ndarray, float]:
+    """The outward normal (3,) of a square label in the camera's optical frame from its corners (4, 2), and its
+    standard deviation (rad), without its printed size: PnP's rotation does not depend on it (module docstring).
+    Raises ``VisionError`` as ``pnp_label``."""
+    est = pnp_label(corners, 1.0, camera, sigma_px)
+    return est.c_normal, est.normal_sigma_rad
 
 
 def triangulate(
@@ -223,11 +280,13 @@ def observation_from_pnp(
     bTc: np.ndarray,
     sigma_px: float = DEFAULT_SIGMA_PX,
 ) -> ObjectObservation:
-    """An ``ObjectObservation`` (label centre in the base frame at ``stamp_ns``) from one view by PnP; ``bTc``
-    is the camera's optical frame in the base frame at the image stamp."""
+    """An ``ObjectObservation`` (label centre in the base frame at ``stamp_ns``, with the label's normal) from one
+    view by PnP; ``bTc`` is the camera's optical frame in the base frame at the image stamp."""
     est = pnp_label(corners, side_m, camera, sigma_px)
     p, cov = transform_position(bTc, est.c_position, est.cov_c_position)
-    return ObjectObservation(int(stamp_ns), object_id, payload, p, cov, "pnp")
+    b_normal = np.asarray(bTc, np.float64)[:3, :3] @ est.c_normal
+    return ObjectObservation(int(stamp_ns), object_id, payload, p, cov, "pnp", b_normal=b_normal,
+                             normal_sigma_rad=est.normal_sigma_rad)
 
 
 def observation_from_triangulation(

@@ -59,7 +59,9 @@ class View:
     ``camera`` its camera, ``bTc`` (4, 4) the camera's optical frame in the base frame at ``stamp_ns``;
     ``source`` is where the sighting came from ("images": decoded here, "tags": the robot's tag topic);
     ``foreign`` whether the code is not a holoslam label (then ``object_id`` is derived from the payload);
-    ``side_px`` the mean side of the code in the image (for a size estimate, 0 if unknown)."""
+    ``side_px`` the mean side of the code in the image (for a size estimate, 0 if unknown); ``b_normal`` the
+    code's outward normal in the base frame from its corners (``locate.label_normal``; None if unknown) with the
+    standard deviation of its direction ``normal_sigma_rad``."""
 
     stamp_ns: int
     object_id: str
@@ -70,6 +72,8 @@ class View:
     source: str = "images"
     foreign: bool = False
     side_px: float = 0.0
+    b_normal: np.ndarray | None = None
+    normal_sigma_rad: float = math.nan
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "centre_px", np.asarray(self.centre_px, np.float64).reshape(2))

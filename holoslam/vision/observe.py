@@ -38,7 +38,7 @@ from holoslam.errors import HoloslamError, ImageDecodeError, PayloadError, Visio
 from holoslam.types import CameraInfo, LogData, ObjectObservation
 from holoslam.vision.camera import PinholeCamera
 from holoslam.vision.label import MAGIC, ObjectLabel, foreign_code_id, parse_label
-from holoslam.vision.locate import DEFAULT_SIGMA_PX, observation_from_pnp
+from holoslam.vision.locate import DEFAULT_SIGMA_PX, label_normal, observation_from_pnp
 from holoslam.vision.multiview import View
 from holoslam.vision.qr import Decoder, Fallback, detect_qr
 from holoslam.vision.stream import FrameDecoder, StreamSettings
@@ -169,6 +169,17 @@ def _centre(corners: np.ndarray) -> np.ndarray:
     if abs(np.linalg.det(A)) < 1e-12:
         return np.asarray(corners, np.float64).reshape(4, 2).mean(axis=0)
     return p0 + np.linalg.solve(A, p1 - p0)[0] * d1
+
+
+def _view_normal(corners: np.ndarray, cam: PinholeCamera, bTc: np.ndarray, sigma_px: float
+                 ) -> tuple[np.ndarray | None, float]:
+    """A code's outward normal in the base frame from its corners, without its size (``locate.label_normal``),
+    and its sigma (rad); (None, NaN) when the corners give no pose."""
+    try:
+        c_normal, sigma = label_normal(corners, cam, sigma_px)
+    except VisionError:
+        return None, float("nan")
+    return np.asarray(bTc, np.float64)[:3, :3] @ c_normal, sigma
 
 
 def resolve_source(log: LogData, source: SightingSource | str = SightingSource.AUTO) -> SightingSource:
@@ -338,8 +349,9 @@ def locate_from_log(
                 obs.append(replace(ob, source=s.source))
             else:
                 sides = np.linalg.norm(s.corners - np.roll(s.corners, -1, axis=0), axis=1)
+                b_normal, sigma_n = _view_normal(s.corners, cam, bTc, sigma_px)
                 views.append(View(s.stamp_ns, s.object_id, s.payload, _centre(s.corners), cam, bTc, s.source,
-                                  s.foreign, float(sides.mean())))
+                                  s.foreign, float(sides.mean()), b_normal, sigma_n))
                 n_foreign += s.foreign
                 n_sizeless += not s.foreign
         except VisionError as e:

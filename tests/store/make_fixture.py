@@ -1,8 +1,8 @@
-"""Makes ``fixture_v1.holomap``: two 60 s simulated sessions of the household (the second from another start, its
-odometry from the identity there) run into a new store by ``holoslam.lifelong.session.run_session``. Run it only
-when the schema version changes (the old fixture stays, as ``fixture_v<old>.holomap``, for the migration tests):
+"""Makes ``fixture_v<schema>.holomap``: two 60 s simulated sessions of the household (the second from another start,
+its odometry from the identity there) run into a new store by ``holoslam.lifelong.session.run_session``. Run it only
+when the schema version changes (the old fixtures stay, as ``fixture_v<old>.holomap``, for the migration tests):
 
-    PYTHONPATH=. python tests/store/make_fixture.py tests/store/fixture_v1.holomap
+    PYTHONPATH=. python tests/store/make_fixture.py tests/store/fixture_v2.holomap
 """
 
 from __future__ import annotations

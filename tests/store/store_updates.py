@@ -21,7 +21,7 @@ def make_update(seed: int = 0, n_submaps: int = 4, stored_ids: tuple[int, ...] =
     kinds = ("scan_match",) * (n_submaps - 1) + ("cross",) * len(stored_ids)
     m = len(fi)
     objs = (ObjectState("O05", "cup", "HL1;O05;cup;s=60", "new", np.array([1.0, 2.0]), 0.5, np.eye(2) * 1e-4, 3,
-                        "O05#1", view=np.array([0.0, 1.0])),
+                        "O05#1", view=np.array([0.0, 1.0]), normal=np.array([0.6, 0.8]), normal_sigma_rad=0.03),
             ObjectState("O07", "armchair", "HL1;O07;armchair", "moved", np.array([3.0, 2.0]), 0.45, np.eye(2) * 4e-4,
                         2, "O07#2", np.array([0.5, 0.1]), np.eye(2) * 1e-3))
     stamps = np.sort(rng.integers(0, 10**12, n_poses))

@@ -1,6 +1,6 @@
-"""The map store: round trip of a session, schema version and migration, refusals with one-line errors, one
-transaction per session (an exception or a SIGKILL anywhere inside leaves the previous state), and the committed
-fixture store of schema 1 opening and extending."""
+"""The map store: round trip of a session, schema version and migration (schema 1 -> 2: the label normals),
+refusals with one-line errors, one transaction per session (an exception or a SIGKILL anywhere inside leaves the
+previous state), and the committed fixture stores of schemas 1 and 2 opening and extending."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ from holoslam.store.codec import pack, pack_prob, unpack, unpack_prob
 from holoslam.store.db import MapStore
 
 FIXTURE = Path(__file__).with_name("fixture_v1.holomap")
+FIXTURE_V2 = Path(__file__).with_name("fixture_v2.holomap")  # with the label normals
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -57,6 +58,9 @@ def test_a_session_round_trips(tmp_path):
         h = st.object_history(object_id="O07")
         assert len(h) == 1 and h[0].status == "moved"
         np.testing.assert_allclose(h[0].displacement, [0.5, 0.1])
+        assert h[0].normal is None and np.isnan(h[0].normal_sigma_rad)  # a label whose normal is not known
+        o5 = st.latest_objects()["O05"]
+        assert o5.normal is not None and np.allclose(o5.normal, [0.6, 0.8]) and o5.normal_sigma_rad == 0.03
         t = st.trajectory(1)
         assert np.array_equal(t.stamps_ns, u.trajectory.stamps_ns)
         np.testing.assert_allclose(t.aTb, u.trajectory.aTb, atol=1e-6)
@@ -117,9 +121,10 @@ def test_refusals_are_one_line_store_errors(tmp_path):
         MapStore.open(newer)
 
 
-def test_the_fixture_store_of_schema_1_opens_and_extends(tmp_path):
+@pytest.mark.parametrize("fixture", [FIXTURE, FIXTURE_V2], ids=["schema1", "schema2"])
+def test_the_fixture_stores_open_and_extend(tmp_path, fixture):
     p = tmp_path / "home.holomap"
-    shutil.copy(FIXTURE, p)
+    shutil.copy(fixture, p)
     with MapStore.open(p) as st:
         assert st.schema_version == schema.SCHEMA_VERSION
         sessions = st.sessions()
@@ -133,28 +138,68 @@ def test_the_fixture_store_of_schema_1_opens_and_extends(tmp_path):
         assert after["sessions"] == before["sessions"] + 1 and after["submaps"] == before["submaps"] + 4
 
 
-def test_a_migration_runs_once_when_a_later_schema_opens_an_older_store(tmp_path, monkeypatch):
+def test_the_schema_1_fixture_migrates_to_label_normals_and_keeps_them(tmp_path):
+    """Schema 2 adds the label's normal to the object history: the schema-1 fixture opens with every normal
+    unknown (its objects keep their seen side), and a session added after it stores and reads back its
+    normals; a new store has the same tables as a migrated one."""
     p = tmp_path / "home.holomap"
     shutil.copy(FIXTURE, p)
+    v1 = {r[1] for r in sqlite3.connect(FIXTURE).execute("PRAGMA table_info(object_history)")}
+    assert not {"normal_x", "normal_y", "normal_sigma"} & v1
+    with MapStore.open(p) as st:
+        assert st.schema_version == 2
+        old = st.object_history()
+        assert old and all(o.normal is None and np.isnan(o.normal_sigma_rad) for o in old)
+        assert any(o.view is not None for o in old)
+        st.add_session(make_update(8, stored_ids=(st.submaps()[0].id,), expected_id=3))
+        o5 = st.latest_objects()["O05"]
+        assert o5.session_id == 3 and np.allclose(o5.normal, [0.6, 0.8]) and o5.normal_sigma_rad == 0.03
+    shutil.copy(FIXTURE_V2, tmp_path / "v2.holomap")
+    with MapStore.open(tmp_path / "v2.holomap", create=False) as v2:  # schema 2: every located label has a normal
+        located = [o for o in v2.object_history() if o.status in ("new", "seen", "moved")]
+        assert located and all(o.normal is not None and 0 < o.normal_sigma_rad < 0.5 for o in located)
+        # 19 of its 20 rows within 1.3 deg; O12's one reading on day 1 could not tell the flip apart (15 deg)
+        assert sum(o.normal_sigma_rad < np.radians(2.5) for o in located) == len(located) - 1 == 19
+    new = tmp_path / "new.holomap"
+    MapStore.open(new).close()
+    tables = "SELECT name, sql FROM sqlite_master WHERE type IN ('table', 'index') ORDER BY name"
+    cols = "SELECT name, type FROM pragma_table_info(?)"
 
-    def v1_to_v2(con: sqlite3.Connection) -> None:
+    def shape(path: Path) -> list:
+        con = sqlite3.connect(path)
+        return [(n, con.execute(cols, (n,)).fetchall()) for n, _sql in con.execute(tables).fetchall()]
+
+    assert shape(new) == shape(p)
+
+
+def test_a_migration_runs_once_when_a_later_schema_opens_an_older_store(tmp_path, monkeypatch):
+    """A later schema (this one + 1, its migration a stand-in) opens the schema-1 fixture through every
+    migration in one transaction; without the last migration the store stays at schema 1, not half-migrated."""
+    p = tmp_path / "home.holomap"
+    shutil.copy(FIXTURE, p)
+    now = schema.SCHEMA_VERSION
+
+    def later(con: sqlite3.Connection) -> None:
         con.execute("ALTER TABLE sessions ADD COLUMN operator TEXT")
 
-    monkeypatch.setattr(schema, "SCHEMA_VERSION", 2)
-    monkeypatch.setitem(schema.MIGRATIONS, 1, v1_to_v2)
+    monkeypatch.setattr(schema, "SCHEMA_VERSION", now + 1)
+    monkeypatch.setitem(schema.MIGRATIONS, now, later)
     import holoslam.store.db as db
 
-    monkeypatch.setattr(db, "SCHEMA_VERSION", 2)
+    monkeypatch.setattr(db, "SCHEMA_VERSION", now + 1)
     with MapStore.open(p) as st:
-        assert st.schema_version == 2 and len(st.sessions()) == 2
-    cols = [r[1] for r in sqlite3.connect(p).execute("PRAGMA table_info(sessions)")]
-    assert "operator" in cols
-    monkeypatch.delitem(schema.MIGRATIONS, 1)
+        assert st.schema_version == now + 1 and len(st.sessions()) == 2
+    con = sqlite3.connect(p)
+    assert "operator" in [r[1] for r in con.execute("PRAGMA table_info(sessions)")]
+    assert "normal_x" in [r[1] for r in con.execute("PRAGMA table_info(object_history)")]
+    monkeypatch.delitem(schema.MIGRATIONS, now)
     q = tmp_path / "again.holomap"
     shutil.copy(FIXTURE, q)
-    with pytest.raises(StoreError, match="no migration from map store schema 1"):
+    with pytest.raises(StoreError, match=f"no migration from map store schema {now}"):
         MapStore.open(q)
-    assert sqlite3.connect(q).execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()[0] == "1"
+    con = sqlite3.connect(q)
+    assert con.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()[0] == "1"
+    assert "normal_x" not in [r[1] for r in con.execute("PRAGMA table_info(object_history)")]
 
 
 def _child_env() -> dict[str, str]:
@@ -217,9 +262,11 @@ def test_a_session_killed_after_its_commit_is_kept(tmp_path):
         assert len(st.trajectory(1).stamps_ns) == 5000
 
 
-def test_the_bounded_reads_give_what_the_whole_history_gives():
+def test_the_bounded_reads_give_what_the_whole_history_gives(tmp_path):
     """latest_objects / sightings(ids) / placements() select in SQL what reading every row would give."""
-    with MapStore.open(FIXTURE, create=False) as st:
+    p = tmp_path / "home.holomap"
+    shutil.copy(FIXTURE, p)  # a copy: opening the committed schema-1 fixture migrates it
+    with MapStore.open(p, create=False) as st:
         joined = {s.id for s in st.sessions() if s.joined}
         whole: dict = {}
         for o in st.object_history():

@@ -160,3 +160,37 @@ def test_laser_range_along_the_rays_replaces_a_triangulation_it_agrees_with():
             assert {o.method for o in tl.observations} == {"laser_range"}
         else:  # the cabinet 1.2 m before the wall: laser ranges far from the triangulation, not used
             assert tl.laser_ranged == 0 and tl.ids == ("O40",) and tl.observations[0].method == "triangulation"
+
+
+def test_the_label_normal_follows_a_code_through_triangulation_and_laser_ranging():
+    """The same wall code, each view carrying the normal its corners gave (the wall's, facing -x, 2 deg off in
+    opposite senses, in the view's base frame): a laser-ranged view keeps its own normal, a triangulated point
+    the views' mean, each in its observation's base frame, so in the world every one lies within 2 deg of
+    the wall's normal (the mean within the 0.3 deg the given headings are off by)."""
+    from dataclasses import replace
+
+    from holoslam.vision.landmarks import triangulated_landmarks
+
+    cam = _camera(3000.0)
+    w_X = np.array([3.0, 0.4, 1.5])
+    true = np.array([[0.0, 0.0, 0.05], [0.0, 0.3, -0.08]])
+    given = true + np.array([[0, 0, math.radians(0.3)], [0, 0, -math.radians(0.3)]])
+    wall_normal = 180.0
+    views = []
+    for k, p in enumerate(true):
+        yaw = math.radians(wall_normal + (2.0 if k else -2.0)) - p[2]  # in the base frame at the true pose
+        v = _view(w_X, p, cam, stamp=1_000_000_000 * (k + 1))
+        views.append(replace(v, b_normal=np.array([math.cos(yaw), math.sin(yaw), 0.0]), normal_sigma_rad=0.01))
+    wall = np.column_stack([np.full(121, 3.0), np.linspace(-1.5, 1.5, 121)])
+    cabinet = wall[40:80] - [1.2, 0.0]
+    hidden = np.vstack([wall[:40], wall[80:], cabinet])
+    stamps = [v.stamp_ns for v in views]
+    odo_t, odo = np.array([0, 3_000_000_000], np.int64), np.zeros((2, 3))
+    for points, method, n_obs, worst in ((wall, "laser_range", 2, 2.4), (hidden, "triangulation", 1, 0.4)):
+        tl = triangulated_landmarks(views, [_Submap(points, stamps, given)], np.zeros((1, 3)), None, odo_t, odo, 0.5)
+        assert [o.method for o in tl.observations] == [method] * n_obs
+        for o in tl.observations:
+            k = stamps.index(o.stamp_ns)
+            w_yaw = math.degrees(math.atan2(o.b_normal[1], o.b_normal[0]) + given[k, 2])
+            assert abs((w_yaw - wall_normal + 180.0) % 360.0 - 180.0) < worst
+            assert 0 < o.normal_sigma_rad < math.radians(3.0)
