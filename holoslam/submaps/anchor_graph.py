@@ -47,6 +47,10 @@ class AnchorGraph:
         self.cov: list[np.ndarray] = []
         self.kind: list[str] = []
         self.est: list[np.ndarray] = [np.asarray(first_wTa, np.float64)]
+        # each anchor by dead reckoning alone (odometry and compass, chained from the first): independent of the
+        # scan matches and closures the estimate follows (``dead_reckoning_disagreement``)
+        self.dr: list[np.ndarray] = [np.asarray(first_wTa, np.float64)]
+        self.part: list[int] = [0]  # the part of the run each anchor is in: breaks of local SLAM ("lost") before it
         self.travel: list[float] = [0.0]  # odometer path length at each anchor
         self._dist: tuple[int, int, np.ndarray] | None = None
         self._infl: tuple[int, float] | None = None
@@ -85,6 +89,29 @@ class AnchorGraph:
             A = coo_matrix((w, (ii, jj)), shape=(N, N)).tocsr()
             self._dist = (*key, dijkstra(A, directed=False, indices=n))
         return self._dist[2]
+
+    def add_anchor(self, m: int, est_mTn: np.ndarray, dr_mTn: np.ndarray, travelled: float, lost: bool) -> None:
+        """A new anchor n after anchor m: its estimate ``est_mTn`` (the scan match, or the odometry across a break)
+        and its dead reckoning ``dr_mTn`` from m, the odometer at it, and whether local SLAM broke between them."""
+        self.est.append(g.compose(self.est[m], est_mTn))
+        self.dr.append(g.compose(self.dr[m], dr_mTn))
+        self.part.append(self.part[m] + int(lost))
+        self.travel.append(float(travelled))
+
+    def dead_reckoning_disagreement(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) m and (N,) rad: how far the current estimate of anchor n relative to each anchor m lies from
+        dead reckoning's alone (position, heading); inf for anchors across a break of local SLAM (the odometry
+        is all either has there). The estimate follows the scan matches and closures, dead reckoning the
+        odometer and the compass: two independent measures of mTn. Where they agree, neither can be far off
+        (``LoopConfig.agreement_factor``)."""
+        est, dr = np.array(self.est), np.array(self.dr)
+        N = len(est)
+        d = g.between(g.between(dr, np.broadcast_to(dr[n], dr.shape)),
+                      g.between(est, np.broadcast_to(est[n], est.shape)))
+        other = np.array(self.part) != self.part[n]
+        xy = np.where(other, np.inf, np.hypot(d[:, 0], d[:, 1]))
+        th = np.where(other, np.inf, np.abs(g.wrap(d[:, 2])))
+        return xy[:N], th[:N]
 
     def relative_covariances(self, n: int) -> np.ndarray:
         """(N, 3, 3): the covariance of anchor n relative to each anchor m (right perturbation, n's frame) along

@@ -315,12 +315,10 @@ def _walk_scans(
             if mTn is None:  # a break: the odometry alone, as uncertain as the building is large
                 graph.add(m, n, dr.end, dr.cov_aTb_end + lost, "lost")
                 loops.add_break(n)
-                graph.est.append(g.compose(graph.est[m], dr.end))
             else:
                 graph.add(m, n, dr.end, dr.cov_aTb_end, "dead_reckoning")
                 graph.add(m, n, mTn, cov_mTn, "scan_match")
-                graph.est.append(g.compose(graph.est[m], mTn))
-            graph.travel.append(float(travelled[k]))
+            graph.add_anchor(m, dr.end if mTn is None else mTn, dr.end, float(travelled[k]), mTn is None)
         n_arrivals, n_breaks = len(slam.arrivals), len(slam.breaks)
         finish(slam.pop_finished())
         if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
@@ -329,7 +327,8 @@ def _walk_scans(
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
                                  graph.graph_distance(node.submap), float(travelled[k]),
                                  graph.relative_covariances(node.submap), np.array(graph.travel),
-                                 partial(slam.bundle, node, cfg.loops.global_bundle_m))
+                                 partial(slam.bundle, node, cfg.loops.global_bundle_m),
+                                 graph.dead_reckoning_disagreement(node.submap) if run.have_h else None)
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found and graph.disagree(found, cfg.loops.resolve_min_d2):

@@ -123,13 +123,19 @@ class LoopSearch:
         return float(wx[0]), float(wy[0]), float(wth[0])
 
     def windows(self, graph_distance_m: np.ndarray, cov_mTr: np.ndarray | None = None,
-                mTr: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                mTr: np.ndarray | None = None,
+                disagreement: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``window`` of M old submaps at once: graph distances (M,), covariances (M, 3, 3) of the node's poses
         ``mTr`` (M, 3) in them; (wx, wy, wth), each (M,). The covariance part is ``window_sigmas`` of the node's
-        covariance relative to the old submap, in the submap's axes."""
+        covariance relative to the old submap, in the submap's axes. ``disagreement`` (m (M,), rad (M,)): how far
+        the estimate of the node's submap relative to each old one lies from dead reckoning's alone; the drift
+        part is at most the base window plus ``agreement_factor`` times it (``LoopConfig``)."""
         c = self.cfg
         xy = c.base_window_xy + c.window_rate * graph_distance_m
         th = np.radians(c.base_window_deg + c.window_deg_rate * graph_distance_m)
+        if disagreement is not None and c.agreement_factor > 0:
+            xy = np.minimum(xy, c.base_window_xy + c.agreement_factor * disagreement[0])
+            th = np.minimum(th, math.radians(c.base_window_deg) + c.agreement_factor * disagreement[1])
         if cov_mTr is None or mTr is None:
             return xy, xy.copy(), np.minimum(th, math.pi)
         cs, sn = np.cos(mTr[:, 2]), np.sin(mTr[:, 2])
@@ -149,7 +155,8 @@ class LoopSearch:
     def search(self, n: int, nTr: np.ndarray, cov_nTr: np.ndarray, b_pts: np.ndarray, est_wTa: np.ndarray,
                graph_distance: np.ndarray, travelled: float = 0.0, rel_cov: np.ndarray | None = None,
                travel: np.ndarray | None = None,
-               bundle: Callable[[], np.ndarray] | None = None) -> list[LoopCandidate]:
+               bundle: Callable[[], np.ndarray] | None = None,
+               disagreement: tuple[np.ndarray, np.ndarray] | None = None) -> list[LoopCandidate]:
         """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps;
         ``graph_distance[m]`` is the graph path length from m to n (see the module docstring); ``travelled``
         the odometer reading, which spaces wide searches of one old submap ``wide_search_spacing`` apart (a
@@ -157,8 +164,10 @@ class LoopSearch:
         ``rel_cov[m]`` (optional): the covariance of anchor n relative to anchor m (n's frame), which widens the
         window to ``window_sigmas`` of it; ``travel[m]`` the odometer at each anchor (the consistency test's
         drift allowance); ``bundle`` makes the points of the node and those behind it (``global_bundle_m``, node
-        frame) that the global search matches, called only when a global round runs. Closures of windowed searches are returned at once; those of global ones
-        when another agrees (``loop_consistency``)."""
+        frame) that the global search matches, called only when a global round runs; ``disagreement`` (m (N,), rad
+        (N,), per anchor: ``AnchorGraph.dead_reckoning_disagreement``) bounds the drift windows where dead
+        reckoning agrees with the estimate. Closures of windowed searches are returned at once; those of global
+        ones when another agrees (``loop_consistency``)."""
         from holoslam.warmup import wait_for_kernels
 
         wait_for_kernels("holoslam.submaps")  # a first run's pool compiling the branch and bound: not twice
@@ -180,7 +189,8 @@ class LoopSearch:
         olds_arr, dist = olds_arr[order], dist[order]
         seeds = g.between(np.asarray(est_wTa[olds_arr], float), np.broadcast_to(wTr, (len(olds_arr), 3)))
         covs = None if rel_cov is None else np.einsum("ij,mjk,lk->mil", A, rel_cov[olds_arr], A) + cov_nTr
-        win = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
+        dis = None if disagreement is None else (disagreement[0][olds_arr], disagreement[1][olds_arr])
+        win = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds, dis)
         for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
                                                     strict=True)):
             seed = seeds[q].copy()

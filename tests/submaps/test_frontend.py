@@ -404,6 +404,26 @@ def test_the_anchors_are_re_solved_only_for_a_closure_the_estimate_contradicts()
     assert G.disagree([agrees], 0.0)  # 0: always re-solved
 
 
+def test_the_estimate_is_compared_with_dead_reckoning_alone_within_one_part_of_the_run():
+    from holoslam.submaps.anchor_graph import AnchorGraph
+
+    G = AnchorGraph(np.zeros(3))
+    step = np.array([10.0, 0.0, 0.0])
+    for k in range(4):  # scan matches 10 m ahead each; dead reckoning 10.1 m and 0.01 rad to the left each
+        G.add_anchor(k, step, np.array([10.1, 0.0, 0.01]), 10.0 * (k + 1), lost=False)
+    G.add_anchor(4, step, np.array([30.0, 5.0, 1.0]), 50.0, lost=True)  # a break: the robot carried
+    G.add_anchor(5, step, step, 60.0, lost=False)
+    xy, th = G.dead_reckoning_disagreement(4)
+    dr_0T4 = g.compose(g.compose(g.compose(np.array([10.1, 0.0, 0.01]), np.array([10.1, 0.0, 0.01])),
+                                 np.array([10.1, 0.0, 0.01])), np.array([10.1, 0.0, 0.01]))
+    e = g.between(dr_0T4, np.array([40.0, 0.0, 0.0]))
+    assert xy[0] == pytest.approx(math.hypot(e[0], e[1])) and th[0] == pytest.approx(0.04)
+    assert xy[4] == pytest.approx(0.0, abs=1e-12) and xy[3] == pytest.approx(math.hypot(*g.between(np.array([10.1, 0.0, 0.01]), step)[:2]))
+    assert np.isinf(xy[5]) and np.isinf(th[6])  # the other side of the break: no bound
+    xy6, _ = G.dead_reckoning_disagreement(6)
+    assert np.all(np.isinf(xy6[:5])) and xy6[5:] == pytest.approx([0.0, 0.0], abs=1e-12)
+
+
 def test_the_scan_rate_ignores_bursts_of_stamps_and_stops():
     """``scan_rate_hz``: 5 Hz scans, some stamped in bursts 1 ms apart (as intel's log) and a 60 s stop: 5 Hz."""
     from holoslam.submaps.frontend import scan_rate_hz

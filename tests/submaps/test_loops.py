@@ -80,6 +80,24 @@ def test_window_grows_with_the_graph_distance_and_the_covariance_without_a_cap()
     assert wy == pytest.approx(4.0 / 3 * 3, rel=1e-6) and wx == pytest.approx(1.0)
 
 
+def test_dead_reckoning_that_agrees_with_the_estimate_bounds_the_drift_window():
+    ls = LoopSearch(LoopConfig(), MatchConfig())  # agreement_factor 2
+    d = np.array([1000.0, 1000.0, 1000.0, 40.0])
+    dis = (np.array([2.0, np.inf, 30.0, 2.0]), np.array([0.01, np.inf, 0.5, 0.01]))
+    wx, wy, th = ls.windows(d, None, None, dis)
+    # 1000 m of graph: 51 m / every heading by the drift rate; 1 m + 2 x 2 m and 10 deg + 2 x 0.01 rad where dead
+    # reckoning lies 2 m / 0.01 rad from the estimate; unchanged across a break (inf) or where they disagree widely
+    assert wx[0] == wy[0] == pytest.approx(5.0) and th[0] == pytest.approx(math.radians(10.0) + 0.02)
+    assert wx[1] == pytest.approx(51.0) and th[1] == pytest.approx(math.pi)
+    assert wx[2] == pytest.approx(51.0) and th[2] == pytest.approx(math.radians(10.0) + 1.0)  # each bound apart
+    assert wx[3] == pytest.approx(3.0)  # 40 m: the drift window (3 m) is already the smaller
+    # the covariance part still widens it: 3 sigma of 4 m along the old submap's x
+    wx, _, _ = ls.windows(d[:1], np.diag([4.0, 0.1, 0.001])[None] ** 2, np.zeros((1, 3)), (dis[0][:1], dis[1][:1]))
+    assert wx[0] == pytest.approx(12.0)
+    off = LoopSearch(LoopConfig(agreement_factor=0.0), MatchConfig()).windows(d, None, None, dis)
+    assert off[0][0] == pytest.approx(51.0)  # 0: off
+
+
 @pytest.mark.parametrize("drift_m", [1.0, 2.5, 4.0])
 def test_a_node_is_closed_against_an_old_submap_however_far_its_estimate_drifted(household_place, drift_m):
     # the estimate of submap n is off by drift_m and 10 deg about the world origin (~3-4 m at the node); 60 m of
