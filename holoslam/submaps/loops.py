@@ -128,14 +128,23 @@ class LoopSearch:
         """``window`` of M old submaps at once: graph distances (M,), covariances (M, 3, 3) of the node's poses
         ``mTr`` (M, 3) in them; (wx, wy, wth), each (M,). The covariance part is ``window_sigmas`` of the node's
         covariance relative to the old submap, in the submap's axes. ``disagreement`` (m (M,), rad (M,)): how far
-        the estimate of the node's submap relative to each old one lies from dead reckoning's alone; the drift
-        part is at most the base window plus ``agreement_factor`` times it (``LoopConfig``)."""
+        the estimate of the node's submap relative to each old one lies from dead reckoning's alone; the window is
+        at most the base window plus ``agreement_factor`` times it (``LoopConfig``)."""
         c = self.cfg
         xy = c.base_window_xy + c.window_rate * graph_distance_m
         th = np.radians(c.base_window_deg + c.window_deg_rate * graph_distance_m)
+        wx, wy, wth = self._covariance_windows(xy, th, cov_mTr, mTr)
         if disagreement is not None and c.agreement_factor > 0:
-            xy = np.minimum(xy, c.base_window_xy + c.agreement_factor * disagreement[0])
-            th = np.minimum(th, math.radians(c.base_window_deg) + c.agreement_factor * disagreement[1])
+            bxy = c.base_window_xy + c.agreement_factor * disagreement[0]
+            wx, wy = np.minimum(wx, bxy), np.minimum(wy, bxy)
+            wth = np.minimum(wth, math.radians(c.base_window_deg) + c.agreement_factor * disagreement[1])
+        return wx, wy, wth
+
+    def _covariance_windows(self, xy: np.ndarray, th: np.ndarray, cov_mTr: np.ndarray | None,
+                            mTr: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The drift windows (xy m, th rad) widened to ``window_sigmas`` of the covariances, in the old submaps'
+        axes; the heading at most a half turn."""
+        c = self.cfg
         if cov_mTr is None or mTr is None:
             return xy, xy.copy(), np.minimum(th, math.pi)
         cs, sn = np.cos(mTr[:, 2]), np.sin(mTr[:, 2])

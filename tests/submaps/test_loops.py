@@ -91,9 +91,12 @@ def test_dead_reckoning_that_agrees_with_the_estimate_bounds_the_drift_window():
     assert wx[1] == pytest.approx(51.0) and th[1] == pytest.approx(math.pi)
     assert wx[2] == pytest.approx(51.0) and th[2] == pytest.approx(math.radians(10.0) + 1.0)  # each bound apart
     assert wx[3] == pytest.approx(3.0)  # 40 m: the drift window (3 m) is already the smaller
-    # the covariance part still widens it: 3 sigma of 4 m along the old submap's x
-    wx, _, _ = ls.windows(d[:1], np.diag([4.0, 0.1, 0.001])[None] ** 2, np.zeros((1, 3)), (dis[0][:1], dis[1][:1]))
-    assert wx[0] == pytest.approx(12.0)
+    # and the covariance part: 3 sigma of 4 m along the old submap's x is 12 m, 5 m where dead reckoning agrees
+    cov = np.diag([4.0, 0.1, 0.001])[None] ** 2
+    wx, _, _ = ls.windows(d[:1], cov, np.zeros((1, 3)), (dis[0][:1], dis[1][:1]))
+    assert wx[0] == pytest.approx(5.0)
+    wx, _, _ = ls.windows(np.zeros(1), cov, np.zeros((1, 3)), (dis[0][1:2], dis[1][1:2]))
+    assert wx[0] == pytest.approx(12.0)  # across a break: the covariance's
     off = LoopSearch(LoopConfig(agreement_factor=0.0), MatchConfig()).windows(d, None, None, dis)
     assert off[0][0] == pytest.approx(51.0)  # 0: off
 
