@@ -458,3 +458,49 @@ def test_the_search_threads_work_in_a_process_forked_after_a_search():
     assert _abs_in_search_threads() == [1, 2, 3, 4, 5]  # the pool exists in this process
     with multiprocessing.get_context("fork").Pool(1) as pool:  # measured: the copied pool hung here
         assert pool.apply_async(_abs_in_search_threads).get(timeout=30) == [1, 2, 3, 4, 5]
+
+
+def _twin_rooms() -> np.ndarray:
+    """Two identical 4 x 4 m rooms 6 m apart along x (a building's row of rooms), each with a cupboard off its
+    centre and a doorway in its south wall: (N, 4) segments."""
+    room = [[0, 0, 1.5, 0], [2.5, 0, 4, 0], [4, 0, 4, 4], [4, 4, 0, 4], [0, 4, 0, 0],  # walls, a 1 m doorway
+            [2.6, 2.6, 3.4, 2.6], [3.4, 2.6, 3.4, 3.4], [3.4, 3.4, 2.6, 3.4], [2.6, 3.4, 2.6, 2.6]]  # the cupboard
+    room = np.array(room, float)
+    return np.concatenate([room, room + np.array([6.0, 0.0, 6.0, 0.0])])
+
+
+def _twin_search(disagreement):
+    """An old submap of scans in both rooms (a corridor pass looking into each), then a node r in the first room
+    whose submap's estimate is right, 200 m of graph path from the old submap (drift window 11 m: both rooms)."""
+    segs = _twin_rooms()
+    rng = np.random.default_rng(3)
+    b = GridBuilder(GridConfig())
+    wTm = np.array([1.0, 1.0, 0.0])
+    for k in range(30):  # across both rooms: the grid holds two identical rooms 6 m apart
+        mTb = np.array([0.2 * k, 0.3 * math.sin(0.5 * k), math.radians(90.0 + 5.0 * math.sin(k))])
+        wTb = g.compose(wTm, mTb)
+        wTb[0] = 1.0 + (k % 2) * 6.0 + 0.1 * (k // 2) % 2.0
+        b.insert(ray_scan(segs, wTb, rng), BEAMS, g.between(wTm, wTb))
+    wTr = np.array([1.3, 1.2, math.radians(70.0)])
+    wTn = g.compose(wTr, np.array([-0.5, 0.1, 0.0]))
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls.add_submap(0, b.freeze())
+    est = np.zeros((6, 3))
+    est[0], est[5] = wTm, wTn
+    b_pts = points(ray_scan(segs, wTr, rng))
+    found = ls.search(5, g.between(wTn, wTr), np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.full(6, 200.0),
+                      disagreement=disagreement)
+    return ls, found, g.between(wTm, wTn)
+
+
+def test_a_twin_room_is_told_apart_where_dead_reckoning_agrees_with_the_estimate():
+    # without the bound the window (11 m, capped to 7) holds both rooms: two equal peaks, rejected as ambiguous
+    ls, found, _ = _twin_search(None)
+    assert found == [] and ls.ambiguous == 1
+    # dead reckoning (with a compass) 0.1 m / 0.5 deg from the estimate: a 1.2 m window around it, one room
+    dis = (np.full(6, 0.1), np.full(6, math.radians(0.5)))
+    ls, found, true_mTn = _twin_search(dis)
+    assert len(found) == 1 and ls.ambiguous == 0
+    e = g.between(true_mTn, found[0].mTn)
+    assert math.hypot(e[0], e[1]) < 0.05 and abs(e[2]) < math.radians(0.5), e
+    assert found[0].window_xy == pytest.approx(1.2)
