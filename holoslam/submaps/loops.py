@@ -200,6 +200,10 @@ class LoopSearch:
         covs = None if rel_cov is None else np.einsum("ij,mjk,lk->mil", A, rel_cov[olds_arr], A) + cov_nTr
         dis = None if disagreement is None else (disagreement[0][olds_arr], disagreement[1][olds_arr])
         win = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds, dis)
+        bounded = np.zeros(len(olds_arr), bool)  # where dead reckoning's agreement narrowed the window
+        if dis is not None:
+            loose = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
+            bounded = (win[0] < loose[0]) | (win[1] < loose[1]) | (win[2] < loose[2])
         for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
                                                     strict=True)):
             seed = seeds[q].copy()
@@ -230,6 +234,8 @@ class LoopSearch:
             if weak:
                 self.last_weak[m] = travelled
             jobs.append((m, seed, (wx, wy), wth, wide, weak))
+            if bounded[q]:
+                self._count("windowed: window narrowed by dead reckoning's agreement")
         found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel, travelled))
         if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
             self.last_global_round = travelled

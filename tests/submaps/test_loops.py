@@ -496,11 +496,12 @@ def _twin_search(disagreement):
 def test_a_twin_room_is_told_apart_where_dead_reckoning_agrees_with_the_estimate():
     # without the bound the window (11 m, capped to 7) holds both rooms: two equal peaks, rejected as ambiguous
     ls, found, _ = _twin_search(None)
-    assert found == [] and ls.ambiguous == 1
+    assert found == [] and ls.ambiguous == 1 and not any("narrowed" in k for k in ls.counts)
     # dead reckoning (with a compass) 0.1 m / 0.5 deg from the estimate: a 1.2 m window around it, one room
     dis = (np.full(6, 0.1), np.full(6, math.radians(0.5)))
     ls, found, true_mTn = _twin_search(dis)
     assert len(found) == 1 and ls.ambiguous == 0
+    assert ls.counts["windowed: window narrowed by dead reckoning's agreement"] == 1  # said so in the report
     e = g.between(true_mTn, found[0].mTn)
     assert math.hypot(e[0], e[1]) < 0.05 and abs(e[2]) < math.radians(0.5), e
     assert found[0].window_xy == pytest.approx(1.2)
