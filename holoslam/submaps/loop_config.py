@@ -19,9 +19,10 @@ class LoopConfig:
     # different paths: 3 nodes are 0.14 m of the household log (a robot that turns a lot), 0.24-0.35 m of the real
     # logs at full rate and 0.66-1.03 m at 1.4 Hz. 0.2 m (the motion filter's distance) / 30 deg keeps 60 % of the
     # household's searches (957 of 1,593), 61 % of intel's and 97 % of the sparse logs'. Measured (bench_realdata
-    # --variants full kidnap sparse, laser m, against main): intel 0.0187 -> 0.0186, aces 0.0355 -> 0.0355, fr079
-    # 0.0429 -> 0.0429; kidnap joins kept (across max intel 0.155 -> 0.156, aces 0.273, fr079 0.213 -> 0.214);
-    # sparse intel 0.091 -> 0.0914 (max 4.4, its known failure), aces 0.0426 -> 0.0426, fr079 0.0552 -> 0.0552;
+    # --variants full kidnap sparse, laser m, against main on the same day): intel 0.0187 -> 0.0186, aces 0.0355 ->
+    # 0.0355, fr079 0.0429 -> 0.0429; kidnap joins kept (across max intel 0.155 -> 0.156, aces 0.275 -> 0.273, fr079
+    # 0.213 -> 0.214); sparse intel 0.0934 -> 0.0914 (max 4.3-4.4, its known failure), aces 0.0424 -> 0.0426, fr079
+    # 0.0552 -> 0.0552; the full intel log 52.1 -> 45.8 s CPU (back to back);
     # the household run: anchors 4.8 -> 4.7 mm, objects 9.8 -> 10.7 mm, coverage 0.977, CPU 15.8 -> 14.1 s (medians
     # of 3 at load 4-5; map_log in process 8.2 -> 7.6 s). 0.3 m / 30 deg (46 % of the household's searches) mapped
     # the real logs as well but the intel windows of tests/lifelong/test_keyframes_onto_map.py worse (across the
