@@ -32,6 +32,7 @@ Steps (seed 002 §2, SPEC §4 and §8), each a named function or class:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -286,11 +287,12 @@ def _walk_scans(
     finish: Callable[[list[ActiveSubmap]], None],
 ) -> None:
     """``_local_slam``'s walk over the scans: each node to local SLAM, new anchors into the graph, finished
-    submaps to ``finish``, and every ``every_nodes``-th node's loop search."""
+    submaps to ``finish``, and the loop search of every ``every_nodes``-th node (``_search_due``)."""
     ost, opose, travelled = run.ost, run.opose, run.travelled
     n_arrivals, n_breaks, last_t, n_nodes = 0, 0, int(run.scans[0].stamp_ns), 0
     lost = np.diag([cfg.lost_sigma_m ** 2] * 2 + [np.radians(cfg.lost_sigma_deg) ** 2])
     every = max(1, -(-len(run.scans) // 50))
+    last_search: tuple[int, float, float] | None = None  # the node count, odometer and heading at the last search
     for k, scan in enumerate(run.scans):
         if progress is not None and k % every == 0:
             progress(k, len(run.scans))
@@ -321,7 +323,9 @@ def _walk_scans(
             graph.add_anchor(m, dr.end if mTn is None else mTn, dr.end, float(travelled[k]), mTn is None)
         n_arrivals, n_breaks = len(slam.arrivals), len(slam.breaks)
         finish(slam.pop_finished())
-        if n_nodes % cfg.loops.every_nodes == 0 and loops.grids:
+        here = (n_nodes, float(travelled[k]), float(run.odo_at_scans[k][2]))
+        if loops.grids and _search_due(cfg.loops, here, last_search):
+            last_search = here
             usual = slam.usual_score()
             loops.scale = 1.0 if usual is None else min(1.0, usual / cfg.loops.score_reference)
             found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
@@ -333,6 +337,19 @@ def _walk_scans(
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found and graph.disagree(found, cfg.loops.resolve_min_d2):
                 graph.reoptimise(optimize)
+
+
+def _search_due(cfg: LoopConfig, here: tuple[int, float, float], last: tuple[int, float, float] | None) -> bool:
+    """Whether the node at ``here`` (node count, odometer m, odometry heading rad) searches for loops, the last
+    search's node at ``last`` (None before the first): every ``every_nodes``-th node, and with ``every_m`` /
+    ``every_deg`` set, only once the robot moved or turned that much since ``last``."""
+    if here[0] % cfg.every_nodes:
+        return False
+    if last is None or (cfg.every_m <= 0 and cfg.every_deg <= 0):
+        return True
+    moved = cfg.every_m > 0 and here[1] - last[1] >= cfg.every_m
+    turned = cfg.every_deg > 0 and abs(g.wrap(here[2] - last[2])) >= math.radians(cfg.every_deg)
+    return moved or turned
 
 
 def _problem(

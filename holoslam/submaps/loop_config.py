@@ -14,6 +14,23 @@ __all__ = ["LoopConfig"]
 @dataclass(frozen=True, slots=True)
 class LoopConfig:
     every_nodes: int = 3  # search from every k-th node (Cartographer samples 30 % of pairs)
+    # m / deg, > 0: and only once the robot moved every_m or turned every_deg (its odometry) since the node that
+    # searched last. The motion filter makes a node per 0.2 m or 1 deg (or 5 s standing), so k nodes span very
+    # different paths: 3 nodes are 0.14 m of the household log (a robot that turns a lot), 0.24-0.35 m of the real
+    # logs at full rate and 0.66-1.03 m at 1.4 Hz. 0.2 m (the motion filter's distance) / 30 deg keeps 60 % of the
+    # household's searches (957 of 1,593), 61 % of intel's and 97 % of the sparse logs'. Measured (bench_realdata
+    # --variants full kidnap sparse, laser m, against main on the same day): intel 0.0187 -> 0.0186, aces 0.0355 ->
+    # 0.0355, fr079 0.0429 -> 0.0429; kidnap joins kept (across max intel 0.155 -> 0.156, aces 0.275 -> 0.273, fr079
+    # 0.213 -> 0.214); sparse intel 0.0934 -> 0.0914 (max 4.3-4.4, its known failure), aces 0.0424 -> 0.0426, fr079
+    # 0.0552 -> 0.0552; the full intel log 52.1 -> 45.8 s CPU (back to back);
+    # the household run: anchors 4.8 -> 4.7 mm, objects 9.8 -> 10.7 mm, coverage 0.977, CPU 15.8 -> 14.1 s (medians
+    # of 3 at load 4-5; map_log in process 8.2 -> 7.6 s). 0.3 m / 30 deg (46 % of the household's searches) mapped
+    # the real logs as well but the intel windows of tests/lifelong/test_keyframes_onto_map.py worse (across the
+    # sessions 0.0257 -> 0.0273 m with the keyframe stage; 0.2 m: 0.0255); 0.3 m alone (no turn) kept 74-84 % of
+    # sparse intel's and aces' searches (turns in place span few metres) and moved them (intel 0.091 -> 0.128 m,
+    # aces 0.0426 -> 0.0460); every 6th node instead of every 3rd lost sparse aces' corridor revisit
+    every_m: float = 0.2
+    every_deg: float = 30.0
     max_constraint_distance: float = 15.0  # m between the node and an old submap's anchor (windowed searches)
     base_window_xy: float = 1.0  # m, window half-width right after a closure
     window_rate: float = 0.05  # m of window per m travelled since the last closure

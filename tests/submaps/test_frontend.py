@@ -433,3 +433,19 @@ def test_the_scan_rate_ignores_bursts_of_stamps_and_stops():
     t[300:] += 60.0  # a stop
     assert scan_rate_hz((t * 1e9).astype(np.int64)) == pytest.approx(5.0, rel=0.02)
     assert scan_rate_hz(np.arange(5, dtype=np.int64)) == 0.0
+
+
+def test_the_loop_search_runs_every_kth_node_once_the_robot_moved_or_turned():
+    """``_search_due``: every ``every_nodes``-th node, and with ``every_m`` / ``every_deg`` only once the robot
+    moved or turned that much since the node that searched last (the first due node always searches)."""
+    from holoslam.submaps.frontend import _search_due
+
+    cfg = LoopConfig(every_nodes=3, every_m=0.3, every_deg=30.0)
+    assert not _search_due(cfg, (4, 5.0, 0.0), None)  # not a 3rd node
+    assert _search_due(cfg, (3, 0.0, 0.0), None)  # the first search
+    last = (3, 0.0, 0.0)
+    assert not _search_due(cfg, (6, 0.29, math.radians(29.0)), last)  # neither moved nor turned enough
+    assert _search_due(cfg, (6, 0.30, 0.0), last)  # moved
+    assert _search_due(cfg, (6, 0.0, math.radians(-31.0)), last)  # turned the other way
+    assert _search_due(cfg, (6, 0.0, math.radians(179.0)), (3, 0.0, math.radians(-179.0))) is False  # 2 deg
+    assert _search_due(LoopConfig(every_nodes=3, every_m=0.0, every_deg=0.0), (6, 0.0, 0.0), last)  # off: by count
