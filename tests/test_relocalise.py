@@ -286,3 +286,27 @@ def test_relocalise_joins_by_prediction_and_says_so(monkeypatch):
     assert {m.old for m in r.matches} == {1}  # the cross-session factors: the global matches that agree
     off = R.relocalise(subs, sTa, {}, stored, {}, RelocaliseConfig(predict_min_submaps=0))
     assert not off.placed and "predictions" not in off.why
+
+
+def test_the_predictions_use_every_third_keyframe():
+    from holoslam.relocalise import predicted_hypothesis
+
+    wTs = np.array([2.0, -1.0, 0.7])
+    subs, sTa = _corridor_session(wTs)
+    # the corridor's submaps: an anchor scan of 10 returns (too few to search), their fourth keyframe 0.4 m on
+    # seeing the corridor (its points in the base frame)
+    bTk = np.array([0.4, 0.1, 0.05])
+    pts = _wall_points(NEAR_ROOM)
+    for k in range(1, 5):
+        wTk = g.compose(g.compose(wTs, sTa[k]), bTk)
+        near = pts[np.hypot(*(pts - wTk[:2]).T) <= 5.0]
+        subs[k] = SimpleNamespace(**vars(subs[k]), aTb=np.array([np.zeros(3), [0.1, 0, 0], [0.2, 0, 0], bTk]),
+                                  scan_points=(subs[k].points[:10], near[:5], near[:5],
+                                               g.transform_points(g.inverse(wTk), near)))
+    stored = _two_rooms(OTHER_CORRIDOR)
+    h, preds = predicted_hypothesis(_room_matches(wTs, 3, 3), subs, sTa, stored, RelocaliseConfig())
+    assert h is not None and h.verified and max(p.submaps for p in preds) == 4
+    assert np.hypot(*(h.wTs[:2] - wTs[:2])) < 0.03
+    anchor_only, _ = predicted_hypothesis(_room_matches(wTs, 3, 3), subs, sTa, stored,
+                                          RelocaliseConfig(predict_keyframe_step=0))
+    assert anchor_only is not None and not anchor_only.verified and "of 0 placed near" in anchor_only.why
