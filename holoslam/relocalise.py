@@ -117,6 +117,12 @@ class RelocaliseConfig:
     # submaps of the right place (the others overlap the stored map too little to score 0.55); every third
     # keyframe confirms 9 of it and 3-4 of the wrong places (2-4 m off along the corridor). 0: the anchor scan alone
     predict_keyframe_step: int = 3
+    # a session submap confirms a prediction when at least this share of its keyframes predicted near a stored
+    # submap match there. Walls match walls: in another building a corridor's keyframes match here and there (the 18
+    # sessions of the wrong-building check: up to 16 of 44 session submaps with one keyframe or more matched, 4
+    # with 0.5 of them or more); where the stored map holds the place most do (aces' third session, the right
+    # place: 0.5-1.0 of them in 5 of its submaps)
+    predict_keyframe_share: float = 0.5
     predict_candidates: int = 4  # groups tried, largest first (each a local match per session submap and nearby submap)
     object_inlier_m: float = 0.3  # m: an object this close to its stored place agrees (the "moved" threshold)
     min_object_inliers: int = 3  # objects agreeing with an object hypothesis for it to be verified
@@ -621,14 +627,15 @@ def predict(group: tuple[LaserMatch, ...], session_submaps, session_sTa: np.ndar
         k, q = todo[order[0]], int(nearest[order[0]])
         tried[k] = q
         pred = g.compose(wTa[q], g.between(sTa[q], sTa[k]))
-        if any(len(p) >= cfg.min_query_points and _near_stored(g.compose(pred, aTb), stored_submaps, cfg)
-               for p, aTb in queries[k]):
+        near = [(pts, aTb) for pts, aTb in queries[k]
+                if len(pts) >= cfg.min_query_points and _near_stored(g.compose(pred, aTb), stored_submaps, cfg)]
+        if near:
             tested.add(k)
-        found = [(m, aTb) for pts, aTb in queries[k]
+        found = [(m, i) for i, (pts, aTb) in enumerate(near)
                  for m in _matches_near(pts, g.compose(pred, aTb), stored_submaps, cfg)]
-        if not found:
+        if not found or len({i for _, i in found}) < cfg.predict_keyframe_share * len(near):
             continue
-        hits = [(m[4], g.compose(m[1], g.inverse(aTb)), m[2], m[3], m[0]) for m, aTb in found]  # to the anchor
+        hits = [(m[4], g.compose(m[1], g.inverse(near[i][1])), m[2], m[3], m[0]) for m, i in found]  # to the anchor
         best = max(hits, key=lambda h: h[3])
         wTa[k] = g.compose(best[4], best[1])
         confirmed += [LaserMatch(k, h[0], h[1], h[2], h[3], g.compose(g.compose(h[4], h[1]), g.inverse(sTa[k])))
