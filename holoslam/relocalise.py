@@ -102,12 +102,12 @@ class RelocaliseConfig:
     verify: VerifyConfig = field(default_factory=VerifyConfig)  # the loop search's, calibrated on aces
     # Verification by prediction (``predicted_hypothesis``), when the global matches verify no group (too few
     # session submaps, or a runner-up as large): each of the largest predict_candidates consistent groups places
-    # the session, every other session submap's anchor scan is matched locally where it puts it (``local_matches``:
-    # close_radius_m, close_per_submap, min_score, a 0.3 m / 3 deg window and consistency; close_per_submap 0 turns
-    # it off), and the map check (``join_agreement``) runs at the fitted transform around the group's own session
+    # the session, the other session submaps' keyframes are matched locally where it puts them, grown outwards
+    # (``predict``; ``local_matches``' settings: close_radius_m, close_per_submap, min_score, a 0.3 m / 3 deg window;
+    # close_per_submap 0 turns it off), and the map check (``join_agreement``) runs at the fitted transform around the group's own session
     # submaps, as for a verified group (over every placed submap it refused the right place on aces' third
-    # session, 0.87: the stored map there is bent by up to 1.1 m against the whole log's run). A group is verified when the
-    # local matches of at least predict_min_submaps further session submaps confirm it, the map check does not
+    # session, 0.87: the stored map there is bent by up to 1.1 m against the whole log's run). A group is
+    # verified when the local matches of at least predict_min_submaps further session submaps confirm it, the map check does not
     # refuse it and no other group's predictions come within runner_up_ratio of it. 3: the global test's
     # min_consistent, now as submaps placed where the hypothesis said they would be, each a scan from another
     # place; a wrong group's predictions fall where the map does not hold those scans
@@ -119,8 +119,8 @@ class RelocaliseConfig:
     predict_keyframe_step: int = 3
     # a session submap confirms a prediction when at least this share of its keyframes predicted near a stored
     # submap match there. Walls match walls: in another building a corridor's keyframes match here and there (the 18
-    # sessions of the wrong-building check: up to 16 of 44 session submaps with one keyframe or more matched, 4
-    # with 0.5 of them or more); where the stored map holds the place most do (aces' third session, the right
+    # sessions of the wrong-building check: up to 16 of 44 session submaps with one keyframe or more matched, at
+    # most 2 with 0.5 of them or more); where the stored map holds the place most do (aces' third session, the right
     # place: 0.5-1.0 of them in 5 of its submaps)
     predict_keyframe_share: float = 0.5
     predict_candidates: int = 4  # groups tried, largest first (each a local match per session submap and nearby submap)

@@ -310,3 +310,14 @@ def test_the_predictions_use_every_third_keyframe():
     anchor_only, _ = predicted_hypothesis(_room_matches(wTs, 3, 3), subs, sTa, stored,
                                           RelocaliseConfig(predict_keyframe_step=0))
     assert anchor_only is not None and not anchor_only.verified and "of 0 placed near" in anchor_only.why
+    # the first keyframe a scan of somewhere else (a 60-point ring): one of the two keyframes near a stored submap
+    # matches, half of them: confirmed at the share 0.5, not at 0.75
+    ring = 1.5 * np.column_stack([np.cos(np.linspace(0, 6, 60)), np.sin(np.linspace(0, 6, 60))])
+    for k in range(1, 5):
+        subs[k] = SimpleNamespace(**{**vars(subs[k]), "scan_points": (ring, *subs[k].scan_points[1:])})
+    half, _ = predicted_hypothesis(_room_matches(wTs, 3, 3), subs, sTa, stored, RelocaliseConfig())
+    assert half is not None and half.verified
+    assert "local matches of 4 further session submaps" in half.why
+    strict, _ = predicted_hypothesis(_room_matches(wTs, 3, 3), subs, sTa, stored,
+                                     RelocaliseConfig(predict_keyframe_share=0.75))
+    assert strict is not None and not strict.verified and "local matches of 0 further" in strict.why
