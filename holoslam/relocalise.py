@@ -35,7 +35,7 @@ from holoslam import geometry as g
 from holoslam.submaps.loop_verify import Agreement, VerifyConfig
 
 __all__ = ["RelocaliseConfig", "LaserMatch", "Hypothesis", "Relocalisation", "global_match", "precompute_stored", "laser_matches",
-           "laser_hypothesis", "checked_hypothesis", "object_hypothesis", "relocalise", "fit_se2", "local_matches", "join_agreement"]
+           "laser_hypothesis", "checked_hypothesis", "laser_groups", "Prediction", "predict", "predicted_hypothesis", "object_hypothesis", "relocalise", "fit_se2", "local_matches", "join_agreement"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -100,6 +100,30 @@ class RelocaliseConfig:
     verify_joins: bool = True
     verify_radius_m: float = 10.0  # m: a real log's submap spans 10-30 m (30 m lasers); the household's 5-8 m
     verify: VerifyConfig = field(default_factory=VerifyConfig)  # the loop search's, calibrated on aces
+    # Verification by prediction (``predicted_hypothesis``), when the global matches verify no group (too few
+    # session submaps, or a runner-up as large): each of the largest predict_candidates consistent groups places
+    # the session, the other session submaps' keyframes are matched locally where it puts them, grown outwards
+    # (``predict``; ``local_matches``' settings: close_radius_m, close_per_submap, min_score, a 0.3 m / 3 deg window;
+    # close_per_submap 0 turns it off), and the map check (``join_agreement``) runs at the fitted transform around the group's own session
+    # submaps, as for a verified group (over every placed submap it refused the right place on aces' third
+    # session, 0.87: the stored map there is bent by up to 1.1 m against the whole log's run). A group is
+    # verified when the local matches of at least predict_min_submaps further session submaps confirm it, the map check does not
+    # refuse it and no other group's predictions come within runner_up_ratio of it. 3: the global test's
+    # min_consistent, now as submaps placed where the hypothesis said they would be, each a scan from another
+    # place; a wrong group's predictions fall where the map does not hold those scans
+    predict_min_submaps: int = 3  # 0: no verification by prediction
+    # every this many keyframes of a session submap are predicted and matched, not its anchor scan alone (the
+    # settling's closures search every third too). On aces' third session the anchor scans confirm at most 2 further
+    # submaps of the right place (the others overlap the stored map too little to score 0.55); every third
+    # keyframe confirms 9 of it and 3-4 of the wrong places (2-4 m off along the corridor). 0: the anchor scan alone
+    predict_keyframe_step: int = 3
+    # a session submap confirms a prediction when at least this share of its keyframes predicted near a stored
+    # submap match there. Walls match walls: in another building a corridor's keyframes match here and there (the 18
+    # sessions of the wrong-building check: up to 16 of 44 session submaps with one keyframe or more matched, at
+    # most 2 with 0.5 of them or more); where the stored map holds the place most do (aces' third session, the right
+    # place: 0.5-1.0 of them in 5 of its submaps)
+    predict_keyframe_share: float = 0.5
+    predict_candidates: int = 4  # groups tried, largest first (each a local match per session submap and nearby submap)
     object_inlier_m: float = 0.3  # m: an object this close to its stored place agrees (the "moved" threshold)
     min_object_inliers: int = 3  # objects agreeing with an object hypothesis for it to be verified
     min_pair_separation_m: float = 1.0  # m: two objects nearer fix the heading poorly (5 cm in 1 m = 3 deg)
@@ -278,31 +302,36 @@ def local_matches(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs:
     """Cross-session matches once the session is placed by ``wTs`` (``close_radius_m`` and the settings beside
     it): each session submap's anchor scan registered by the continuous matcher around its predicted pose in the
     nearest stored submaps."""
+    out: list[LaserMatch] = []
+    for k, sm in enumerate(session_submaps):
+        for m in _matches_near(query_points(sm), g.compose(wTs, session_sTa[k]), stored_submaps, cfg):
+            implied = g.compose(g.compose(m[0], m[1]), g.inverse(session_sTa[k]))
+            if _consistent(implied[None], np.asarray(wTs)[None], cfg)[0, 0]:
+                out.append(LaserMatch(k, m[4], m[1], m[2], m[3], implied))
+    return out
+
+
+def _matches_near(q: np.ndarray, wTn: np.ndarray, stored_submaps, cfg: RelocaliseConfig) -> list[tuple]:
+    """Scan ``q`` (a session submap's anchor scan) registered by the continuous matcher around ``wTn`` (its anchor's
+    predicted pose) in the ``close_per_submap`` stored submaps nearest it within ``close_radius_m``, a window of
+    ``consistent_xy_m`` / ``consistent_deg``: (wTa of the stored submap, aTn, cov, score, stored id) of those
+    at ``min_score`` at least."""
     from holoslam.submaps.scanmatch import MatchConfig, match_scan
 
-    if cfg.close_per_submap <= 0:
+    if cfg.close_per_submap <= 0 or len(q) < cfg.min_query_points or not len(stored_submaps):
         return []
     mc = MatchConfig(linear_window=cfg.consistent_xy_m, angular_window_deg=cfg.consistent_deg, min_score=0.0,
                      seed_margin=0.0)  # the placement is a hypothesis: its window's best seeds the refinement
-    anchors = np.array([s.wTa for s in stored_submaps]).reshape(-1, 3)
-    out: list[LaserMatch] = []
-    for k, sm in enumerate(session_submaps):
-        q = query_points(sm)
-        if len(q) < cfg.min_query_points or not len(anchors):
-            continue
-        w = g.compose(wTs, session_sTa[k])
-        d = np.hypot(anchors[:, 0] - w[0], anchors[:, 1] - w[1])
-        for j in np.argsort(d, kind="stable")[: cfg.close_per_submap].tolist():
-            st = stored_submaps[j]
-            if d[j] > cfg.close_radius_m or st.prob is None:
-                break
-            pred = g.compose(g.inverse(np.asarray(st.wTa, np.float64)), w)
-            m = match_scan(st.prob, st.origin, float(st.resolution), q, pred, mc)
-            if m.score < cfg.min_score:
-                continue
-            implied = g.compose(g.compose(st.wTa, m.aTb), g.inverse(session_sTa[k]))
-            if _consistent(implied[None], np.asarray(wTs)[None], cfg)[0, 0]:
-                out.append(LaserMatch(k, int(st.id), m.aTb, m.cov_aTb, float(m.score), implied))
+    anchors = np.array([s.wTa for s in stored_submaps], np.float64).reshape(-1, 3)
+    d = np.hypot(anchors[:, 0] - wTn[0], anchors[:, 1] - wTn[1])
+    out = []
+    for j in np.argsort(d, kind="stable")[: cfg.close_per_submap].tolist():
+        st = stored_submaps[j]
+        if d[j] > cfg.close_radius_m or st.prob is None:
+            break
+        m = match_scan(st.prob, st.origin, float(st.resolution), q, g.compose(g.inverse(anchors[j]), wTn), mc)
+        if m.score >= cfg.min_score:
+            out.append((anchors[j], m.aTb, m.cov_aTb, float(m.score), int(st.id)))
     return out
 
 
@@ -440,14 +469,44 @@ def _group(T: np.ndarray, cfg: RelocaliseConfig) -> list[int]:
     return best
 
 
+def _mean_wTs(matches) -> np.ndarray:
+    """The score-weighted mean of the matches' session transforms (headings about the first's)."""
+    M = np.array([m.wTs for m in matches], np.float64).reshape(-1, 3)
+    w = np.array([m.score for m in matches], np.float64)
+    th0 = M[0, 2]
+    return np.array([*(w @ M[:, :2] / w.sum()), g.wrap(th0 + float(w @ g.wrap(M[:, 2] - th0) / w.sum()))])
+
+
+def _not_refuted(matches: list[LaserMatch], refuted: tuple[np.ndarray, ...], cfg: RelocaliseConfig
+                 ) -> list[LaserMatch]:
+    if not refuted or not matches:
+        return list(matches)
+    R = np.array(refuted).reshape(-1, 3)
+    return [m for m in matches if not _consistent(np.asarray(m.wTs)[None], R, cfg).any()]
+
+
+def laser_groups(matches: list[LaserMatch], cfg: RelocaliseConfig = RelocaliseConfig(),
+                 refuted: tuple[np.ndarray, ...] = (), most: int | None = None) -> list[tuple[LaserMatch, ...]]:
+    """The matches' consistent groups, largest first: the largest (``_group``), then the largest of the matches
+    that agree with none of its members, and so on (the first two are ``laser_hypothesis``'s group and
+    runner-up); at most ``most``. Matches that agree with a ``refuted`` transform are left out."""
+    matches = _not_refuted(matches, refuted, cfg)
+    T = np.array([m.wTs for m in matches], np.float64).reshape(-1, 3)
+    rest = list(range(len(T)))
+    out: list[tuple[LaserMatch, ...]] = []
+    while rest and (most is None or len(out) < most):
+        members = [rest[i] for i in _group(T[rest], cfg)]
+        out.append(tuple(matches[k] for k in members))
+        rest = [k for k in rest if not _consistent(T[k : k + 1], T[members], cfg).any()]
+    return out
+
+
 def laser_hypothesis(matches: list[LaserMatch], cfg: RelocaliseConfig = RelocaliseConfig(),
                      refuted: tuple[np.ndarray, ...] = ()) -> Hypothesis | None:
     """The verified laser hypothesis of the matches (module docstring), or the best unverified one, or None.
     ``refuted``: session transforms the map check refused; the matches that agree with one of them are left out
     (they neither support a hypothesis nor count as its runner-up)."""
-    if refuted:
-        R = np.array(refuted).reshape(-1, 3)
-        matches = [m for m in matches if not _consistent(np.asarray(m.wTs)[None], R, cfg).any()]
+    matches = _not_refuted(matches, refuted, cfg)
     if not matches:
         return None
     T = np.array([m.wTs for m in matches])
@@ -455,9 +514,7 @@ def laser_hypothesis(matches: list[LaserMatch], cfg: RelocaliseConfig = Relocali
     rest = [k for k in range(len(T)) if not _consistent(T[k : k + 1], T[members], cfg).any()]
     runner = len(_group(T[rest], cfg)) if rest else 0
     M = T[members]
-    w = np.array([matches[k].score for k in members])
-    th0 = M[0, 2]
-    wTs = np.array([*(w @ M[:, :2] / w.sum()), g.wrap(th0 + float(w @ g.wrap(M[:, 2] - th0) / w.sum()))])
+    wTs = _mean_wTs([matches[k] for k in members])
     n_new = len({matches[k].new for k in members})
     ok = (len(members) >= cfg.min_consistent and n_new >= cfg.min_session_submaps
           and runner <= cfg.runner_up_ratio * len(members))
@@ -474,21 +531,170 @@ def checked_hypothesis(matches: list[LaserMatch], session_submaps, session_sTa: 
     """``laser_hypothesis`` with the map check (``join_agreement``, ``verify_joins``): a verified group the check
     refuses is set aside and the next is tried, so long as one is verified. Returns the hypothesis (verified and
     not refused, or the best unverified one, or None) and a note per refused group."""
+    h, notes, _refuted = _checked(matches, session_submaps, session_sTa, stored_submaps, cfg)
+    return h, notes
+
+
+def _checked(matches: list[LaserMatch], session_submaps, session_sTa: np.ndarray, stored_submaps,
+             cfg: RelocaliseConfig) -> tuple[Hypothesis | None, list[str], tuple[np.ndarray, ...]]:
+    """``checked_hypothesis`` and the session transforms the map check refused."""
     refuted: list[np.ndarray] = []
     notes: list[str] = []
     while True:
         h = laser_hypothesis(matches, cfg, tuple(refuted))
         if h is None or not h.verified or not cfg.verify_joins:
-            return h, notes
+            return h, notes, tuple(refuted)
         near = sorted({m.new for m in h.members})
         a = join_agreement(session_submaps, session_sTa, stored_submaps, h.wTs, near, cfg)
         if a is None or a.verdict(cfg.verify) is not False:
             tail = "" if a is None else f"; map check {a.fraction:.2f} of {a.support + a.conflict} walls"
-            return dataclasses.replace(h, why=h.why + tail), notes
+            return dataclasses.replace(h, why=h.why + tail), notes, tuple(refuted)
         notes.append(f"refused by the map check ({a.fraction:.2f} of {a.support + a.conflict} walls agree, needs "
                      f"{cfg.verify.min_agreement:g}): {h.support} matches at ({h.wTs[0]:.2f}, {h.wTs[1]:.2f}, "
                      f"{math.degrees(h.wTs[2]):.1f} deg)")
         refuted.append(h.wTs)
+
+
+@dataclass(frozen=True, eq=False)
+class Prediction:
+    """One candidate group tested by prediction (``predict``): its matches (``group``), the session transform
+    fitted to every placed session submap, where each placed session submap's anchor lies in the world
+    (``wTa``: the group's by its global matches, the others by their local matches), the further session
+    submaps tried (``tested``: a stored submap near their predicted place), the local matches that placed them
+    (``confirmed``) and the map check (None: no verdict)."""
+
+    group: tuple[LaserMatch, ...]
+    wTs: np.ndarray
+    wTa: dict[int, np.ndarray]
+    tested: tuple[int, ...]
+    confirmed: tuple[LaserMatch, ...]
+    agreement: Agreement | None
+    refused: bool
+
+    @property
+    def submaps(self) -> int:
+        """Further session submaps confirmed (each counted once, whatever its number of local matches)."""
+        return len({m.new for m in self.confirmed})
+
+    def text(self) -> str:
+        w, a = self.wTs, self.agreement
+        check = "" if a is None else (f", map check {a.fraction:.2f} of {a.support + a.conflict} walls"
+                                      + (" (refused)" if self.refused else ""))
+        return (f"{len(self.group)} matches at ({w[0]:.2f}, {w[1]:.2f}, {math.degrees(w[2]):.1f} deg): "
+                f"{self.submaps} of {len(self.tested)} further session submaps confirmed{check}")
+
+
+def _same_place(a: Prediction, b: Prediction, cfg: RelocaliseConfig) -> bool:
+    """Two predictions put one session submap at the same pose (within the consistency): one place reached from
+    two groups (neighbouring groups of one place, a few decimetres apart, reach the same local matches)."""
+    for k in set(a.wTa) & set(b.wTa):
+        d = g.between(a.wTa[k], b.wTa[k])
+        if np.hypot(d[0], d[1]) <= cfg.consistent_xy_m and abs(g.wrap(d[2])) <= math.radians(cfg.consistent_deg):
+            return True
+    return False
+
+
+def predict(group: tuple[LaserMatch, ...], session_submaps, session_sTa: np.ndarray, stored_submaps,
+            cfg: RelocaliseConfig = RelocaliseConfig()) -> Prediction:
+    """A candidate group's predictions, grown outwards: the group's session submaps are placed by their global
+    matches; the unplaced session submap nearest (in the session's frame) to a placed one is predicted from it
+    (the placed anchor composed with their relative pose in the session) and matched locally there
+    (``_matches_near``: a 0.3 m / 3 deg window); a match at ``min_score`` places it, and the next is predicted,
+    until none is left to try (each keyframe of ``_keyframe_queries`` is tried; the best placed match places the
+    submap). Each prediction spans one step of the session's own map, so a bend between the session and the stored
+    map (aces' third session: 3.5 deg where the stored map is bent) does not leave the window. The session
+    transform is then the least-squares fit of the placed anchors; the map check (``join_agreement``) runs at it
+    around the group's own session submaps."""
+    sTa = np.asarray(session_sTa, np.float64).reshape(-1, 3)
+    wTa: dict[int, np.ndarray] = {}
+    for m in sorted(group, key=lambda m: -m.score):
+        wTa.setdefault(m.new, g.compose(m.wTs, sTa[m.new]))
+    own = set(wTa)
+    queries = {k: _keyframe_queries(session_submaps[k], cfg) for k in range(len(sTa)) if k not in wTa}
+    tried: dict[int, int] = {}  # session submap -> the placed one it was last predicted from
+    tested: set[int] = set()
+    confirmed: list[LaserMatch] = []
+    while True:
+        placed = np.array(sorted(wTa))
+        todo = [k for k in queries if k not in wTa]
+        if not todo:
+            break
+        d = np.hypot(sTa[todo, None, 0] - sTa[None, placed, 0], sTa[todo, None, 1] - sTa[None, placed, 1])
+        nearest = placed[np.argmin(d, axis=1)]
+        order = [i for i in np.argsort(np.min(d, axis=1), kind="stable").tolist() if tried.get(todo[i]) != nearest[i]]
+        if not order:
+            break
+        k, q = todo[order[0]], int(nearest[order[0]])
+        tried[k] = q
+        pred = g.compose(wTa[q], g.between(sTa[q], sTa[k]))
+        near = [(pts, aTb) for pts, aTb in queries[k]
+                if len(pts) >= cfg.min_query_points and _near_stored(g.compose(pred, aTb), stored_submaps, cfg)]
+        if near:
+            tested.add(k)
+        found = [(m, i) for i, (pts, aTb) in enumerate(near)
+                 for m in _matches_near(pts, g.compose(pred, aTb), stored_submaps, cfg)]
+        if not found or len({i for _, i in found}) < cfg.predict_keyframe_share * len(near):
+            continue
+        hits = [(m[4], g.compose(m[1], g.inverse(near[i][1])), m[2], m[3], m[0]) for m, i in found]  # to the anchor
+        best = max(hits, key=lambda h: h[3])
+        wTa[k] = g.compose(best[4], best[1])
+        confirmed += [LaserMatch(k, h[0], h[1], h[2], h[3], g.compose(g.compose(h[4], h[1]), g.inverse(sTa[k])))
+                      for h in hits]
+    keys = sorted(wTa)
+    P = np.array([wTa[k] for k in keys])
+    wTs = (fit_se2(sTa[keys, :2], P[:, :2]) if len(keys) >= 2 else g.compose(P[0], g.inverse(sTa[keys[0]])))
+    a = join_agreement(session_submaps, sTa, stored_submaps, wTs, sorted(own), cfg) if cfg.verify_joins else None
+    return Prediction(group, wTs, wTa, tuple(sorted(tested)), tuple(confirmed), a,
+                      a is not None and a.verdict(cfg.verify) is False)
+
+
+def _keyframe_queries(submap, cfg: RelocaliseConfig) -> list[tuple[np.ndarray, np.ndarray]]:
+    """What a session submap is predicted with: every ``predict_keyframe_step``-th keyframe's points (base frame)
+    and its pose in the anchor frame; a submap without keyframes (or the step 0): its ``query_points`` at the
+    anchor."""
+    scans = getattr(submap, "scan_points", None)
+    if not scans or cfg.predict_keyframe_step <= 0:
+        return [(query_points(submap), np.zeros(3))]
+    aTb = np.asarray(submap.aTb, np.float64).reshape(-1, 3)
+    return [(np.asarray(scans[i], np.float64), aTb[i]) for i in range(0, len(scans), cfg.predict_keyframe_step)]
+
+
+def _near_stored(wTn: np.ndarray, stored_submaps, cfg: RelocaliseConfig) -> bool:
+    anchors = np.array([s.wTa for s in stored_submaps], np.float64).reshape(-1, 3)
+    return bool(len(anchors)) and float(np.min(np.hypot(anchors[:, 0] - wTn[0], anchors[:, 1] - wTn[1]))) <= cfg.close_radius_m
+
+
+def predicted_hypothesis(matches: list[LaserMatch], session_submaps, session_sTa: np.ndarray, stored_submaps,
+                         cfg: RelocaliseConfig = RelocaliseConfig(), refuted: tuple[np.ndarray, ...] = ()
+                         ) -> tuple[Hypothesis | None, list[Prediction]]:
+    """Verification by prediction (``predict_min_submaps`` and the settings beside it): the largest
+    ``predict_candidates`` consistent groups (``laser_groups``, without the ``refuted`` transforms) each
+    ``predict``-ed; the one confirmed by most further session submaps is verified when they are at least
+    ``predict_min_submaps``, the map check does not refuse it and every other group not refused is confirmed by
+    at most ``runner_up_ratio`` of its number. Returns that hypothesis (verified or not; None without groups
+    or with the check off) and every candidate's prediction."""
+    if cfg.predict_min_submaps <= 0 or cfg.close_per_submap <= 0:
+        return None, []
+    preds = [predict(gr, session_submaps, session_sTa, stored_submaps, cfg)
+             for gr in laser_groups(matches, cfg, refuted, cfg.predict_candidates)]
+    live = sorted((p for p in preds if not p.refused), key=lambda p: (-p.submaps, -len(p.group)))
+    if not live:
+        return None, preds
+    best = live[0]
+    runner = max((p.submaps for p in live[1:] if not _same_place(p, best, cfg)), default=0)
+    ok = best.submaps >= cfg.predict_min_submaps and runner <= cfg.runner_up_ratio * best.submaps
+    members = best.group + best.confirmed
+    why = (f"{len(best.group)} consistent laser matches from {len({m.new for m in best.group})} session submaps, "
+           f"their prediction confirmed by local matches of {best.submaps} further session submaps (of "
+           f"{len(best.tested)} placed near a stored submap; {len(best.confirmed)} matches)"
+           + ("" if best.agreement is None else
+              f"; map check {best.agreement.fraction:.2f} of {best.agreement.support + best.agreement.conflict} walls")
+           + f"; the best other group's predictions {runner}")
+    if not ok:
+        why += (f"; needs {cfg.predict_min_submaps} further submaps and no other group over "
+                f"{cfg.runner_up_ratio:g}x")
+    M = np.array([m.wTs for m in members], np.float64)
+    return Hypothesis(best.wTs, _spread_cov(best.wTs, M, cfg), len(members), ok, why, members), preds
 
 
 def _agree(a: Hypothesis, b: Hypothesis, cfg: RelocaliseConfig) -> bool:
@@ -506,7 +712,14 @@ def relocalise(session_submaps, session_sTa: np.ndarray, session_objects: dict[s
     # a verified object hypothesis only chooses where the laser looks first; the laser's matches stay global
     matches, searches = laser_matches(session_submaps, session_sTa, stored_submaps, cfg,
                                       obj if obj is not None and obj.verified else None)
-    las, refused = checked_hypothesis(matches, session_submaps, session_sTa, stored_submaps, cfg)
+    las, refused, refuted = _checked(matches, session_submaps, session_sTa, stored_submaps, cfg)
+    if las is not None and not las.verified:
+        pred, tried = predicted_hypothesis(matches, session_submaps, session_sTa, stored_submaps, cfg, refuted)
+        if pred is not None and pred.verified:
+            las = dataclasses.replace(pred, why=f"verified by prediction: {pred.why} (the global matches alone: "
+                                                f"{las.why})")
+        elif tried:
+            las = dataclasses.replace(las, why=f"{las.why}; predictions: " + "; ".join(p.text() for p in tried))
     if las is not None and refused:
         las = dataclasses.replace(las, why=las.why + "; " + "; ".join(refused))
     lv, ov = las is not None and las.verified, obj is not None and obj.verified
