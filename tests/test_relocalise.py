@@ -231,7 +231,7 @@ def _room_matches(wTs, n_true, n_alias):
 
 
 def test_a_hypothesis_confirmed_by_its_predictions_is_verified_and_the_alias_is_not():
-    from holoslam.relocalise_predict import predicted_hypothesis
+    from holoslam.relocalise import predicted_hypothesis
 
     wTs = np.array([2.0, -1.0, 0.7])
     subs, sTa = _corridor_session(wTs)
@@ -257,7 +257,7 @@ def test_a_hypothesis_confirmed_by_its_predictions_is_verified_and_the_alias_is_
 
 
 def test_two_hypotheses_both_confirmed_stay_unjoined():
-    from holoslam.relocalise_predict import predicted_hypothesis
+    from holoslam.relocalise import predicted_hypothesis
 
     wTs = np.array([2.0, -1.0, 0.7])
     subs, sTa = _corridor_session(wTs)
@@ -289,7 +289,7 @@ def test_relocalise_joins_by_prediction_and_says_so(monkeypatch):
 
 
 def test_the_predictions_use_every_third_keyframe():
-    from holoslam.relocalise_predict import predicted_hypothesis
+    from holoslam.relocalise import predicted_hypothesis
 
     wTs = np.array([2.0, -1.0, 0.7])
     subs, sTa = _corridor_session(wTs)
