@@ -19,7 +19,7 @@ import dataclasses
 import numpy as np
 
 from holoslam import geometry as g
-from holoslam.relocalise import LaserMatch, RelocaliseConfig, _consistent, _grid
+from holoslam.relocalise_parts import LaserMatch, RelocaliseConfig, _consistent, _grid
 
 __all__ = ["session_closures"]
 

@@ -86,7 +86,7 @@ def session_keyframes(st: Any, wTa: np.ndarray, cov_wTa: np.ndarray | None, stor
     from dataclasses import replace
 
     from holoslam.graph.nodes import solve_nodes
-    from holoslam.relocalise import _grid
+    from holoslam.relocalise_parts import _grid
     from holoslam.submaps.frontend import FrontEndConfig
     from holoslam.submaps.revisits import NodeMatches, graph_nodes, match_nodes
 

@@ -22,7 +22,7 @@ from holoslam import geometry as g
 from holoslam.lifelong.changes import ChangeConfig, Located, classify, to_world, view_directions
 from holoslam.lifelong.frustum import FrustumConfig
 from holoslam.lifelong.summary import ObjectChange, SessionSummary
-from holoslam.relocalise import RelocaliseConfig, fit_se2, local_matches, query_points
+from holoslam.relocalise_parts import RelocaliseConfig, fit_se2, local_matches, query_points
 from holoslam.store.records import (
     NewSubmap,
     ObjectState,
@@ -329,7 +329,7 @@ def _settled(st: Any, sTa: np.ndarray, stored: tuple, reloc: Any, lc: LifelongCo
     or not, ``crossmatch.settle_join``, and the global matches that agree with it) and the cross-session factors
     beside them (``LifelongConfig.dense_closures``: the settling's closures, or the anchor scans' local matches)."""
     from holoslam.lifelong.crossmatch import settle_join
-    from holoslam.relocalise import _consistent
+    from holoslam.relocalise_parts import _consistent
 
     closures: tuple = ()
     if lc.settle or lc.dense_closures:
