@@ -105,13 +105,12 @@ class AnchorGraph:
         odometer and the compass: two independent measures of mTn. Where they agree, neither can be far off
         (``LoopConfig.agreement_factor``)."""
         est, dr = np.array(self.est), np.array(self.dr)
-        N = len(est)
         d = g.between(g.between(dr, np.broadcast_to(dr[n], dr.shape)),
                       g.between(est, np.broadcast_to(est[n], est.shape)))
         other = np.array(self.part) != self.part[n]
         xy = np.where(other, np.inf, np.hypot(d[:, 0], d[:, 1]))
         th = np.where(other, np.inf, np.abs(g.wrap(d[:, 2])))
-        return xy[:N], th[:N]
+        return xy, th
 
     def relative_covariances(self, n: int) -> np.ndarray:
         """(N, 3, 3): the covariance of anchor n relative to each anchor m (right perturbation, n's frame) along

@@ -51,9 +51,10 @@ class LoopConfig:
     # of one relative pose, and where they agree neither can be far off. The covariance part too: on the
     # building's seed 27 a node 799 m of graph from an old submap had an estimate 0.49 m off the truth and dead
     # reckoning 0.93 m from the estimate, but 3 sigma of its covariance said 9.1 m; the window at the 7 m cap then
-    # accepted a twin room 6.2 m off on its own, and the corrupted estimate drew 29 more wrong closures. Measured over every span of anchors 10-600 m apart on the simulated 350 m building
-    # (compass, 2,400 m; the chain of scan matches against the truth): the chain's error stayed within 1 m + 2x the
-    # disagreement on all 645 spans (1 m + 1x failed 4 of the 600 m ones by up to 1.27 m); its windows at 600 m
+    # accepted a twin room 6.2 m off on its own, and the corrupted estimate drew 29 more wrong closures.
+    # Measured over every span of anchors 10-600 m apart on the simulated 350 m building (compass, 2,400 m;
+    # the chain of scan matches against the truth): the chain's error stayed within 1 m + 2x the disagreement on
+    # all 645 spans (1 m + 1x failed 4 of the 600 m ones by up to 1.27 m); its windows at 600 m
     # become 1.6 % of the span (median) where window_rate says 5 %, and the building's anchors 20.0 m -> 0.36 m
     # RMSE (aliases of its identical rooms 30 m away were inside the 5 % windows). Without a compass dead
     # reckoning's heading is the odometry's, which local SLAM also predicts from: not independent, and on the real

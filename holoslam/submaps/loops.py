@@ -133,12 +133,20 @@ class LoopSearch:
         c = self.cfg
         xy = c.base_window_xy + c.window_rate * graph_distance_m
         th = np.radians(c.base_window_deg + c.window_deg_rate * graph_distance_m)
-        wx, wy, wth = self._covariance_windows(xy, th, cov_mTr, mTr)
-        if disagreement is not None and c.agreement_factor > 0:
-            bxy = c.base_window_xy + c.agreement_factor * disagreement[0]
-            wx, wy = np.minimum(wx, bxy), np.minimum(wy, bxy)
-            wth = np.minimum(wth, math.radians(c.base_window_deg) + c.agreement_factor * disagreement[1])
-        return wx, wy, wth
+        return self._agreement_bound(self._covariance_windows(xy, th, cov_mTr, mTr), disagreement)
+
+    def _agreement_bound(self, win: tuple[np.ndarray, np.ndarray, np.ndarray],
+                         disagreement: tuple[np.ndarray, np.ndarray] | None
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Windows (wx, wy, wth) at most the base plus ``agreement_factor`` times dead reckoning's disagreement
+        (m, rad) with the estimate; unchanged without one."""
+        c = self.cfg
+        wx, wy, wth = win
+        if disagreement is None or c.agreement_factor <= 0:
+            return wx, wy, wth
+        bxy = c.base_window_xy + c.agreement_factor * disagreement[0]
+        return (np.minimum(wx, bxy), np.minimum(wy, bxy),
+                np.minimum(wth, math.radians(c.base_window_deg) + c.agreement_factor * disagreement[1]))
 
     def _covariance_windows(self, xy: np.ndarray, th: np.ndarray, cov_mTr: np.ndarray | None,
                             mTr: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -174,8 +182,8 @@ class LoopSearch:
         window to ``window_sigmas`` of it; ``travel[m]`` the odometer at each anchor (the consistency test's
         drift allowance); ``bundle`` makes the points of the node and those behind it (``global_bundle_m``, node
         frame) that the global search matches, called only when a global round runs; ``disagreement`` (m (N,), rad
-        (N,), per anchor: ``AnchorGraph.dead_reckoning_disagreement``) bounds the drift windows where dead
-        reckoning agrees with the estimate. Closures of windowed searches are returned at once; those of global
+        (N,), per anchor: ``AnchorGraph.dead_reckoning_disagreement``) bounds the windows where dead reckoning
+        agrees with the estimate. Closures of windowed searches are returned at once; those of global
         ones when another agrees (``loop_consistency``)."""
         from holoslam.warmup import wait_for_kernels
 
@@ -199,11 +207,9 @@ class LoopSearch:
         seeds = g.between(np.asarray(est_wTa[olds_arr], float), np.broadcast_to(wTr, (len(olds_arr), 3)))
         covs = None if rel_cov is None else np.einsum("ij,mjk,lk->mil", A, rel_cov[olds_arr], A) + cov_nTr
         dis = None if disagreement is None else (disagreement[0][olds_arr], disagreement[1][olds_arr])
-        win = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds, dis)
-        bounded = np.zeros(len(olds_arr), bool)  # where dead reckoning's agreement narrowed the window
-        if dis is not None:
-            loose = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
-            bounded = (win[0] < loose[0]) | (win[1] < loose[1]) | (win[2] < loose[2])
+        loose = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
+        win = self._agreement_bound(loose, dis)
+        bounded = (win[0] < loose[0]) | (win[1] < loose[1]) | (win[2] < loose[2])  # narrowed by the agreement
         for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
                                                     strict=True)):
             seed = seeds[q].copy()
