@@ -62,6 +62,14 @@ class LocalSlamConfig:
     # glued to the old one by a prediction nothing checked. 10 s is twice the motion filter's time (a standing
     # robot's laser yields a node every motion_time_s) and 7x the slowest real laser period met (1.4 Hz)
     lost_gap_s: float = 10.0
+    # m/s^2: the laser's own prediction (the last matched pose moved on at the last matched velocity) is offered to
+    # the matcher only while a change of speed at this rate moves it less than the matcher's window
+    # (1/2 a dt^2 <= ``match.linear_window``: 0.45 s at 1 m/s^2 and 0.1 m). A wheeled indoor robot accelerates well
+    # below 1 m/s^2 (ARIA's Pioneer default is 0.3); a 5 Hz laser's next scan is 0.2 s on, a 1.4 Hz laser's 0.7 s,
+    # too far for a constant velocity: on intel at 1.4 Hz, whose stamps come in bursts (a velocity from two stamps
+    # 2.3 s apart, the robot's motion between them logged within 10 ms), the laser's prediction put scans 0.5-0.9 m
+    # back along corridors
+    laser_prediction_accel: float = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -229,12 +237,16 @@ class LocalSlam:
             return None
 
     def _laser_predict(self, host: ActiveSubmap, stamp: int) -> np.ndarray | None:
-        """The pose at ``stamp`` from the laser alone: the last matched pose moved on at the last velocity."""
+        """The pose at ``stamp`` from the laser alone: the last matched pose moved on at the last velocity (None
+        when that is too far on for a constant velocity, ``laser_prediction_accel``)."""
         if self._last_fix is None:
             return None
         t, index, aTb = self._last_fix
+        dt = (stamp - t) * 1e-9
+        if 0.5 * self.cfg.laser_prediction_accel * dt * dt > self.cfg.match.linear_window:
+            return None
         prev = self._in_host(host, index, aTb)
-        return None if prev is None else g.compose(prev, self._twist * ((stamp - t) * 1e-9))
+        return None if prev is None else g.compose(prev, self._twist * dt)
 
     def _fix(self, host: ActiveSubmap, stamp: int, aTb: np.ndarray) -> None:
         """Record a matched pose and the body-frame velocity since the last one."""

@@ -53,3 +53,32 @@ def test_backing_up_while_the_odometry_says_forward(laser_prediction):
         # the 0.1 m window cannot reach a pose 0.2 m behind the odometry's: 0.17 m off at once, 2.2 m after 12
         assert err[30:].max() > 1.0, err[30:]
 
+
+
+@pytest.mark.parametrize("period_s, offered", [(0.2, True), (0.8, False)])
+def test_the_laser_prediction_is_offered_only_while_a_constant_velocity_holds(monkeypatch, period_s, offered):
+    """A constant velocity is a fair guess of the next pose only while a change of speed (``laser_prediction_accel``,
+    1 m/s^2) moves it less than the matcher's window (0.1 m): 0.45 s. A 5 Hz laser's scans are offered the laser's
+    prediction; a 1.25 Hz laser's never are (on intel at 1.4 Hz the laser's prediction put scans 0.5-0.9 m back
+    along corridors)."""
+    from holoslam.submaps import local_slam
+
+    seen = []
+    real = local_slam.match_scan
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("alternative_aTb"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(local_slam, "match_scan", spy)
+    rng = np.random.default_rng(4)
+    slam = LocalSlam(LocalSlamConfig(scans_per_submap=200), np.zeros(3))
+    dt_ns = int(period_s * 1e9)
+    for k in range(12):
+        T = np.array([0.8 + 0.1 * k, 2.0, 0.0])
+        r = ray_scan(ROOM, T, BEAMS_360, rng, 0.01)
+        slam.add(k * dt_ns, T, lambda: np.diag([1e-4, 1e-4, 1e-6]), points(r, BEAMS_360),
+                 np.where(np.isfinite(r), r, np.inf), BEAMS_360, 0.1 * k)
+    assert len(seen) >= 8  # every scan after the first few into the submap is matched
+    given = [a is not None for a in seen]
+    assert all(given[1:]) if offered else not any(given), given
