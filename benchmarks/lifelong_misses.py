@@ -3,7 +3,8 @@
 
     .venv/bin/python benchmarks/lifelong_misses.py DIR
 
-Per day and object, what the robot could have known (the simulator's truth against the store):
+First every error against the observable truth (``lifelong_truth.py``, what the issue's goal is judged on).
+Then per day and object, what the robot could have known (the simulator's raw truth against the store):
 
 - a **moved** object called gone or not reported: the seconds of the day in which the simulated camera could have
   photographed it at its new place (``bench_lifelong._photographable_s`` on that day's home: within 3.5 m, facing
@@ -38,6 +39,25 @@ def _world_angle(w2m: list, vec: np.ndarray | None) -> float:
 
 def _diff(a: float, b: float) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
+
+
+def _observable_errors(out: Path, truth: dict, detail: list, worlds: list) -> None:
+    """Every false and missed change against the observable truth (``lifelong_truth``: what the day's camera
+    could photograph), the goal's truth; computed when the run's ``sim_detail.json`` predates it."""
+    from lifelong_truth import camera_positions, observable_truth
+
+    if all("truth_observable" in x for x in detail):
+        obs = [x["truth_observable"] for x in detail]
+    else:
+        days = truth["days"][: len(detail)]
+        obs = observable_truth({**truth, "days": days}, worlds[: len(days)],
+                               [camera_positions(out / d["log"]) for d in days]).days
+    print("errors against the observable truth (day object: truth -> detected)")
+    for x, t in zip(detail, obs, strict=True):
+        det = x["detected"]
+        for oid in sorted(set(t) | {o for o, v in det.items() if v in ("moved", "gone", "new")}):
+            if t.get(oid) != det.get(oid) and (oid in t or det.get(oid) != "seen"):
+                print(f"  day {x['day']:>2} {oid}: {t.get(oid)} -> {det.get(oid)} (raw truth {x['truth'].get(oid)})")
 
 
 def _moved_misses(out: Path, truth: dict, detail: list, worlds: list) -> None:
@@ -122,6 +142,7 @@ def main() -> None:
         hist: dict = {}
         for h in s.object_history():
             hist.setdefault(h.object_id, []).append(h)
+    _observable_errors(out, truth, detail, worlds)
     _moved_misses(out, truth, detail, worlds)
     _gone_misses(truth, detail, worlds, hist, trajs, merged)
     _new_evidence(out, truth, hist, trajs, merged)
