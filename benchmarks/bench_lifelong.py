@@ -292,6 +292,7 @@ def sim_part(out: Path, days: int, duration: float | None, seed: int, lifelong: 
         detail.append({"day": d["day"], "truth": tru, "detected": det, "unseen_in_view_s": s.unseen_in_view_s,
                        "normal_err_deg": normal_err, "located": n_located,
                        "unseen_in_images": s.unseen_in_images, "checked": d.get("checked", {}),
+                       "unseen_support_left": s.unseen_support_left,
                        "err_store_m": e_life, "err_single_m": e_single, "xy_store": p_life, "xy_single": p_single,
                        "reloc_s": s.relocalisation_s, "run_s": run_s, "joined_by": s.joined_by})
         if before is not None:

@@ -14,7 +14,8 @@ Then per day and object, what the robot could have known (the simulator's raw tr
   the angle between the direction the store saw its label from (``ObjectState.view``, the mean over its
   sightings) and the label's true normal, the stored normal's error (``ObjectState.normal``, from the readings'
   PnP poses) and its sigma, and the largest angle from the true normal of the robot poses the view test counted
-  (the simulated camera reads to 60 deg);
+  (the simulated camera reads to 60 deg); whether the session's laser saw the thing it was on gone
+  (``support``);
 - **new**: for every object first located after day 1 (added or not), the images of each earlier session that
   held its place readable (``frustum.covering_images``), and the seconds the robot had it in view
   (``changes.in_view_seconds``, unshared): whether an earlier session could tell "there all along" from "added".
@@ -83,7 +84,7 @@ def _gone_misses(truth: dict, detail: list, worlds: list, hist: dict, trajs: dic
             if gone == absent:
                 continue
             row = f"  day {d['day']:>2} {oid}: {'gone, present' if gone else 'absent, not gone'}, in view {s} s, " \
-                  f"images {x['unseen_in_images'].get(oid)}"
+                  f"images {x['unseen_in_images'].get(oid)}, support left {oid in x.get('unseen_support_left', ())}"
             prev = [h for h in hist.get(oid, ()) if h.session_id < d["day"] and h.w_xy is not None]
             if gone and prev and (prev[-1].view is not None or prev[-1].normal is not None) \
                     and oid not in x["truth"]:  # at its place
