@@ -3,7 +3,8 @@
 
     .venv/bin/python benchmarks/lifelong_misses.py DIR
 
-Per day and object, what the robot could have known (the simulator's truth against the store):
+First every error against the observable truth (``lifelong_truth.py``, what the issue's goal is judged on).
+Then per day and object, what the robot could have known (the simulator's raw truth against the store):
 
 - a **moved** object called gone or not reported: the seconds of the day in which the simulated camera could have
   photographed it at its new place (``bench_lifelong._photographable_s`` on that day's home: within 3.5 m, facing
@@ -13,7 +14,8 @@ Per day and object, what the robot could have known (the simulator's truth again
   the angle between the direction the store saw its label from (``ObjectState.view``, the mean over its
   sightings) and the label's true normal, the stored normal's error (``ObjectState.normal``, from the readings'
   PnP poses) and its sigma, and the largest angle from the true normal of the robot poses the view test counted
-  (the simulated camera reads to 60 deg);
+  (the simulated camera reads to 60 deg); whether the session's laser saw the thing it was on gone
+  (``support``);
 - **new**: for every object first located after day 1 (added or not), the images of each earlier session that
   held its place readable (``frustum.covering_images``), and the seconds the robot had it in view
   (``changes.in_view_seconds``, unshared): whether an earlier session could tell "there all along" from "added".
@@ -40,6 +42,25 @@ def _diff(a: float, b: float) -> float:
     return abs((a - b + 180.0) % 360.0 - 180.0)
 
 
+def _observable_errors(out: Path, truth: dict, detail: list, worlds: list) -> None:
+    """Every false and missed change against the observable truth (``lifelong_truth``: what the day's camera
+    could photograph), the goal's truth; computed when the run's ``sim_detail.json`` predates it."""
+    from lifelong_truth import camera_positions, observable_truth
+
+    if all("truth_observable" in x for x in detail):
+        obs = [x["truth_observable"] for x in detail]
+    else:
+        days = truth["days"][: len(detail)]
+        obs = observable_truth({**truth, "days": days}, worlds[: len(days)],
+                               [camera_positions(out / d["log"]) for d in days]).days
+    print("errors against the observable truth (day object: truth -> detected)")
+    for x, t in zip(detail, obs, strict=True):
+        det = x["detected"]
+        for oid in sorted(set(t) | {o for o, v in det.items() if v in ("moved", "gone", "new")}):
+            if t.get(oid) != det.get(oid) and (oid in t or det.get(oid) != "seen"):
+                print(f"  day {x['day']:>2} {oid}: {t.get(oid)} -> {det.get(oid)} (raw truth {x['truth'].get(oid)})")
+
+
 def _moved_misses(out: Path, truth: dict, detail: list, worlds: list) -> None:
     from bench_lifelong import _photographable_s
 
@@ -63,7 +84,7 @@ def _gone_misses(truth: dict, detail: list, worlds: list, hist: dict, trajs: dic
             if gone == absent:
                 continue
             row = f"  day {d['day']:>2} {oid}: {'gone, present' if gone else 'absent, not gone'}, in view {s} s, " \
-                  f"images {x['unseen_in_images'].get(oid)}"
+                  f"images {x['unseen_in_images'].get(oid)}, support left {oid in x.get('unseen_support_left', ())}"
             prev = [h for h in hist.get(oid, ()) if h.session_id < d["day"] and h.w_xy is not None]
             if gone and prev and (prev[-1].view is not None or prev[-1].normal is not None) \
                     and oid not in x["truth"]:  # at its place
@@ -122,6 +143,7 @@ def main() -> None:
         hist: dict = {}
         for h in s.object_history():
             hist.setdefault(h.object_id, []).append(h)
+    _observable_errors(out, truth, detail, worlds)
     _moved_misses(out, truth, detail, worlds)
     _gone_misses(truth, detail, worlds, hist, trajs, merged)
     _new_evidence(out, truth, hist, trajs, merged)

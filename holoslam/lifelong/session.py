@@ -111,6 +111,7 @@ class _Placed:
     graph: Any = None
     view_s: dict[str, float] = field(default_factory=dict)  # stored objects not located: camera s in view
     images: dict[str, int] = field(default_factory=dict)  # the same: images that held their place readable
+    support_left: tuple[str, ...] = ()  # the same: the session's laser saw the thing they were on gone
     # the session's trajectory in the world from its node solve (``keyframes.world_trajectory``: poses at the
     # session's stamps, keyframe stamps, keyframes); None: hung from the anchors rigidly
     traj: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -270,6 +271,18 @@ def _unseen_images(latest: dict[str, ObjectState], located: dict, log: Any, st: 
     return out
 
 
+def _support_left(latest: dict[str, ObjectState], located: dict, st: Any, sTa: np.ndarray, wTs: np.ndarray,
+                  merged: Any, cfg: ChangeConfig) -> tuple[str, ...]:
+    """The stored objects not located whose support the session's laser saw gone (``support``)."""
+    from holoslam.lifelong.support import session_grid, support_left
+
+    todo = {k: o.w_xy for k, o in latest.items()
+            if k not in located and o.status != ObjectStatus.GONE and o.w_xy is not None}
+    own = session_grid(st.fe.submaps, sTa, wTs) if todo else None
+    return tuple(k for k, xy in todo.items() if support_left(merged, own, xy, cfg.moved_m, cfg.p_occupied,
+                                                             cfg.support_min_cells, cfg.support_seen_share))
+
+
 def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, latest: dict, reloc: Any,
           lc: LifelongConfig, log: Any = None, closures: tuple = (), frontend: Any = None) -> _Placed:
     """The joined session: object changes, the joint solve, the session transform it implies, retirements."""
@@ -283,8 +296,9 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
     located = _located(st, sobj, h.wTs, h.cov_wTs, lc.changes)
     view_s: dict[str, float] = {}
     images = _unseen_images(latest, located, log, st, h.wTs, merged, lc.frustum)
+    left = _support_left(latest, located, st, sTa, h.wTs, merged, lc.changes)
     statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), merged, lc.changes, view_s,
-                        images)
+                        images, left)
     sightings = store.sightings(ids)
     # every placement the store ever gave (retired submaps' sightings included): a new one never reuses a name
     placement = _placements(statuses, latest, store.placements())
@@ -311,7 +325,7 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
         int(k): (js.stored_wTa[n], None if js.stored_cov is None else js.stored_cov[n])
         for n, k in enumerate(ids.tolist())}
     return _Placed(wTa, js.new_cov, wTs, h.cov_wTs, objs, placement, updates, retire, cross, js, jg,
-                   view_s, images or {}, traj, kf)
+                   view_s, images or {}, left, traj, kf)
 
 
 def _onto_map(store: Any, st: Any, stored: tuple, js: Any, frontend: Any) -> tuple[Any, Any]:
@@ -449,7 +463,8 @@ def _summary(store: Any, sid: int, p: _Placed, reloc: Any, founded: bool, n_seen
         working_submaps=counts["working_submaps"] - len(p.retire) + (len(p.wTa) if joined else 0),
         retired_submaps=counts["submaps"] - counts["working_submaps"] + len(p.retire),
         relocalisation_cpu_s=0.0 if reloc is None else round(reloc.cpu_seconds, 4),
-        unseen_in_view_s=dict(sorted(p.view_s.items())), unseen_in_images=dict(sorted(p.images.items())))
+        unseen_in_view_s=dict(sorted(p.view_s.items())), unseen_in_images=dict(sorted(p.images.items())),
+        unseen_support_left=sorted(p.support_left))
 
 
 def _rehang(stamps_ns: np.ndarray, poses: np.ndarray, anchor_stamps_ns: np.ndarray, sTa: np.ndarray,

@@ -53,6 +53,9 @@ class SessionSummary:
     # the same objects, each with the number of the session's images that held its place readable (gone from
     # ChangeConfig.min_images; empty for a log without images)
     unseen_in_images: dict[str, int] = field(default_factory=dict)
+    # the same objects whose support (the thing the label was on) the session's laser saw gone from their place
+    # (``holoslam.lifelong.support``): gone
+    unseen_support_left: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

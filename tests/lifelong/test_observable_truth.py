@@ -1,0 +1,89 @@
+"""benchmarks/lifelong_truth.py: the simulated days' changes as the day's camera could have observed them (issue 27:
+an object moved where nothing of the day could photograph it is "not seen although its place was in view", gone,
+and found again moved against its last known place; a gone waits for its place to be photographable; an added
+object is new on the first day it can be photographed), decided from the truth alone."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+
+import numpy as np
+import pytest
+from repo_paths import REPO
+
+from holoslam.sim.world import World, WorldObject
+
+
+@pytest.fixture(scope="module")
+def lt():
+    path = REPO / "benchmarks" / "lifelong_truth.py"
+    spec = importlib.util.spec_from_file_location("lifelong_truth", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("lifelong_truth", mod)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _obj(oid: str, x: float, y: float, yaw: float, z: float = 0.5) -> WorldObject:
+    return WorldObject(oid, "cup", "room", f"holo:{oid};k=cup;s=60", (x, y, z), yaw, 0.06)
+
+
+def _home(*objects: WorldObject, walls=()) -> World:
+    return World(20.0, 20.0, (), tuple(walls), (), (), tuple(objects))
+
+
+def _cam_at(o: WorldObject, r: float, off_deg: float = 0.0, z: float | None = None) -> np.ndarray:
+    a = o.label_yaw + math.radians(off_deg)
+    return np.array([[o.position[0] + r * math.cos(a), o.position[1] + r * math.sin(a),
+                      o.position[2] if z is None else z]])
+
+
+def test_the_cameras_reading_limits(lt):
+    o = _obj("O05", 5.0, 5.0, 0.0)
+    w = _home(o)
+    assert lt.readable_mask(w, o, _cam_at(o, 1.0, 59.0))[0]  # the camera reads to 60 deg from the normal
+    assert not lt.readable_mask(w, o, _cam_at(o, 1.0, 61.0))[0]
+    assert not lt.readable_mask(w, o, _cam_at(o, 1.0, 180.0))[0]  # its back
+    assert not lt.readable_mask(w, o, _cam_at(o, 0.5, 0.0, z=1.10))[0]  # 50 deg below the camera: tilt 45 at most
+    far = lt.max_read_m(o)
+    assert 3.0 < far < 6.0  # a 6 cm code with 3 px modules at 10x
+    assert lt.readable_mask(w, o, _cam_at(o, 0.95 * far))[0]
+    assert not lt.readable_mask(w, o, _cam_at(o, 1.05 * far))[0]
+    walled = _home(o, walls=[(6.0, 3.0, 6.0, 7.0)])  # a wall 1 m in front of it
+    assert not lt.readable_mask(walled, o, _cam_at(o, 2.0))[0]
+    assert lt.readable_mask(walled, o, _cam_at(o, 0.8))[0]
+    assert lt.photographable_s(w, o, np.vstack([_cam_at(o, 1.0), _cam_at(o, 1.0, 90.0)]), 0.25) == pytest.approx(0.25)
+
+
+def test_a_move_out_of_sight_is_gone_then_moved_and_gone_waits_for_its_place(lt):
+    cup_a, remote = _obj("O05", 2.0, 2.0, 0.0), _obj("O06", 2.0, 8.0, 0.0)
+    cup_b = _obj("O05", 12.0, 2.0, math.pi)  # facing away from the camera in front of its old place
+    added = _obj("O36", 12.0, 12.0, 0.0)
+    cam_a, cam_r, cam_b, cam_n = (_cam_at(cup_a, 1.5), _cam_at(remote, 1.5), _cam_at(cup_b, 1.5),
+                                  _cam_at(added, 1.5))
+    assert not lt.readable_mask(_home(cup_b), cup_b, cam_a)[0]
+    worlds = [_home(cup_a, remote), _home(cup_b, added), _home(cup_b, added), _home(cup_b, added)]
+    cams = [np.vstack([cam_a, cam_r]), cam_a, np.vstack([cam_a, cam_n]), np.vstack([cam_b, cam_r])]
+    truth = {"days": [{"objects": {"O05": [], "O06": []}}] + [{"objects": {}} for _ in range(3)]}
+    obs = lt.observable_truth(truth, worlds, cams)
+    # day 2: the cup moved where nothing photographed it, its old place photographed: gone; the remote's place not
+    # photographable: its gone waits; the added object not photographable: not new yet
+    assert obs.days[1] == {"O05": "gone"}
+    assert obs.days[2] == {"O36": "new"}  # photographed; the cup's empty place again: already gone
+    assert obs.days[3] == {"O05": "moved", "O06": "gone"}  # the cup found, moved against its last known place
+
+
+def test_an_object_at_its_place_out_of_sight_and_a_visible_move_on_its_day(lt):
+    cup_a, cup_b = _obj("O05", 2.0, 2.0, 0.0), _obj("O05", 2.0, 4.0, 0.0)
+    worlds = [_home(cup_a), _home(cup_a), _home(cup_b)]
+    cams = [_cam_at(cup_a, 1.0), _cam_at(cup_a, 1.0, 180.0), _cam_at(cup_b, 1.0)]
+    truth = {"days": [{"objects": {"O05": []}}, {"objects": {}}, {"objects": {}}]}
+    obs = lt.observable_truth(truth, worlds, cams)
+    assert obs.days[1] == {}  # at its place, not photographable: no change
+    assert obs.days[2] == {"O05": "moved"}  # 2 m, photographable on its day
+    # read in the day's images (the simulator's record) counts as observable whatever the geometry says
+    truth["days"][2]["photographed"] = ["O05"]
+    obs = lt.observable_truth(truth, worlds, [cams[0], cams[1], cams[1]])
+    assert obs.days[2] == {"O05": "moved"}
