@@ -10,7 +10,12 @@ Here the session's keyframes stand at their placed estimate (``wTs`` ∘ sTa ∘
 their stored poses, as a run's nodes and finished submaps do; the window is the loop search's right after a
 closure (``base_window_xy``, ``base_window_deg``: the hypothesis is good to the relocalisation's 0.3 m / 3 deg).
 A closure must also agree with the hypothesis within that 0.3 m / 3 deg (``RelocaliseConfig.consistent_*``):
-it refines the join, it cannot move it elsewhere."""
+it refines the join, it cannot move it elsewhere. Both hold where the session's matches placed it: a session is
+rigid only to its own drift, so further along its path from the submaps that placed it (``path_from``; its own
+loop closures are shortcuts), window and agreement grow with that path as the loop search's windows grow with the
+travel since a closure (``LoopConfig.window_rate``, ``window_deg_rate``). Aces' second third, placed by its last
+submaps, starts 1.3 m from its stored neighbour (the first third's loose end): a 1 m window there found none of
+the closures a run finds, and its relations to the first third stayed 1.3 m off."""
 
 from __future__ import annotations
 
@@ -21,18 +26,49 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.relocalise_parts import LaserMatch, RelocaliseConfig, _consistent, _grid
 
-__all__ = ["session_closures"]
+__all__ = ["session_closures", "path_from"]
+
+
+def path_from(session_sTa: np.ndarray, sources, relative=None) -> np.ndarray:
+    """Per session submap, the path length (m) along the session to the nearest submap of ``sources`` (indices):
+    the anchors' chain, each step the distance between consecutive anchors, the session's own loop closures
+    (``relative``, a ``RelativePoseMeasurements`` of its anchors: kind ``loop``) free. All zero without sources."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    sTa = np.asarray(session_sTa, np.float64).reshape(-1, 3)
+    n, src = len(sTa), sorted({int(k) for k in sources if 0 <= int(k) < len(sTa)})
+    if not src or n < 2:
+        return np.zeros(n)
+    i, j = np.arange(n - 1), np.arange(1, n)
+    w = np.maximum(np.hypot(*(sTa[1:, :2] - sTa[:-1, :2]).T), 1e-9)
+    if relative is not None and len(relative.i):
+        loop = np.asarray(relative.kind, object) == "loop"
+        i = np.concatenate([i, np.asarray(relative.i)[loop]])
+        j = np.concatenate([j, np.asarray(relative.j)[loop]])
+        w = np.concatenate([w, np.full(int(loop.sum()), 1e-9)])
+    G = coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
+    return np.min(dijkstra(G, directed=False, indices=src), axis=0)
+
+
+def _agreeing(match: LaserMatch, wTs: np.ndarray, cfg: RelocaliseConfig, loops, path_m: float) -> bool:
+    """Does the closure ``match`` agree with the session transform ``wTs``, within the hypothesis's tolerance grown
+    by the session's drift over ``path_m`` (module docstring)?"""
+    grown = dataclasses.replace(cfg, consistent_xy_m=cfg.consistent_xy_m + loops.window_rate * path_m,
+                                consistent_deg=cfg.consistent_deg + loops.window_deg_rate * path_m)
+    return bool(_consistent(np.asarray(match.wTs)[None], np.asarray(wTs, np.float64)[None], grown)[0, 0])
 
 
 def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, wTs: np.ndarray, frontend=None,
                      every_nodes: int | None = None, cfg: RelocaliseConfig | None = None,
-                     already=(), per_pair: int = 0) -> list[LaserMatch]:
+                     already=(), per_pair: int = 0, path_m: np.ndarray | None = None) -> list[LaserMatch]:
     """The cross-session closures of a placed session (module docstring): ``LaserMatch``es (new: session submap
     index, old: stored submap id, oTn: the new anchor in the old one). ``frontend``: the run's
     ``FrontEndConfig`` (its loop search and matcher settings; the defaults when None); ``every_nodes``: search
     from every k-th keyframe of a submap (the loop search's ``every_nodes`` when None); ``already``: the
     closures the join holds (``LaserMatch``es), counted against ``max_per_pair`` as the loop search counts its own;
-    ``per_pair`` > 0 replaces that ``max_per_pair``."""
+    ``per_pair`` > 0 replaces that ``max_per_pair``; ``path_m`` (per session submap, ``path_from``): the path from
+    the submaps that placed the session, over which windows and agreement grow (zero when None)."""
     from holoslam.submaps.frontend import FrontEndConfig
     from holoslam.submaps.loops import LoopSearch
 
@@ -57,9 +93,10 @@ def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, w
         if int(m.old) in row:
             key = (row[int(m.old)], first + int(m.new))
             search.pairs[key] = search.pairs.get(key, 0) + 1
-    distance = np.zeros(len(est))  # the graph distance to every old submap: just closed (the join)
+    path = np.zeros(len(sTa)) if path_m is None else np.asarray(path_m, np.float64)
     out: list[LaserMatch] = []
     for k, sm in enumerate(session_submaps):
+        distance = np.full(len(est), path[k])  # the graph distance to every old submap: through the join
         scans = getattr(sm, "scan_points", None)
         if not scans:
             continue
@@ -68,14 +105,16 @@ def session_closures(session_submaps, session_sTa: np.ndarray, stored_submaps, w
             for c in search.search(first + k, aTb[r], cov[r], np.asarray(scans[r], np.float64), est, distance):
                 st = stored_submaps[c.old]
                 implied = g.compose(g.compose(np.asarray(st.wTa, np.float64), c.mTn), g.inverse(sTa[k]))
-                if _consistent(implied[None], np.asarray(wTs, np.float64)[None], cfg)[0, 0]:
-                    out.append(LaserMatch(k, int(st.id), c.mTn, c.cov_mTn, float(c.score), implied))
+                m = LaserMatch(k, int(st.id), c.mTn, c.cov_mTn, float(c.score), implied)
+                if _agreeing(m, wTs, cfg, fe.loops, float(path[k])):
+                    out.append(m)
     return out
 
 
 def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypothesis, frontend=None,
                 cfg: RelocaliseConfig | None = None, margin: float = 0.1, moves: int = 2,
-                every_nodes: int | None = None, refine_margin: float | None = None, per_pair: int = 0):
+                every_nodes: int | None = None, refine_margin: float | None = None, per_pair: int = 0,
+                relative=None):
     """The join checked against its neighbourhood once placed: the session's closures (``session_closures``,
     searched in the loop search's windows around the hypothesis) grouped by the transform each implies
     (``laser_hypothesis``'s groups: 0.3 m / 3 deg, at least ``min_consistent`` from ``min_session_submaps``
@@ -86,18 +125,24 @@ def settle_join(session_submaps, session_sTa: np.ndarray, stored_submaps, hypoth
     the session's 21 submaps agree on 0.64 of their walls there and 0.88 at the place the log's relations
     give); a session's many keyframes, each matched in a window, find the right bay.
 
+    ``relative``: the session's own relative poses (its loop closures shorten ``path_from``).
+
     Returns (the hypothesis kept or moved, the closures consistent with it, a note of the moves)."""
     from holoslam.relocalise import join_agreement, laser_hypothesis
+    from holoslam.submaps.frontend import FrontEndConfig
 
     cfg = cfg or RelocaliseConfig()
+    loops = (frontend or FrontEndConfig()).loops
     wide = dataclasses.replace(cfg, consistent_xy_m=1e9, consistent_deg=360.0)  # every closure, grouped below
     every = list(range(len(session_submaps)))
     h = hypothesis
     notes: list[str] = []
     for move in range(moves + 1):
+        placed = [int(m.new) for m in h.members if isinstance(m, LaserMatch)]
+        path = path_from(session_sTa, placed, relative)
         closures = session_closures(session_submaps, session_sTa, stored_submaps, h.wTs, frontend, every_nodes, wide,
-                                    already=h.members if move == 0 else (), per_pair=per_pair)
-        here = [m for m in closures if _consistent(np.asarray(m.wTs)[None], h.wTs[None], cfg)[0, 0]]
+                                    already=h.members if move == 0 else (), per_pair=per_pair, path_m=path)
+        here = [m for m in closures if _agreeing(m, h.wTs, cfg, loops, float(path[m.new]))]
         a = join_agreement(session_submaps, session_sTa, stored_submaps, h.wTs, every, cfg)
         if a is None or move == moves:
             return h, here, "; ".join(notes)

@@ -350,7 +350,7 @@ def _settled(st: Any, sTa: np.ndarray, stored: tuple, reloc: Any, lc: LifelongCo
         h2, found, note = settle_join(st.fe.submaps, sTa, stored, reloc.hypothesis, frontend, lc.relocalise,
                                       lc.settle_margin if lc.settle else 1e9, lc.settle_moves,
                                       lc.closure_every_nodes or None, lc.settle_refine_margin,
-                                      lc.closures_per_pair)
+                                      lc.closures_per_pair, st.fe.problem.relative)
         closures = tuple(found)
         if h2 is not reloc.hypothesis:
             T = np.array([m.wTs for m in reloc.all_matches]).reshape(-1, 3)

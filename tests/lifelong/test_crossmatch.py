@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from holoslam import geometry as g
-from holoslam.lifelong.crossmatch import session_closures
+from holoslam.lifelong.crossmatch import path_from, session_closures
 from holoslam.lifelong.joint import composed_factors, working_factors
 from holoslam.store.records import StoredFactors
 from tests.test_relocalise import L_ROOM, _stored, _wall_points
@@ -96,3 +96,28 @@ def test_relative_poses_through_retired_submaps_are_kept_composed():
     assert sorted(zip(w.i.tolist(), w.j.tolist(), strict=True)) == [(1, 4), (4, 5)]
     assert len(working_factors(f, np.array([1, 4, 5]), compose=False)) == 1
     assert len(composed_factors(f, np.array([1, 4, 5]), kinds=("loop", "cross"))) == 0  # only a session's chain
+
+
+def test_far_along_the_session_from_where_it_was_placed_windows_and_agreement_grow():
+    """A session is rigid only to its own drift: its submap 1.3 m from where the join's transform puts it (the far
+    end of aces' second third from the submaps that placed it) is found in a window grown by the path from them
+    (``path_from``, at ``LoopConfig.window_rate``), not in the 1 m window right after a closure."""
+    stored = [_stored(L_ROOM, np.array([1.0, 0.5, 0.3]), 1), _stored(L_ROOM, np.array([4.0, 1.0, -1.0]), 2)]
+    wTs = np.array([2.0, 1.5, 1.1])
+    sTa = np.array([[0.0, 0.0, 0.0], [0.5, 0.2, 0.3]])
+    aTb = np.array([[0.0, 0.0, 0.0], [0.4, 0.3, 0.2], [0.8, 0.1, -0.3], [1.0, 1.0, 0.5]])
+    subs = _session(L_ROOM, wTs, sTa, aTb)
+    off = g.compose(wTs, np.array([1.0, -0.85, math.radians(2.0)]))  # 1.3 m / 2 deg off
+    assert session_closures(subs, sTa, stored, off, every_nodes=2, path_m=np.zeros(2)) == []
+    far = session_closures(subs, sTa, stored, off, every_nodes=2, path_m=np.full(2, 40.0))
+    assert len(far) >= 4
+    for m in far:  # each implies the true transform
+        assert np.hypot(*(m.wTs[:2] - wTs[:2])) < 0.03 and abs(g.wrap(m.wTs[2] - wTs[2])) < math.radians(0.5)
+
+
+def test_the_path_from_the_placing_submaps_runs_along_the_chain_and_through_loops():
+    sTa = np.column_stack([np.arange(5.0), np.zeros(5), np.zeros(5)])  # 1 m apart
+    assert np.allclose(path_from(sTa, [4]), [4, 3, 2, 1, 0])
+    loop = SimpleNamespace(i=np.array([0]), j=np.array([4]), kind=np.array(["loop"], object))
+    assert np.allclose(path_from(sTa, [4], loop), [0, 1, 2, 1, 0], atol=1e-6)
+    assert np.allclose(path_from(sTa, []), 0.0)
