@@ -41,7 +41,7 @@ def _undirected_csr(n_nodes: int, i: np.ndarray, j: np.ndarray, w: np.ndarray
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The arcs of the undirected graph of the edges (i, j) with weights w as scipy's ``csgraph.dijkstra(
     coo_matrix((w, (i, j))).tocsr(), directed=False)`` sees them (the parallel edges of one ordered pair summed,
-    either direction traversable), in CSR form for ``_fast.dijkstra``: (indptr (N + 1,), heads, weights)."""
+    either direction traversable), in CSR form for ``_graph_fast.dijkstra``: (indptr (N + 1,), heads, weights)."""
     keys, which = np.unique(np.asarray(i, np.int64) * n_nodes + np.asarray(j, np.int64), return_inverse=True)
     summed = np.zeros(len(keys))
     np.add.at(summed, which.reshape(-1), np.asarray(w, np.float64))
@@ -55,9 +55,11 @@ def _undirected_csr(n_nodes: int, i: np.ndarray, j: np.ndarray, w: np.ndarray
 def _shortest_paths(csr: tuple[np.ndarray, np.ndarray, np.ndarray], source: int) -> tuple[np.ndarray, np.ndarray]:
     """Dijkstra from ``source`` over ``_undirected_csr``'s arcs: (dist (N,), inf where unreached; pred (N,), -1 for
     the source and the unreached), scipy's distances and predecessors without its sparse matrix's set-up
-    (``_fast.dijkstra``; that set-up cost ~10x the search on the anchor graph, at every loop search)."""
-    from holoslam.submaps._fast import dijkstra
+    (``_graph_fast.dijkstra``; that set-up cost ~10x the search on the anchor graph, at every loop search)."""
+    from holoslam.submaps._graph_fast import dijkstra
+    from holoslam.warmup import wait_for_kernels
 
+    wait_for_kernels("holoslam.submaps._graph_fast")  # a first run's pool compiling it: not twice
     return dijkstra(*csr, int(source))
 
 

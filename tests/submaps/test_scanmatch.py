@@ -294,7 +294,8 @@ def test_refinement_step_solve_is_numpys():
 def test_newton_terms_are_the_cost_derivatives():
     """``_newton_terms``' gradient and Hessian are the cost's (central differences of the cost, halved as the
     matcher's are), at poses inside cells of a filled room grid; its Gauss-Newton part is ``_lsq_terms``'."""
-    from holoslam.submaps._grid_fast import _lsq_terms, _newton_terms
+    from holoslam.submaps._grid_fast import _lsq_terms
+    from holoslam.submaps._newton_fast import _newton_terms
 
     rng = np.random.default_rng(3)
     grid = grid_from(ROOM_A, [A], BEAMS_360)
@@ -327,6 +328,7 @@ def test_newton_refinement_reaches_a_lower_cost_in_fewer_iterations():
     """The matcher's refinement with Newton's Hessian (``MatchConfig.newton``) ends at a cost no higher than
     Gauss-Newton's, in fewer iterations, near the true pose (ten-scan noisy submap, the eight predictions)."""
     from holoslam.submaps._grid_fast import lsq_match
+    from holoslam.submaps._newton_fast import lsq_match_newton
 
     rng = np.random.default_rng(0)
     grid = grid_from(ROOM_A, [g.compose(A, np.array([-0.03 * (9 - j), 0.0, 0.0])) for j in range(10)], BEAMS_LMS,
@@ -334,8 +336,9 @@ def test_newton_refinement_reaches_a_lower_cost_in_fewer_iterations():
     its = {False: [], True: []}
     for true, pred in _steps():
         b = points(ray_scan(ROOM_A, true, BEAMS_LMS, rng, 0.01), BEAMS_LMS)
-        out = {full: lsq_match(grid.prob, *grid.origin, grid.resolution, b[:, 0].copy(), b[:, 1].copy(), *pred, *pred,
-                               20.0, 30.0, 60.0, 20, 0.1, full) for full in (False, True)}
+        out = {full: (lsq_match_newton if full else lsq_match)(grid.prob, *grid.origin, grid.resolution, b[:, 0].copy(),
+                                                               b[:, 1].copy(), *pred, *pred, 20.0, 30.0, 60.0, 20, 0.1)
+               for full in (False, True)}
         assert out[True][3] <= out[False][3] * (1 + 1e-9)
         e = g.between(true, np.array(out[True][:3]))
         assert math.hypot(e[0], e[1]) < 0.01 and abs(e[2]) < math.radians(0.4)
