@@ -268,7 +268,8 @@ def wait_for_kernels(*prefixes: str) -> None:
         return
     from concurrent.futures import wait
 
-    mine = {m: f for m, f in _BACKGROUND.items() if m.startswith(prefixes)}
+    # a snapshot: the loop search's and the keyframe stage's threads call this at once, and pop below
+    mine = {m: f for m, f in list(_BACKGROUND.items()) if m.startswith(prefixes)}
     wait(mine.values())  # done, failed or cancelled: a kernel not compiled is compiled by the caller on first call
     for module in mine:
         _BACKGROUND.pop(module, None)

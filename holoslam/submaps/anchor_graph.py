@@ -37,6 +37,32 @@ def _lookup(keys: np.ndarray, order: np.ndarray, wanted: np.ndarray) -> np.ndarr
     return np.where(hit, order[pos], -1)
 
 
+def _undirected_csr(n_nodes: int, i: np.ndarray, j: np.ndarray, w: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arcs of the undirected graph of the edges (i, j) with weights w as scipy's ``csgraph.dijkstra(
+    coo_matrix((w, (i, j))).tocsr(), directed=False)`` sees them (the parallel edges of one ordered pair summed,
+    either direction traversable), in CSR form for ``_graph_fast.dijkstra``: (indptr (N + 1,), heads, weights)."""
+    keys, which = np.unique(np.asarray(i, np.int64) * n_nodes + np.asarray(j, np.int64), return_inverse=True)
+    summed = np.zeros(len(keys))
+    np.add.at(summed, which.reshape(-1), np.asarray(w, np.float64))
+    a, b = keys // n_nodes, keys % n_nodes
+    tail, head, weight = np.concatenate([a, b]), np.concatenate([b, a]), np.concatenate([summed, summed])
+    order = np.argsort(tail, kind="stable")
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(tail, minlength=n_nodes))]).astype(np.int64)
+    return indptr, np.ascontiguousarray(head[order]), np.ascontiguousarray(weight[order])
+
+
+def _shortest_paths(csr: tuple[np.ndarray, np.ndarray, np.ndarray], source: int) -> tuple[np.ndarray, np.ndarray]:
+    """Dijkstra from ``source`` over ``_undirected_csr``'s arcs: (dist (N,), inf where unreached; pred (N,), -1 for
+    the source and the unreached), scipy's distances and predecessors without its sparse matrix's set-up
+    (``_graph_fast.dijkstra``; that set-up cost ~10x the search on the anchor graph, at every loop search)."""
+    from holoslam.submaps._graph_fast import dijkstra
+    from holoslam.warmup import wait_for_kernels
+
+    wait_for_kernels("holoslam.submaps._graph_fast")  # a first run's pool compiling it: not twice
+    return dijkstra(*csr, int(source))
+
+
 class AnchorGraph:
     """The relative poses found so far and the anchors' current world estimate."""
 
@@ -53,6 +79,7 @@ class AnchorGraph:
         self.part: list[int] = [0]  # the part of the run each anchor is in: breaks of local SLAM ("lost") before it
         self.travel: list[float] = [0.0]  # odometer path length at each anchor
         self._dist: tuple[int, int, np.ndarray] | None = None
+        self._csr: dict[str, tuple[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}  # ``_arcs``
         self._infl: tuple[int, float] | None = None
         self._rel: tuple[int, int, np.ndarray] | None = None
         self._meas: tuple[int, Any] | None = None
@@ -78,17 +105,21 @@ class AnchorGraph:
         between their anchors, loop edges nothing (``loops`` module docstring). Cached until the graph grows."""
         key = (n, len(self.i))
         if self._dist is None or self._dist[:2] != key:
-            from scipy.sparse import coo_matrix
-            from scipy.sparse.csgraph import dijkstra
-
-            N = len(self.est)
             ii, jj, _, _, kinds = self.edges()
             trav = np.array(self.travel)
             # a break (kind "lost") is as long as the building is large: a window across it covers everything
             w = np.where(kinds == "loop", 1e-6, np.where(kinds == "lost", 1e6, np.abs(trav[jj] - trav[ii]) + 1e-6))
-            A = coo_matrix((w, (ii, jj)), shape=(N, N)).tocsr()
-            self._dist = (*key, dijkstra(A, directed=False, indices=n))
+            self._dist = (*key, _shortest_paths(self._arcs("distance", len(self.est), ii, jj, w), n)[0])
         return self._dist[2]
+
+    def _arcs(self, name: str, n_nodes: int, i: np.ndarray, j: np.ndarray, w: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``_undirected_csr`` of the edges (i, j, w), cached under ``name`` until the graph grows (the weights are
+        functions of the edges)."""
+        key = (len(self.i), n_nodes)
+        if name not in self._csr or self._csr[name][0] != key:
+            self._csr[name] = (key, _undirected_csr(n_nodes, i, j, w))
+        return self._csr[name][1]
 
     def add_anchor(self, m: int, est_mTn: np.ndarray, dr_mTn: np.ndarray, travelled: float, lost: bool) -> None:
         """A new anchor n after anchor m: its estimate ``est_mTn`` (the scan match, or the odometry across a break)
@@ -121,14 +152,10 @@ class AnchorGraph:
         key = (n, len(self.i))
         if self._rel is not None and self._rel[:2] == key:
             return self._rel[2]
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import dijkstra
-
         N = len(self.est)
         pairs, covs = self._fused_pairs()
         w = np.sqrt(covs[:, 0, 0] + covs[:, 1, 1]) + 5.0 * np.sqrt(covs[:, 2, 2]) + 1e-9
-        A = coo_matrix((w, (pairs[:, 0], pairs[:, 1])), shape=(N, N)).tocsr()
-        dist, pred = dijkstra(A, directed=False, indices=n, return_predecessors=True)
+        dist, pred = _shortest_paths(self._arcs("certainty", N, pairs[:, 0], pairs[:, 1], w), n)
         est = np.array(self.est)
         # Ad(nTp) of every anchor p at once (geometry.adjoint's matrix, between's arithmetic)
         nTp = g.between(np.broadcast_to(est[n], est.shape), est)
