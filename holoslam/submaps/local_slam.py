@@ -265,7 +265,7 @@ class LocalSlam:
         self._pyramid.key = (host.index, host.count)  # the host's grid changes only when a scan is inserted
         m = match_scan(host.builder.prob, host.builder.origin, host.builder.res, b_pts, pred,
                        cfg or self.cfg.match, expected_score=usual, pyramid=self._pyramid,
-                       alternative_aTb=alternative)
+                       alternative_aTb=alternative, known=host.builder.known)
         if m.ok:
             self._scores.append(m.score)
         return m
