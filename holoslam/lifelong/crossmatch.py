@@ -32,23 +32,26 @@ __all__ = ["session_closures", "path_from"]
 def path_from(session_sTa: np.ndarray, sources, relative=None) -> np.ndarray:
     """Per session submap, the path length (m) along the session to the nearest submap of ``sources`` (indices):
     the anchors' chain, each step the distance between consecutive anchors, the session's own loop closures
-    (``relative``, a ``RelativePoseMeasurements`` of its anchors: kind ``loop``) free. All zero without sources."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
+    (``relative``, a ``RelativePoseMeasurements`` of its anchors: kind ``loop``) free, as the run's anchor graph
+    weighs them (``AnchorGraph.graph_distance``; its Dijkstra, from a virtual node tied to every source). All zero
+    without sources."""
+    from holoslam.submaps.anchor_graph import _shortest_paths, _undirected_csr
 
     sTa = np.asarray(session_sTa, np.float64).reshape(-1, 3)
     n, src = len(sTa), sorted({int(k) for k in sources if 0 <= int(k) < len(sTa)})
     if not src or n < 2:
         return np.zeros(n)
+    free = 1e-9  # an edge of no length (a weight of 0 would be no edge)
     i, j = np.arange(n - 1), np.arange(1, n)
-    w = np.maximum(np.hypot(*(sTa[1:, :2] - sTa[:-1, :2]).T), 1e-9)
+    w = np.maximum(np.hypot(*(sTa[1:, :2] - sTa[:-1, :2]).T), free)
     if relative is not None and len(relative.i):
         loop = np.asarray(relative.kind, object) == "loop"
         i = np.concatenate([i, np.asarray(relative.i)[loop]])
         j = np.concatenate([j, np.asarray(relative.j)[loop]])
-        w = np.concatenate([w, np.full(int(loop.sum()), 1e-9)])
-    G = coo_matrix((w, (i, j)), shape=(n, n)).tocsr()
-    return np.min(dijkstra(G, directed=False, indices=src), axis=0)
+        w = np.concatenate([w, np.full(int(loop.sum()), free)])
+    i, j = np.concatenate([i, np.full(len(src), n)]), np.concatenate([j, src])  # the virtual source: node n
+    w = np.concatenate([w, np.full(len(src), free)])
+    return _shortest_paths(_undirected_csr(n + 1, i, j, w), n)[0][:n]
 
 
 def _agreeing(match: LaserMatch, wTs: np.ndarray, cfg: RelocaliseConfig, loops, path_m: float) -> bool:

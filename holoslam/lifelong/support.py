@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from holoslam import geometry as g
+from holoslam.submaps.probgrid import cells_at
 
 __all__ = ["session_grid", "support_left"]
 
@@ -41,16 +42,6 @@ def _cells_within(grid: Any, xy: np.ndarray, radius_m: float) -> tuple[np.ndarra
     return rr[ok], cc[ok]
 
 
-def _lookup(grid: Any, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(known, probability) of ``grid``'s cells at world points (N, 2); unknown outside the grid."""
-    c = np.floor((pts[:, 0] - grid.origin[0]) / grid.resolution).astype(np.int64)
-    r = np.floor((pts[:, 1] - grid.origin[1]) / grid.resolution).astype(np.int64)
-    H, W = grid.prob.shape
-    inside = (r >= 0) & (r < H) & (c >= 0) & (c < W)
-    rr, cc = np.clip(r, 0, H - 1), np.clip(c, 0, W - 1)
-    return inside & grid.known[rr, cc], grid.prob[rr, cc]
-
-
 def support_left(stored: Any, session: Any, w_xy: np.ndarray, radius_m: float, p_occupied: float, min_cells: int,
                  seen_share: float) -> bool:
     """Whether the support of the label at ``w_xy`` left (module docstring): ``stored`` the store's merged grid
@@ -66,7 +57,7 @@ def support_left(stored: Any, session: Any, w_xy: np.ndarray, radius_m: float, p
         return False
     res = stored.resolution
     support = np.column_stack([stored.origin[0] + (cc[occ] + 0.5) * res, stored.origin[1] + (rr[occ] + 0.5) * res])
-    known, _ = _lookup(session, support)
+    known, _ = cells_at(session.prob, session.known, session.origin, session.resolution, support)
     if known.sum() < seen_share * len(support):
         return False
     sr, sc = _cells_within(session, xy, radius_m)

@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["GridConfig", "ProbGrid", "GridBuilder", "scan_endpoints"]
+__all__ = ["GridConfig", "ProbGrid", "GridBuilder", "scan_endpoints", "cells_at"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,6 +80,19 @@ class ProbGrid:
         res = self.resolution
         return (self.origin[0] + c.min() * res, self.origin[1] + r.min() * res,
                 self.origin[0] + (c.max() + 1) * res, self.origin[1] + (r.max() + 1) * res)
+
+
+def cells_at(prob: np.ndarray, known: np.ndarray, origin, resolution: float, pts: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The cells of a grid (``prob`` and its ``known`` mask, cell (r, c) at ``origin`` + (c, r) ``resolution``)
+    holding points ``pts`` (N, 2) of its frame: (explored (N,) bool: inside the grid and known; probability (N,),
+    of the nearest cell of the grid where a point is outside it)."""
+    c = np.floor((pts[:, 0] - origin[0]) / resolution).astype(np.int64)
+    r = np.floor((pts[:, 1] - origin[1]) / resolution).astype(np.int64)
+    H, W = prob.shape
+    inside = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+    rr, cc = np.clip(r, 0, H - 1), np.clip(c, 0, W - 1)
+    return inside & (known[rr, cc] != 0), prob[rr, cc]
 
 
 def scan_endpoints(ranges: np.ndarray, angles: np.ndarray, aTs: np.ndarray, cfg: GridConfig

@@ -147,20 +147,16 @@ def explored_gain(prob: np.ndarray, known: np.ndarray, origin, resolution: float
     that fall on explored cells (``known`` nonzero) at both poses, the share on occupied cells (p > 0.5) at ``bTb``
     less that at ``aTb``, and how many those points are. Points on unexplored cells read p_min wherever the pose
     is, and a wall's probability ramps up over the scans that saw it: neither says which pose is right."""
-    cells, on = [], np.ones(len(b_pts), bool)
-    for T in (aTb, bTb):
-        w = g.transform_points(np.asarray(T, np.float64), np.reshape(b_pts, (-1, 2)))
-        c = np.floor((w[:, 0] - origin[0]) / resolution).astype(np.int64)
-        r = np.floor((w[:, 1] - origin[1]) / resolution).astype(np.int64)
-        inside = (r >= 0) & (c >= 0) & (r < known.shape[0]) & (c < known.shape[1])
-        r, c = np.where(inside, r, 0), np.where(inside, c, 0)
-        on &= inside & (known[r, c] != 0)
-        cells.append((r, c))
+    from holoslam.submaps.probgrid import cells_at
+
+    pts = np.reshape(b_pts, (-1, 2))
+    on_a, p_a = cells_at(prob, known, origin, resolution, g.transform_points(np.asarray(aTb, np.float64), pts))
+    on_b, p_b = cells_at(prob, known, origin, resolution, g.transform_points(np.asarray(bTb, np.float64), pts))
+    on = on_a & on_b
     n = int(np.count_nonzero(on))
     if n == 0:
         return 0.0, 0
-    (ra, ca), (rb, cb) = cells
-    return float(np.mean(prob[rb[on], cb[on]] > 0.5) - np.mean(prob[ra[on], ca[on]] > 0.5)), n
+    return float(np.mean(p_b[on] > 0.5) - np.mean(p_a[on] > 0.5)), n
 
 
 def score_pose(prob: np.ndarray, origin, resolution: float, b_pts: np.ndarray, aTb: np.ndarray,
