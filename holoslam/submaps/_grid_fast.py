@@ -67,6 +67,29 @@ def insert_scan(logodds, prob, known, marker, stamp, ox, oy, res, sx, sy, ex, ey
 
 
 @nb.njit(**JIT)
+def endpoints(ranges, c, s, x, y, max_range, missing_length):  # pragma: no cover
+    """Beam end points (ex, ey) from the sensor at (x, y) along directions (c, s) (cosine and sine of each
+    beam's angle in the grid frame), which are returns (a finite range in (0, max_range]; any other beam
+    reaches ``missing_length`` of free space), and the box (x0, y0, x1, y1) of the end points and the sensor.
+    ``probgrid.scan_endpoints``'s arithmetic; numpy's eight calls cost 10x this work at every insertion."""
+    n = ranges.size
+    ex = np.empty(n)
+    ey = np.empty(n)
+    hit = np.empty(n, np.bool_)
+    x0, y0, x1, y1 = x, y, x, y
+    for k in range(n):
+        r = ranges[k]
+        h = math.isfinite(r) and r > 0 and r <= max_range
+        length = r if h else missing_length
+        hit[k] = h
+        ex[k] = x + length * c[k]
+        ey[k] = y + length * s[k]
+        x0, x1 = min(x0, ex[k]), max(x1, ex[k])
+        y0, y1 = min(y0, ey[k]), max(y1, ey[k])
+    return ex, ey, hit, x0, y0, x1, y1
+
+
+@nb.njit(**JIT)
 def _cubic(p0, p1, p2, p3, t):  # pragma: no cover
     """Catmull-Rom cubic through p1 (t = 0) and p2 (t = 1): value and derivative in t."""
     a = -p0 + 3.0 * p1 - 3.0 * p2 + p3
