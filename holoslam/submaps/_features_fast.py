@@ -102,7 +102,15 @@ def _extent(x, y, a, b):  # pragma: no cover - compiled
 def _segments(x, y, starts, ends, is_line, split_tol, min_points, min_length, cos_merge):  # pragma: no cover
     """Segments (S, 4) and lines (S, 3) of the runs marked ``is_line``: their split pieces of ``min_points`` or
     more, adjacent collinear ones merged (``features._merged_pieces``), those ``min_length`` long or more."""
-    ra, rb = starts[is_line], ends[is_line]
+    nr = 0
+    for r in range(starts.size):  # the marked runs (a loop: numba compiles a boolean mask's indexing slowly)
+        nr += is_line[r]
+    ra, rb = np.empty(nr, np.int64), np.empty(nr, np.int64)
+    q = 0
+    for r in range(starts.size):
+        if is_line[r]:
+            ra[q], rb[q] = starts[r], ends[r]
+            q += 1
     ps, pe = split_pieces(x, y, ra, rb, split_tol)
     segs = np.empty((ps.size, 4))
     lines = np.empty((ps.size, 3))
@@ -229,43 +237,49 @@ def _moved(P, c, s, tx, ty):  # pragma: no cover - compiled
 
 
 @nb.njit(**JIT)
+def _put(buf, n, rows):  # pragma: no cover - compiled
+    """``rows`` appended to the first ``n`` rows of ``buf`` (a new buffer of twice the size when full)."""
+    k, w = rows.shape[0], buf.shape[1]
+    if n + k > buf.shape[0]:  # element loops: numba's compile of 2-D slice assignment costs seconds
+        grown = np.empty((max(2 * buf.shape[0], n + k), w))
+        for i in range(n):
+            for c in range(w):
+                grown[i, c] = buf[i, c]
+        buf = grown
+    for i in range(k):
+        for c in range(w):
+            buf[n + i, c] = rows[i, c]
+    return buf, n + k
+
+
+@nb.njit(**JIT)
 def scans_features(x, y, start, poses, gap, gap_per_m, split_tol, min_points, min_length, cos_merge, corner_gap,
                    sin_min, extend, point_max_extent, point_min_points):  # pragma: no cover - compiled
     """:func:`scan_features` of every scan k (points [start[k], start[k + 1]) of x, y) moved into one frame by
     its pose ``poses[k]`` (``features.transform_features``), stacked in scan order."""
-    parts = []
+    segs_all, lines_all = np.empty((64, 4)), np.empty((64, 3))
+    corners_all, cross_all, blobs_all = np.empty((64, 2)), np.empty((64, 2)), np.empty((64, 2))
+    ns = nl = nc = nx = nb_ = 0
     for k in range(poses.shape[0]):
         a, b = start[k], start[k + 1]
-        f = scan_features(x[a:b].copy(), y[a:b].copy(), gap, gap_per_m, split_tol, min_points, min_length,
-                          cos_merge, corner_gap, sin_min, extend, point_max_extent, point_min_points)
+        segs, lines, corners, cross, blobs = scan_features(
+            x[a:b].copy(), y[a:b].copy(), gap, gap_per_m, split_tol, min_points, min_length, cos_merge, corner_gap,
+            sin_min, extend, point_max_extent, point_min_points)
         tx, ty, th = poses[k, 0], poses[k, 1], poses[k, 2]
         c, s = math.cos(th), math.sin(th)
-        segs, lines = f[0].copy(), f[1].copy()
         for i in range(segs.shape[0]):
             for e in range(2):
                 sx, sy = segs[i, 2 * e], segs[i, 2 * e + 1]
                 segs[i, 2 * e], segs[i, 2 * e + 1] = tx + c * sx - s * sy, ty + s * sx + c * sy
-            nx, ny = lines[i, 0], lines[i, 1]
-            lines[i, 0], lines[i, 1] = c * nx - s * ny, s * nx + c * ny
+            nx_, ny_ = lines[i, 0], lines[i, 1]
+            lines[i, 0], lines[i, 1] = c * nx_ - s * ny_, s * nx_ + c * ny_
             lines[i, 2] = lines[i, 2] + (lines[i, 0] * tx + lines[i, 1] * ty)
-        corners, cross, blobs = f[2].copy(), f[3].copy(), f[4].copy()
         _moved(corners, c, s, tx, ty)
         _moved(cross, c, s, tx, ty)
         _moved(blobs, c, s, tx, ty)
-        parts.append((segs, lines, corners, cross, blobs))
-    return (_stack([p[0] for p in parts], 4), _stack([p[1] for p in parts], 3), _stack([p[2] for p in parts], 2),
-            _stack([p[3] for p in parts], 2), _stack([p[4] for p in parts], 2))
-
-
-@nb.njit(**JIT)
-def _stack(arrs, width):  # pragma: no cover - compiled
-    n = 0
-    for a in arrs:
-        n += a.shape[0]
-    out = np.empty((n, width))
-    i = 0
-    for a in arrs:
-        out[i:i + a.shape[0]] = a
-        i += a.shape[0]
-    return out
-
+        segs_all, ns = _put(segs_all, ns, segs)
+        lines_all, nl = _put(lines_all, nl, lines)
+        corners_all, nc = _put(corners_all, nc, corners)
+        cross_all, nx = _put(cross_all, nx, cross)
+        blobs_all, nb_ = _put(blobs_all, nb_, blobs)
+    return segs_all[:ns], lines_all[:nl], corners_all[:nc], cross_all[:nx], blobs_all[:nb_]
