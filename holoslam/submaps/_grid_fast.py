@@ -90,6 +90,30 @@ def endpoints(ranges, c, s, x, y, max_range, missing_length):  # pragma: no cove
 
 
 @nb.njit(**JIT)
+def angular_step(px, py, res, quantile):  # pragma: no cover
+    """``scanmatch.angular_step`` of the points (px, py): the rotation that moves the ``quantile`` range (numpy's
+    linear quantile, its arithmetic) by about one cell of ``res``. One compiled call instead of five numpy ones
+    (they cost 10x this work at every match)."""
+    n = px.size
+    if n == 0:
+        d = 1.0
+    else:
+        r = np.empty(n)
+        for k in range(n):
+            r[k] = math.hypot(px[k], py[k])
+        r.sort()
+        v = (n - 1) * quantile  # numpy's virtual index of its linear method
+        lo = min(max(int(math.floor(v)), 0), n - 1)
+        hi = min(lo + 1, n - 1)
+        a, b = r[lo], r[hi]
+        t = min(max(v - math.floor(v), 0.0), 1.0) if 0.0 <= v < n - 1 else (0.0 if v < 0.0 else 1.0)
+        diff = b - a
+        d = b - diff * (1.0 - t) if t >= 0.5 else a + diff * t
+    d = max(d, 2.0 * res)
+    return math.acos(max(-1.0, 1.0 - res ** 2 / (2.0 * d * d)))
+
+
+@nb.njit(**JIT)
 def _cubic(p0, p1, p2, p3, t):  # pragma: no cover
     """Catmull-Rom cubic through p1 (t = 0) and p2 (t = 1): value and derivative in t."""
     a = -p0 + 3.0 * p1 - 3.0 * p2 + p3

@@ -119,26 +119,18 @@ class Match:
     ok: bool
 
 
-def angular_step(b_pts: np.ndarray, resolution: float, quantile: float = 0.9) -> float:
+#: the far point's range quantile of ``angular_step``
+FAR_QUANTILE = 0.9
+
+
+def angular_step(b_pts: np.ndarray, resolution: float, quantile: float = FAR_QUANTILE) -> float:
     """The rotation that moves a far point (the ``quantile`` of the ranges) by about one cell (the median
     instead was measured worse on aces: 4.3 cm / 0.39 deg local relation error against 3.8 cm / 0.32 deg)."""
-    d = _quantile(np.hypot(b_pts[:, 0], b_pts[:, 1]), quantile) if len(b_pts) else 1.0
-    d = max(d, 2.0 * resolution)
-    return math.acos(max(-1.0, 1.0 - resolution**2 / (2.0 * d * d)))
+    from holoslam.submaps import _grid_fast as fast
 
-
-def _quantile(r: np.ndarray, q: float) -> float:
-    """``np.quantile(r, q)`` (its default linear method, the same arithmetic: equal to the last bit) by one
-    partition: np.quantile's own set-up costs ~100 us, ten times the work on a scan's few hundred ranges."""
-    n = len(r)
-    v = (n - 1) * q  # numpy's virtual index of its linear method
-    lo = min(max(int(math.floor(v)), 0), n - 1)
-    hi = min(lo + 1, n - 1)
-    part = np.partition(r, (lo, hi)) if hi != lo else np.partition(r, lo)
-    a, b = float(part[lo]), float(part[hi])
-    t = min(max(v - math.floor(v), 0.0), 1.0) if 0.0 <= v < n - 1 else (0.0 if v < 0.0 else 1.0)
-    diff = b - a
-    return b - diff * (1.0 - t) if t >= 0.5 else a + diff * t
+    pts = np.asarray(b_pts, np.float64).reshape(-1, 2)
+    return float(fast.angular_step(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
+                                   float(resolution), float(quantile)))
 
 
 def explored_gain(prob: np.ndarray, known: np.ndarray, origin, resolution: float, b_pts: np.ndarray,
@@ -194,7 +186,7 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
         return Match(pred, np.eye(3), 0.0, False)
     px, py = pts[:, 0].copy(), pts[:, 1].copy()
     res = float(resolution)
-    step = angular_step(pts, res)
+    step = fast.angular_step(px, py, res, FAR_QUANTILE)  # angular_step's, without its conversions
     na = int(math.ceil(math.radians(cfg.angular_window_deg) / step))
     angles = np.arange(-na, na + 1) * step
     nxy = int(math.ceil(cfg.linear_window / res))

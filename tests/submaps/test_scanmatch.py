@@ -388,3 +388,18 @@ def test_the_wide_search_s_check_counts_only_the_points_both_poses_put_on_explor
     assert back == pytest.approx(-gain) and n_back == n
     far = np.vstack([pts, np.full((40, 2), 100.0)])
     assert explored_gain(room.prob, room.known, room.origin, room.res, far, wrong, at) == (pytest.approx(gain), n)
+
+
+def test_angular_step_is_one_cell_at_numpys_range_quantile():
+    """The matcher's angular step is the rotation moving the 0.9 quantile of the ranges (numpy's linear quantile,
+    to the last bit) by one cell; two points or one, or none (1 m), and near points floored at two cells."""
+    from holoslam.submaps.scanmatch import angular_step
+
+    rng = np.random.default_rng(3)
+    for n in (0, 1, 2, 7, 360, 1081):
+        pts = rng.normal(0.0, 4.0, (n, 2))
+        d = np.quantile(np.hypot(pts[:, 0], pts[:, 1]), 0.9) if n else 1.0
+        d = max(d, 0.1)
+        assert angular_step(pts, 0.05) == math.acos(max(-1.0, 1.0 - 0.05**2 / (2.0 * d * d)))
+    near = np.full((10, 2), 0.01)
+    assert angular_step(near, 0.05) == math.acos(1.0 - 0.05**2 / (2.0 * 0.1 * 0.1))
