@@ -90,6 +90,32 @@ def endpoints(ranges, c, s, x, y, max_range, missing_length):  # pragma: no cove
 
 
 @nb.njit(**JIT)
+def _select(r, k):  # pragma: no cover
+    """The k-th smallest of r (0-based), r reordered so that r[:k] <= r[k] <= r[k + 1:] (Hoare's quickselect,
+    the middle element as pivot): what a sort would put at k, without numba's sort (a second of compiling)."""
+    lo, hi = 0, r.size - 1
+    while lo < hi:
+        pivot = r[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while r[i] < pivot:
+                i += 1
+            while r[j] > pivot:
+                j -= 1
+            if i <= j:
+                r[i], r[j] = r[j], r[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return r[k]
+
+
+@nb.njit(**JIT)
 def angular_step(px, py, res, quantile):  # pragma: no cover
     """``scanmatch.angular_step`` of the points (px, py): the rotation that moves the ``quantile`` range (numpy's
     linear quantile, its arithmetic) by about one cell of ``res``. One compiled call instead of five numpy ones
@@ -101,11 +127,14 @@ def angular_step(px, py, res, quantile):  # pragma: no cover
         r = np.empty(n)
         for k in range(n):
             r[k] = math.hypot(px[k], py[k])
-        r.sort()
         v = (n - 1) * quantile  # numpy's virtual index of its linear method
         lo = min(max(int(math.floor(v)), 0), n - 1)
-        hi = min(lo + 1, n - 1)
-        a, b = r[lo], r[hi]
+        a = _select(r, lo)  # the lo-th smallest; the next one is the least of those after it
+        b = a
+        if lo + 1 < n:
+            b = r[lo + 1]
+            for k in range(lo + 2, n):
+                b = min(b, r[k])
         t = min(max(v - math.floor(v), 0.0), 1.0) if 0.0 <= v < n - 1 else (0.0 if v < 0.0 else 1.0)
         diff = b - a
         d = b - diff * (1.0 - t) if t >= 0.5 else a + diff * t

@@ -403,3 +403,17 @@ def test_angular_step_is_one_cell_at_numpys_range_quantile():
         assert angular_step(pts, 0.05) == math.acos(max(-1.0, 1.0 - 0.05**2 / (2.0 * d * d)))
     near = np.full((10, 2), 0.01)
     assert angular_step(near, 0.05) == math.acos(1.0 - 0.05**2 / (2.0 * 0.1 * 0.1))
+
+
+def test_quickselect_puts_the_sorted_value_at_k():
+    """The angular step's selection gives what a sort puts at k, with ties, sorted and reversed inputs."""
+    from holoslam.submaps._grid_fast import _select
+
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 3, 10, 101, 1000):
+        for data in (rng.normal(size=n), np.round(rng.normal(size=n), 1), np.arange(n, dtype=float),
+                     np.arange(n, 0, -1, dtype=float)):
+            for k in {0, n // 2, int(0.9 * (n - 1)), n - 1}:
+                r = data.copy()
+                assert _select(r, k) == np.sort(data)[k]
+                assert np.all(r[:k] <= r[k]) and np.all(r[k + 1:] >= r[k])
