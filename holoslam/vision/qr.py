@@ -204,9 +204,15 @@ def _finder_corners(n: int) -> np.ndarray:
 def _sample(gray_f: np.ndarray, pts: np.ndarray) -> np.ndarray:
     import cv2
 
-    m = pts.astype(np.float32).reshape(1, -1, 2)
+    n = len(pts)
+    if n == 0:
+        return np.zeros(0, np.float32)
+    width = 1024  # the map as rows of this many points: OpenCV's remap takes fewer than 32767 columns
+    m = np.zeros((-(-n // width) * width, 2), np.float32)
+    m[:n] = pts
     # map2 None: one float map of (x, y) pairs, as OpenCV documents (the stub requires an array)
-    return cv2.remap(gray_f, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).ravel()  # type: ignore[call-overload, unused-ignore]
+    out = cv2.remap(gray_f, m.reshape(-1, width, 2), None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)  # type: ignore[call-overload, unused-ignore]
+    return out.ravel()[:n]
 
 
 def _homography(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -309,49 +315,48 @@ def _refine_edges(gray_f: np.ndarray, H: np.ndarray, n: int) -> np.ndarray | Non
     least-squares line per border, corners as line intersections (exact under perspective)."""
     along = (np.arange(n)[:, None] + np.array([0.3, 0.5, 0.7])[None, :]).ravel()
     zero, full = np.zeros_like(along), np.full_like(along, float(n))
-    borders = [  # base points on the border, outward normal: top, right, bottom, left
-        (np.column_stack([along, zero]), np.array([0.0, -1.0])),
-        (np.column_stack([full, along]), np.array([1.0, 0.0])),
-        (np.column_stack([along, full]), np.array([0.0, 1.0])),
-        (np.column_stack([zero, along]), np.array([-1.0, 0.0])),
-    ]
+    # base points on the border and outward normals, the four borders at once: top, right, bottom, left
+    base = np.stack([np.column_stack([along, zero]), np.column_stack([full, along]),
+                     np.column_stack([along, full]), np.column_stack([zero, along])])  # (4, P, 2)
+    nrm = np.array([[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])
     fpts, fdark = _fixed_pattern(n)
     fv = _sample(gray_f, _apply_h(H, fpts))
     g_dark, g_light = np.median(fv[fdark]), np.median(fv[~fdark])
     g_mid = 0.5 * (g_dark + g_light)
     if g_light - g_dark < 8.0:
         return None
-    pts_by_line: list[np.ndarray] = []
-    for base, nrm in borders:
-        prof_m = base[:, None, :] + _ACROSS[None, :, None] * nrm[None, None, :]  # (P, S, 2)
-        prof = _sample(gray_f, _apply_h(H, prof_m.reshape(-1, 2))).reshape(len(base), len(_ACROSS))
-        dark = np.median(prof[:, _ACROSS < -0.3], axis=1)
-        light = np.median(prof[:, _ACROSS > 0.9], axis=1)
-        thr = 0.5 * (dark + light)
-        good = (dark < g_mid) & (light > g_mid) & (light - dark > 0.4 * (g_light - g_dark))
-        above = prof > thr[:, None]
-        j = np.argmax(above, axis=1)  # first crossing dark -> light going outwards
-        good &= (j > 0) & above[np.arange(len(j)), j]
-        j = np.clip(j, 1, len(_ACROSS) - 1)
-        rows = np.arange(len(j))
-        v0, v1 = prof[rows, j - 1], prof[rows, j]
-        frac = np.where(np.abs(v1 - v0) > 1e-9, (thr - v0) / (v1 - v0 + 1e-12), 0.5)
-        t = _ACROSS[j - 1] + np.clip(frac, 0, 1) * (_ACROSS[1] - _ACROSS[0])
-        good &= np.abs(t) < 0.6
-        if good.sum() < 6:
-            return None
-        pts_by_line.append(_apply_h(H, base[good] + t[good, None] * nrm[None, :]))
+    P, S = base.shape[1], len(_ACROSS)
+    prof_m = base[:, :, None, :] + _ACROSS[None, None, :, None] * nrm[:, None, None, :]  # (4, P, S, 2)
+    prof = _sample(gray_f, _apply_h(H, prof_m.reshape(-1, 2))).reshape(4 * P, S)
+    dark = np.median(prof[:, _ACROSS < -0.3], axis=1)
+    light = np.median(prof[:, _ACROSS > 0.9], axis=1)
+    thr = 0.5 * (dark + light)
+    good = (dark < g_mid) & (light > g_mid) & (light - dark > 0.4 * (g_light - g_dark))
+    above = prof > thr[:, None]
+    j = np.argmax(above, axis=1)  # first crossing dark -> light going outwards
+    rows = np.arange(len(j))
+    good &= (j > 0) & above[rows, j]
+    j = np.clip(j, 1, S - 1)
+    v0, v1 = prof[rows, j - 1], prof[rows, j]
+    frac = np.where(np.abs(v1 - v0) > 1e-9, (thr - v0) / (v1 - v0 + 1e-12), 0.5)
+    t = _ACROSS[j - 1] + np.clip(frac, 0, 1) * (_ACROSS[1] - _ACROSS[0])
+    good = (good & (np.abs(t) < 0.6)).reshape(4, P)
+    if np.any(good.sum(axis=1) < 6):
+        return None
+    t = t.reshape(4, P)
+    pts_by_line = [_apply_h(H, base[k][good[k]] + t[k, good[k], None] * nrm[k][None, :]) for k in range(4)]
     lines = []
     for p in pts_by_line:
         m = p.mean(axis=0)
         _, _, vt = np.linalg.svd(p - m)
-        nrm = vt[1]
-        lines.append(np.array([nrm[0], nrm[1], -nrm @ m]))  # a x + b y + c = 0
+        u = vt[1]
+        lines.append((float(u[0]), float(u[1]), float(-u @ m)))  # a x + b y + c = 0
     top, right, bottom, left = lines
 
-    def meet(l1: np.ndarray, l2: np.ndarray) -> np.ndarray:
-        x = np.cross(l1, l2)
-        return x[:2] / x[2]
+    def meet(l1: tuple[float, float, float], l2: tuple[float, float, float]) -> list[float]:
+        # the cross product (np.cross's arithmetic, on floats)
+        x0, x1, x2 = l1[1] * l2[2] - l1[2] * l2[1], l1[2] * l2[0] - l1[0] * l2[2], l1[0] * l2[1] - l1[1] * l2[0]
+        return [x0 / x2, x1 / x2]
 
     return np.array([meet(top, left), meet(top, right), meet(bottom, right), meet(bottom, left)])
 
