@@ -77,7 +77,10 @@ class SolveOptions:
     # whose LM reaches an earlier start's solution (same error and poses to the tolerances below) stops there.
     # The chordal start comes first: LM from it reached the known optimum on every graph of ../shared/posegraph
     # and w10000 (in 2-7 iterations where LM from the file's guess took 2-18), while LM from the file's guess
-    # stopped in a local minimum on MITb (385.12 vs 20.6035) and ais2klinik (86.6012 vs 86.4071).
+    # stopped in a local minimum on MITb (385.12 vs 20.6035) and ais2klinik (86.6012 vs 86.4071). A pose graph
+    # whose own guess already fits the measurements (the test below, before any solve: intel 4 of 2512 beyond,
+    # FRH 0, intel_g2o943 5; MITb 19 of 827, ais2klinik 94 of 16,727 do not) starts from it instead
+    # (``starts._order``): LM from it reaches the same optimum, and the chordal start is not built.
     auto_candidates: tuple[Initialisation, ...] = (Initialisation.CHORDAL, Initialisation.PROBLEM)
     # ... and a later candidate runs only when the best solution so far does not fit the measurements (the test
     # of ``auto_fallback_beyond`` below); False: every candidate runs. Measured on the 12 graphs above: the

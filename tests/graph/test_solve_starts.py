@@ -151,6 +151,19 @@ def test_a_later_start_runs_when_the_first_solution_does_not_fit():
     assert [c for c, _ in report.skipped] == [Initialisation.CHORDAL] and report.fits
 
 
+def test_default_auto_starts_from_a_guess_that_already_fits():
+    """The default with a guess that already fits the measurements (before any solve): LM from it, first, and the
+    chordal start is not built; the trapped square's guess does not fit, so there the chordal start goes first."""
+    good = replace(_trapped_square(), initial_wTa=square_loop(n_side=6))
+    auto = solve(good, AUTO)
+    report = auto.starts
+    assert report is not None and [o.initialisation for o in report.outcomes] == [Initialisation.PROBLEM]
+    assert [c for c, _ in report.skipped] == [Initialisation.CHORDAL] and report.fits
+    assert auto.final_error < 1e-9
+    trapped = solve(_trapped_square(), AUTO).starts
+    assert trapped is not None and trapped.outcomes[0].initialisation is Initialisation.CHORDAL
+
+
 # ---------------------------------------------------------------------------------------------- MITb
 
 
