@@ -46,7 +46,7 @@ from holoslam.errors import IngestError
 from holoslam.geometry import interpolate_poses
 from holoslam.submaps.anchor_graph import AnchorGraph
 from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interpolate_yaw
-from holoslam.submaps.features import FeatureConfig, ScanFeatures, extract_features, transform_features
+from holoslam.submaps.features import FeatureConfig, scans_features
 from holoslam.submaps.local_slam import ActiveSubmap, LocalSlam, LocalSlamConfig
 from holoslam.submaps.loops import LoopConfig, LoopSearch
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
@@ -153,10 +153,7 @@ def _submap_record(sm: ActiveSubmap, cfg: FrontEndConfig, reason: str, grid: Pro
     grid when already made."""
     P = np.array(sm.aTb).reshape(-1, 3)
     every = max(1, cfg.feature_every_nodes)
-    feats = [transform_features(T, extract_features(b, cfg.features))
-             for T, b in zip(P[::every], sm.b_points[::every], strict=True)]
-    features = ScanFeatures(*(np.vstack([getattr(x, k) for x in feats]) for k in
-                              ("segments", "lines", "corners", "crossings", "points")))
+    features = scans_features(P[::every], sm.b_points[::every], cfg.features)
     pts = np.vstack([g.transform_points(T, b) for T, b in zip(P, sm.b_points, strict=True)])
     pts, nrm = voxel_downsample(pts, np.zeros_like(pts), cfg.point_voxel)
     if grid is None and cfg.build_grids:

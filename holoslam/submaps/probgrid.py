@@ -99,11 +99,16 @@ def scan_endpoints(ranges: np.ndarray, angles: np.ndarray, aTs: np.ndarray, cfg:
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Beam end points in the grid frame (x, y) and which are returns: a finite range within ``max_range``
     is a return at its range; any other beam is free space for ``missing_ray_length``."""
-    r = np.asarray(ranges, dtype=np.float64)
-    hit = np.isfinite(r) & (r > 0) & (r <= cfg.max_range)
-    length = np.where(hit, r, cfg.missing_ray_length)
-    c, s = np.cos(angles + aTs[2]), np.sin(angles + aTs[2])
-    return aTs[0] + length * c, aTs[1] + length * s, hit
+    return _endpoints(ranges, angles, np.asarray(aTs, np.float64), cfg)[:3]
+
+
+def _endpoints(ranges: np.ndarray, angles: np.ndarray, aTs: np.ndarray, cfg: GridConfig) -> tuple:
+    """``scan_endpoints`` and the box (x0, y0, x1, y1) of the end points and the sensor (one compiled pass)."""
+    from holoslam.submaps import _grid_fast as fast
+
+    th = np.asarray(angles, np.float64) + aTs[2]
+    return fast.endpoints(np.asarray(ranges, np.float64), np.cos(th), np.sin(th), float(aTs[0]), float(aTs[1]),
+                          float(cfg.max_range), float(cfg.missing_ray_length))
 
 
 class GridBuilder:
@@ -157,10 +162,10 @@ class GridBuilder:
         """Insert a scan taken from sensor pose ``aTs`` (3,) in the grid's frame."""
         from holoslam.submaps import _grid_fast as fast
 
-        ex, ey, hit = scan_endpoints(ranges, angles, np.asarray(aTs, np.float64), self.cfg)
+        ex, ey, hit, x0, y0, x1, y1 = _endpoints(ranges, angles, np.asarray(aTs, np.float64), self.cfg)
         if ex.size == 0:
             return
-        self._grow(min(ex.min(), aTs[0]), min(ey.min(), aTs[1]), max(ex.max(), aTs[0]), max(ey.max(), aTs[1]))
+        self._grow(x0, y0, x1, y1)
         self.stamp += 1
         fast.insert_scan(self.logodds, self.prob, self.known, self.marker, self.stamp, self.origin[0], self.origin[1],
                          self.res, float(aTs[0]), float(aTs[1]), ex, ey, hit, self._l_hit, self._l_miss,

@@ -222,12 +222,10 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
             S = fast.window_scores(prob, origin[0], origin[1], res, px, py, pred[0], pred[1], pred[2], nxy,
                                    angles, outside)
     off = np.arange(-nxy, nxy + 1) * res
-    d2 = off[None, :, None] ** 2 + off[None, None, :] ** 2
-    discounted = S * np.exp(-(cfg.translation_delta_weight * d2
-                              + cfg.rotation_delta_weight * angles[:, None, None] ** 2))
-    a, j, i = (int(v) for v in np.unravel_index(int(np.argmax(discounted)), S.shape))
-    if S[a, j, i] - S[a, nxy, nxy] < cfg.seed_margin:  # not a clear gain: the predicted position (seed_margin)
-        j = i = nxy
+    # the best cell discounted by its distance from the prediction; the predicted position unless it gains
+    # seed_margin over it
+    a, j, i = fast.window_seed(S, res, angles, cfg.translation_delta_weight, cfg.rotation_delta_weight,
+                               cfg.seed_margin)
     seed = np.array([pred[0] + off[i], pred[1] + off[j], g.wrap(float(pred[2] + angles[a]))])  # wrap's scalar path
     # the priors pull toward the prediction, not the correlative seed: along a corridor the window's best cell
     # is noise, and a prior at it would let the estimate random-walk along the corridor scan after scan
@@ -236,7 +234,8 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
         cfg.occupied_weight, cfg.translation_weight, cfg.rotation_weight, cfg.iterations, outside)
     aTb = np.array([x, y, t])
     score = float(fast.mean_bicubic(prob, origin[0], origin[1], res, px, py, x, y, t, outside))
-    cov = _surface_covariance(S, pred, off, angles, aTb, cfg.kappa, res, step)
+    cov = fast.surface_covariance(S, float(pred[0]), float(pred[1]), float(pred[2]), off, angles, x, y, t,
+                                  float(cfg.kappa), res, float(step))
     return Match(aTb, cov, score, bool(score >= cfg.min_score))
 
 
@@ -284,16 +283,3 @@ def _wide_search(prob, origin, res, pts, pred, cfg: MatchConfig, min_score: floa
     hit = bnb.search(grids, pts, pred, cfg.wide_linear_window, math.radians(cfg.angular_window_deg),
                      min_score)
     return None if hit is None else np.asarray(hit.aTb, np.float64)
-
-
-def _surface_covariance(S, pred, off, angles, aTb, kappa, res, step) -> np.ndarray:
-    """Weighted second moment of the window poses about the refined pose (x, y in the grid frame, theta),
-    weights exp(kappa (s - max s)); floored by the lattice's own uniform variance (spacing^2 / 12); in the
-    pose's own frame. One compiled pass (``_grid_fast.surface_covariance``; numpy's version of the same sums
-    agreed to 4e-15 and took 5x as long, at every match)."""
-    from holoslam.submaps import _grid_fast as fast
-
-    return fast.surface_covariance(np.ascontiguousarray(S, np.float64), float(pred[0]), float(pred[1]),
-                                   float(pred[2]), np.ascontiguousarray(off, np.float64),
-                                   np.ascontiguousarray(angles, np.float64), float(aTb[0]), float(aTb[1]),
-                                   float(aTb[2]), float(kappa), float(res), float(step))

@@ -146,7 +146,7 @@ def test_match_covariance_is_not_overconfident(coverage_run):
 @pytest.mark.xfail(strict=True, reason=(
     "measured coverage 1.0 (200/200), median d^2 0.13 (317a541; 0.19 at 7ef252d) against chi2(3)'s 2.37: on a "
     "well-filled submap the score surface (kappa 200) is a single pose, and the covariance is the lattice floor "
-    "res^2/12 (14.4 mm sigma) while the refined pose errs 3-4 mm rms per axis (scanmatch._surface_covariance). "
+    "res^2/12 (14.4 mm sigma) while the refined pose errs 3-4 mm rms per axis (_grid_fast.surface_covariance). "
     "Tried: the refinement's own covariance (residual variance x inverse Gauss-Newton Hessian) as the floor gives "
     "coverage 0.99 / median d^2 0.76 here, but the bundled run's anchor 95 % coverage falls 0.93 -> 0.84 with "
     "the anchors as accurate (9 mm): a submap's matches share its grid, and as independent factors they "
@@ -257,7 +257,7 @@ def test_walls_on_cell_boundaries_bias_a_match_by_at_most_half_a_cell():
 def test_surface_covariance_kernel_is_the_weighted_moment():
     """The compiled score-surface covariance equals the numpy formula (weighted second moment about the refined
     pose, lattice floors, rotated into the pose's frame), including a heading across +-pi."""
-    from holoslam.submaps.scanmatch import _surface_covariance
+    from holoslam.submaps._grid_fast import surface_covariance
 
     rng = np.random.default_rng(5)
     for pred2 in (0.3, np.pi - 0.004):
@@ -274,8 +274,28 @@ def test_surface_covariance_kernel_is_the_weighted_moment():
         cov = (D * w.ravel()) @ D.T + np.diag([0.05**2 / 12, 0.05**2 / 12, 0.01**2 / 12])
         c, s = np.cos(aTb[2]), np.sin(aTb[2])
         J = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        got = _surface_covariance(S, pred, off, angles, aTb, 200.0, 0.05, 0.01)
+        got = surface_covariance(S, *pred, off, angles, *aTb, 200.0, 0.05, 0.01)
         assert np.allclose(got, J @ cov @ J.T, rtol=1e-12, atol=1e-18)
+
+
+def test_window_seed_is_the_discounted_best_or_the_centre():
+    """The compiled seed of a correlative window is numpy's argmax of the scores discounted by distance and angle
+    from the prediction, and the centre cell of that angle when the best gains less than the seed margin."""
+    from holoslam.submaps._grid_fast import window_seed
+
+    rng = np.random.default_rng(9)
+    res, angles = 0.05, (np.arange(-20, 21)) * 0.012
+    off = (np.arange(5) - 2) * res
+    for k in range(200):
+        S = rng.uniform(0.3, 0.8, (41, 5, 5))
+        if k % 4 == 0:
+            S = np.round(S, 1)  # ties: the first of equals wins, as numpy's argmax
+        disc = S * np.exp(-(0.1 * (off[None, :, None] ** 2 + off[None, None, :] ** 2) + 0.1 * angles[:, None, None] ** 2))
+        a, j, i = np.unravel_index(int(np.argmax(disc)), S.shape)
+        margin = 0.04 if k % 2 else 0.0
+        if S[a, j, i] - S[a, 2, 2] < margin:
+            j = i = 2
+        assert window_seed(S, res, angles, 0.1, 0.1, margin) == (a, j, i)
 
 
 def test_refinement_step_solve_is_numpys():

@@ -7,7 +7,8 @@ import math
 import numpy as np
 
 from holoslam.sim.world import raycast
-from holoslam.submaps.features import _split, _split_all, extract_features, split_runs, transform_features
+from holoslam.submaps._fast import split_pieces
+from holoslam.submaps.features import extract_features, scans_features, split_runs, transform_features
 
 # a 5 x 4 m room; a 0.04 m square leg at (3.5, 1.0); a free-standing 1 m wall piece from (1, 3) to (2, 3)
 WALLS = np.array([[0, 0, 5, 0], [5, 0, 5, 4], [5, 4, 0, 4], [0, 4, 0, 0]], float)
@@ -68,6 +69,27 @@ def test_split_runs_cuts_at_gaps():
     assert split_runs(np.zeros((0, 2))) == []
 
 
+def _reference_split(pts, tol):
+    """Split-and-merge's split step in plain numpy, one run: pieces [start, end), each within tol of its chord."""
+    out, stack = [], [(0, pts.shape[0])]
+    x, y = pts[:, 0], pts[:, 1]
+    while stack:
+        a, b = stack.pop()
+        if b - a < 3:
+            out.append((a, b))
+            continue
+        chx, chy = x[b - 1] - x[a], y[b - 1] - y[a]
+        L = np.hypot(chx, chy)
+        sx, sy = x[a:b] - x[a], y[a:b] - y[a]
+        dist = np.abs(sx * chy - sy * chx) / L if L > 1e-9 else np.hypot(sx, sy)
+        k = int(np.argmax(dist))
+        if dist[k] > tol and 0 < k < b - a - 1:
+            stack += [(a + k, b), (a, a + k + 1)]
+        else:
+            out.append((a, b))
+    return sorted(out)
+
+
 def test_compiled_split_gives_the_pieces_of_the_reference_split():
     # the compiled split of every run of a scan at once must cut exactly where the per-run numpy split cuts
     rng = np.random.default_rng(4)
@@ -77,9 +99,25 @@ def test_compiled_split_gives_the_pieces_of_the_reference_split():
         pts = scan(wTs, segs, sigma=0.01 * (k % 3), seed=k, beams=int(rng.integers(90, 720)))
         if k % 5 == 0:
             pts = np.round(pts, 2)  # collinear and repeated points: ties in the farthest point
-        runs = split_runs(pts)
-        marked = [bool(rng.random() < 0.8) for _ in runs]
+        runs = [ab for ab in split_runs(pts) if rng.random() < 0.8]
         tol = float(rng.choice([0.01, 0.03, 0.1]))
-        got = _split_all(pts, runs, marked, tol)
-        want = {a: _split(pts[a:b], tol, 0) for (a, b), m in zip(runs, marked, strict=True) if m}
-        assert got == want
+        ps, pe = split_pieces(pts[:, 0].copy(), pts[:, 1].copy(), np.array([a for a, _ in runs], np.int64),
+                              np.array([b for _, b in runs], np.int64), tol)
+        want = sorted((a + p0, a + p1) for a, b in runs for p0, p1 in _reference_split(pts[a:b], tol))
+        assert list(zip(ps.tolist(), pe.tolist(), strict=True)) == want
+
+
+def test_a_submaps_features_are_its_scans_features_moved_into_its_frame():
+    # one compiled call for the scans of a submap gives what each scan's features moved by its pose give, stacked
+    rng = np.random.default_rng(7)
+    segs = np.vstack([WALLS, LEG, [[1, 3, 2, 3]]])
+    poses = [np.array([rng.uniform(1, 4), rng.uniform(1, 3), rng.uniform(-3, 3)]) for _ in range(6)]
+    scans = [scan(T, segs, sigma=0.005, seed=k) for k, T in enumerate(poses)]
+    aTb = np.array([[0.3 * k, -0.2 * k, 0.1 * k] for k in range(6)])
+    got = scans_features(aTb, scans)
+    parts = [transform_features(T, extract_features(b)) for T, b in zip(aTb, scans, strict=True)]
+    for name in ("segments", "lines", "corners", "crossings", "points"):
+        want = np.vstack([getattr(f, name) for f in parts])
+        assert getattr(got, name).shape == want.shape and np.allclose(getattr(got, name), want, atol=1e-12)
+    assert got.segments.shape[0] >= 6 * 4 and got.points.shape[0] >= 4  # every scan's walls; the leg, 5 of 6 see it
+    assert scans_features(np.zeros((0, 3)), []).segments.shape == (0, 4)
