@@ -13,7 +13,7 @@ import numpy as np
 
 from holoslam import geometry as g
 
-__all__ = ["MergedGrid", "merge_submaps", "to_occupancy_grid"]
+__all__ = ["MergedGrid", "merge_submaps", "overlay", "to_occupancy_grid"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -97,6 +97,28 @@ def merge_submaps(wTa: np.ndarray, grids: Sequence[tuple[Any, Any, tuple[float, 
     c0, c1 = max(int(kc.min()) - m, 0), min(int(kc.max()) + m + 1, W)
     return MergedGrid(np.ascontiguousarray(prob[r0:r1, c0:c1]), np.ascontiguousarray(known[r0:r1, c0:c1]),
                       (float(lo[0] + c0 * res), float(lo[1] + r0 * res)), res)
+
+
+def overlay(base: MergedGrid, top: MergedGrid | None) -> MergedGrid:
+    """``base`` with ``top``'s known cells replacing its own (the newer observation wins, as across sessions in
+    ``merge_submaps``), over the union of both extents. Both grids' cells lie on the same lattice (origins on
+    multiples of the resolution from the world's origin, as ``merge_submaps`` makes them); ``top`` None: ``base``."""
+    if top is None or not top.known.any():
+        return base
+    res = base.resolution
+    lo = np.minimum(base.origin, top.origin)
+    hi = np.maximum(np.asarray(base.origin) + np.array(base.prob.shape[::-1]) * res,
+                    np.asarray(top.origin) + np.array(top.prob.shape[::-1]) * res)
+    W, H = (int(round(v)) for v in (hi - lo) / res)
+    prob = np.full((H, W), 0.5, np.float32)
+    known = np.zeros((H, W), bool)
+    for m in (base, top):
+        c0, r0 = (int(round(v)) for v in (np.asarray(m.origin) - lo) / res)
+        h, w = m.prob.shape
+        sub_p, sub_k = prob[r0:r0 + h, c0:c0 + w], known[r0:r0 + h, c0:c0 + w]
+        sub_p[m.known] = m.prob[m.known]
+        sub_k |= m.known
+    return MergedGrid(prob, known, (float(lo[0]), float(lo[1])), res)
 
 
 def to_occupancy_grid(m: MergedGrid):

@@ -271,14 +271,14 @@ def _unseen_images(latest: dict[str, ObjectState], located: dict, log: Any, st: 
     return out
 
 
-def _support_left(latest: dict[str, ObjectState], located: dict, st: Any, sTa: np.ndarray, wTs: np.ndarray,
-                  merged: Any, cfg: ChangeConfig) -> tuple[str, ...]:
-    """The stored objects not located whose support the session's laser saw gone (``support``)."""
-    from holoslam.lifelong.support import session_grid, support_left
+def _support_left(latest: dict[str, ObjectState], located: dict, own: Any, merged: Any, cfg: ChangeConfig
+                  ) -> tuple[str, ...]:
+    """The stored objects not located whose support the session's laser (``own``: its grid in the world) saw
+    gone (``support``)."""
+    from holoslam.lifelong.support import support_left
 
     todo = {k: o.w_xy for k, o in latest.items()
             if k not in located and o.status != ObjectStatus.GONE and o.w_xy is not None}
-    own = session_grid(st.fe.submaps, sTa, wTs) if todo else None
     return tuple(k for k, xy in todo.items() if support_left(merged, own, xy, cfg.moved_m, cfg.p_occupied,
                                                              cfg.support_min_cells, cfg.support_seen_share))
 
@@ -287,7 +287,8 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
           lc: LifelongConfig, log: Any = None, closures: tuple = (), frontend: Any = None) -> _Placed:
     """The joined session: object changes, the joint solve, the session transform it implies, retirements."""
     from holoslam.lifelong.joint import joint_problem, retired_priors, solve_joint, working_factors
-    from holoslam.lifelong.merge import merge_submaps
+    from holoslam.lifelong.merge import merge_submaps, overlay
+    from holoslam.lifelong.support import session_grid
 
     h = reloc.hypothesis
     ids = np.array([s.id for s in stored], np.int64)
@@ -295,9 +296,13 @@ def _join(store: Any, st: Any, sTa: np.ndarray, sobj: dict, stored: tuple, lates
                                                                 for s in stored], [s.session_id for s in stored])
     located = _located(st, sobj, h.wTs, h.cov_wTs, lc.changes)
     view_s: dict[str, float] = {}
-    images = _unseen_images(latest, located, log, st, h.wTs, merged, lc.frustum)
-    left = _support_left(latest, located, st, sTa, h.wTs, merged, lc.changes)
-    statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), merged, lc.changes, view_s,
+    own = session_grid(st.fe.submaps, sTa, h.wTs)
+    # the lines of sight of the view tests cross the home as it stands today: where the session's laser saw a
+    # cell, its observation replaces the store's (a chair carried away no longer hides what stood behind it)
+    sight = overlay(merged, own)
+    images = _unseen_images(latest, located, log, st, h.wTs, sight, lc.frustum)
+    left = _support_left(latest, located, own, merged, lc.changes)
+    statuses = classify(latest, located, st.traj.stamps_ns, _robot_world(st, h.wTs), sight, lc.changes, view_s,
                         images, left)
     sightings = store.sightings(ids)
     # every placement the store ever gave (retired submaps' sightings included): a new one never reuses a name

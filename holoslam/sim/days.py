@@ -13,7 +13,8 @@ every 0.15 m, the label 1 cm outside the edge at the surface's height plus 5 cm,
 every other label, with a viewing spot for the operator in front of it. The robot starts each day at a random
 standable place with a random heading; its odometry starts at the identity there, so the world frame of the day
 is unknown to the log. ``days.json`` beside the logs holds per day the log, the start pose, the changes (before
-and after positions), every object's true position, the labels photographed and the remembered places checked.
+and after positions), every object's true position, the labels photographed, the objects of the robot's map
+that day (``remembered``) and the remembered places checked.
 
 Before the objects change, ``furniture`` (lo, hi) pieces of free-standing furniture (``FURNITURE_MOVES`` by
 default) are carried to a new free place in their room, turned or not (``holoslam.sim.furniture_moves``: mostly
@@ -26,9 +27,13 @@ day a piece moves (from then on the free spots on the surfaces, and so the draws
 
 The robot checks on the objects it knows: from day 2 its route also stops in front of the places of the objects of
 its map that no object of the day stands at (``route.plan_stations``), and its camera aims at those places
-(``sensors.camera_snapshots``' ``remembered``). The simulator stands the day before's true objects in for that map
-(the store's knowledge of the home after the day before's session); an image of a place whose object was moved or
-removed holds it empty. Day 1 has no map, so its log is the single-day household's."""
+(``sensors.camera_snapshots``' ``remembered``); an image of a place whose object was moved or removed holds it
+empty. The map is the robot's own memory, kept by the simulator from what the days' images held
+(``robot_map``), not the day before's truth: each object where an image last read its label (moved: at its new
+place once read there), dropped only on a day when ``FORGET_EMPTY_IMAGES`` images aimed at its place held it
+empty and none read it. An object taken away on a day the robot did not look is so still checked on the next days
+until a check finds its place empty, as a robot that does not know it is gone would; an object never
+photographed is not in the map. Day 1 has no map, so its log is the single-day household's."""
 
 from __future__ import annotations
 
@@ -41,8 +46,8 @@ import numpy as np
 from holoslam.sim.furniture_moves import FurnitureChange, move_furniture
 from holoslam.sim.world import World, WorldObject
 
-__all__ = ["DayChange", "Day", "household_days", "simulate_days", "SURFACES", "MIN_MOVE_M", "MIN_SPACING_M", "NEW_KINDS",
-           "DAY_NS", "MOVED_M", "FURNITURE_MOVES"]
+__all__ = ["DayChange", "Day", "household_days", "simulate_days", "robot_map", "SURFACES", "MIN_MOVE_M",
+           "MIN_SPACING_M", "NEW_KINDS", "DAY_NS", "MOVED_M", "FURNITURE_MOVES", "FORGET_EMPTY_IMAGES"]
 
 # the furniture objects are put on (tables, counters, desk, nightstands, cabinet, TV stand, sofa, beds...)
 SURFACES = ("coffee_table", "tv_stand", "balcony_table", "counter", "cabinet", "dining_table", "nightstand_1",
@@ -56,6 +61,11 @@ FURNITURE_MOVES = (0, 2)
 NEW_KINDS = (("cup", 60, "g=handle,m=0.3"), ("book", 50, "g=side,m=0.6"), ("remote", 50, "g=top,m=0.2"),
              ("phone", 50, "g=side,m=0.2"), ("bottle", 60, "g=side,m=1.0"), ("toy", 60, "g=top,m=0.4"))
 DAY_NS = 86_400 * 10**9
+# images of one day aimed at a remembered object's place that held it empty (its label not read) before the robot
+# drops the object from its map: the store calls an object gone on two such images, each aimed on its own
+# (``holoslam.lifelong.changes.ChangeConfig.min_images``: one can cover the place while the label lay just outside
+# it); after fewer the store still holds the object there, so the robot looks again on a later day
+FORGET_EMPTY_IMAGES = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,6 +248,27 @@ def _checks(snapshots: Any) -> dict[str, list[int]]:
     return dict(sorted(out.items()))
 
 
+def robot_map(memory: dict[str, WorldObject], world: World, snapshots: Any) -> dict[str, WorldObject]:
+    """The robot's map after a day (module docstring) from its map before (``memory``: object id -> the
+    ``WorldObject`` where it believes the object is), the day's home and the day's images: every object of
+    ``world`` whose label an image read, where it stood; every remembered object whose place
+    ``FORGET_EMPTY_IMAGES`` check images held empty and no image read, dropped; the others kept as they were.
+    Ordered by object id (deterministic)."""
+    read = {i for s in snapshots for i in s.visible_ids}
+    empty: dict[str, int] = {}
+    for s in snapshots:
+        if s.checked_id and s.checked_id not in s.visible_ids:
+            empty[s.checked_id] = empty.get(s.checked_id, 0) + 1
+    out = dict(memory)
+    for o in world.objects:
+        if o.object_id in read:
+            out[o.object_id] = o
+    for oid, n in empty.items():
+        if oid not in read and n >= FORGET_EMPTY_IMAGES:
+            out.pop(oid, None)
+    return dict(sorted(out.items()))
+
+
 def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | None = None,
                   changes: tuple[int, int] = (5, 10), config: Any = None,
                   furniture: tuple[int, int] = FURNITURE_MOVES) -> dict[str, Any]:
@@ -256,12 +287,13 @@ def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | No
     base = config or SimConfig()
     summary: dict[str, Any] = {"format": "holoslam-days-1", "seed": seed, "changes": list(changes),
                                "furniture_moves": list(furniture), "days": []}
-    remembered: tuple = ()  # the robot's map: the day before's objects where they stood (module docstring)
+    memory: dict[str, WorldObject] = {}  # the robot's map: where its images last read each object (``robot_map``)
     for day in household_days(days, seed, changes, furniture):
         cfg = replace(base, seed=seed + day.day, duration_s=duration_s)
         run = simulate_household(cfg, world=day.world, start_pose=day.start, t0_ns=T0_NS + (day.day - 1) * DAY_NS,
-                                 remembered=remembered)
-        remembered = day.world.objects
+                                 remembered=tuple(memory.values()))
+        remembered = sorted(memory)
+        memory = robot_map(memory, day.world, run.snapshots)
         name = f"day_{day.day:02d}.mcap"
         write_household_log(run, out / name)
         summary["days"].append({
@@ -270,6 +302,6 @@ def simulate_days(out_dir: Any, days: int, seed: int = 0, duration_s: float | No
             "furniture": [m.to_dict() for m in day.furniture],
             "objects": {o.object_id: list(o.position) for o in day.world.objects},
             "photographed": sorted({i for s in run.snapshots for i in s.visible_ids}),
-            "checked": _checks(run.snapshots)})
+            "checked": _checks(run.snapshots), "remembered": remembered})
     (out / "days.json").write_text(dumps(summary, indent=1))
     return summary

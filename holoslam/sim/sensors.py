@@ -47,8 +47,8 @@ plus N(0, 0.3 px).
 
 Checking the robot's map (``remembered``): a robot that keeps a map of its home checks on the objects it knows.
 Given the objects of its map (where it believes they are: on a simulated day, ``holoslam.sim.days`` passes the
-day before's true objects, standing for the store's knowledge), the head also aims at each remembered object's
-place whose label it has not read yet today, under the rules of a label (within 3.5 m, the place's label side
+robot's memory, each object where the days' images last read it, ``days.robot_map``), the head also aims at
+each remembered object's place whose label it has not read yet today, under the rules of a label (within 3.5 m, the place's label side
 facing the camera within 60 deg, not behind a wall or furniture, zoomed so that the remembered label's module
 spans ``TARGET_MODULE_PX``, a second look in a later image from wherever the robot is (``CHECK_BASELINE``: a
 place has nothing to triangulate), later ones after ``resnap_s``, the same ``image_rate_hz`` budget), in one

@@ -8,7 +8,7 @@ import numpy as np
 
 from holoslam.lifelong.changes import ChangeConfig, classify
 from holoslam.lifelong.frustum import CameraViews, FrustumConfig, covering_images, module_count, world_cameras
-from holoslam.lifelong.merge import merge_submaps
+from holoslam.lifelong.merge import merge_submaps, overlay
 from holoslam.store.records import ObjectState
 
 PAYLOAD = "HL1;O05;cup;f=1,g=handle,m=0.3,s=60"  # a 60 mm label
@@ -42,6 +42,32 @@ def test_an_image_holds_a_place_only_when_it_could_read_it_there():
     prob[:, 20:22] = 0.9  # a wall at x = 1
     wall = merge_submaps(np.zeros((1, 3)), [(prob, np.ones_like(prob, bool), (0.0, -1.0), 0.05)], [1])
     assert covering_images(np.array([2.0, 0.0, 1.0]), facing, PAYLOAD, v, wTc, wall, cfg) == 0
+
+
+def test_a_footprint_the_session_saw_free_no_longer_hides_a_place():
+    """The view tests look through the home as the session's laser saw it (``merge.overlay``, used by
+    ``session._join``): a chair the store holds between the camera and a place, carried away and its footprint
+    seen free by today's laser, does not refuse today's checks of the place; what today's laser did not see keeps
+    the store's cells."""
+    v = _views(2)
+    wTc = world_cameras(v, np.array([0, 10**9], np.int64), np.zeros((2, 3)))
+    facing = np.array([-1.0, 0.0])
+    prob = np.full((40, 80), 0.1, np.float32)
+    prob[18:22, 20:28] = 0.9  # the chair's old footprint at x 1.0-1.4, y -0.1..0.1, on the line of sight
+    stored = merge_submaps(np.zeros((1, 3)), [(prob, np.ones_like(prob, bool), (0.0, -1.0), 0.05)], [1])
+    place = np.array([2.0, 0.0, 1.0])
+    assert covering_images(place, facing, PAYLOAD, v, wTc, stored, FrustumConfig()) == 0
+    seen = np.full((10, 14), 0.1, np.float32)  # today's laser: the footprint's cells free (x 0.9-1.6, y -0.2..0.3)
+    today = merge_submaps(np.zeros((1, 3)), [(seen, np.ones_like(seen, bool), (0.9, -0.2), 0.05)], [2], margin_m=0.0)
+    sight = overlay(stored, today)
+    assert covering_images(place, facing, PAYLOAD, v, wTc, sight, FrustumConfig()) == 2
+    half = np.full((10, 4), 0.1, np.float32)  # today's laser saw only the footprint's first 0.2 m
+    part = merge_submaps(np.zeros((1, 3)), [(half, np.ones_like(half, bool), (1.0, -0.2), 0.05)], [2], margin_m=0.0)
+    assert covering_images(place, facing, PAYLOAD, v, wTc, overlay(stored, part), FrustumConfig()) == 0
+    far = merge_submaps(np.zeros((1, 3)), [(seen, np.ones_like(seen, bool), (5.0, 5.0), 0.05)], [2], margin_m=0.0)
+    grown = overlay(stored, far)  # the union of both extents, the store's cells kept
+    assert grown.known.sum() == stored.known.sum() + far.known.sum()
+    assert overlay(stored, None) is stored
 
 
 def test_images_make_an_object_gone_without_time_in_view():

@@ -158,3 +158,42 @@ def test_the_route_stops_in_front_of_the_places_of_its_map():
     assert ids.count(GONE) == 1 and len(ids) == len(set(ids))
     alone = [s.object_id for s in plan_stations(day2) if s.object_id]
     assert GONE not in alone and sorted(alone + [GONE]) == sorted(ids)
+
+
+def test_the_robot_checks_a_removed_objects_place_until_a_check_finds_it_empty():
+    """The simulated days plan the checks from the robot's own map (``sim.days.robot_map``: each object where an
+    image last read it), not from the day before's truth: the cup read on day 1 and taken away before day 2, on a
+    day the robot never looked at its place, is still in the map on day 3, whose route stops in front of its place
+    and whose camera checks it; one image of the place held empty is not enough to forget it, two are, and day 4
+    neither stops nor aims there. The box at the cup's place, its label read from behind on day 2, joins the map."""
+    from holoslam.sim.days import FORGET_EMPTY_IMAGES, robot_map
+    from holoslam.sim.route import plan_stations
+    from holoslam.sim.sensors import camera_snapshots
+
+    day1, day2, _box, stamps, wTb = _two_days()
+    cup = day1.object(GONE)
+    memory = robot_map({}, day1, camera_snapshots(day1, stamps, wTb, np.random.default_rng(1), render=False))
+    assert memory[GONE] == cup and TURNED not in memory
+    # day 2: the cup is gone; the robot drives behind the label's place (its side facing away): no check of it
+    behind = wTb + np.array([0.0, 2.0, 0.0])
+    snaps2 = camera_snapshots(day2, stamps, behind, np.random.default_rng(2), render=False,
+                              remembered=tuple(memory.values()))
+    assert not any(s.checked_id == GONE for s in snaps2)
+    memory = robot_map(memory, day2, snaps2)
+    assert memory[GONE] == cup  # the day before's truth would have dropped it
+    assert memory[TURNED] == day2.object(TURNED)  # read on day 2: where it stands
+    # day 3 (the home as on day 2): the route stops in front of the place, the camera checks it and finds it empty
+    assert GONE in [s.object_id for s in plan_stations(day2, remembered=tuple(memory.values()))]
+    snaps3 = camera_snapshots(day2, stamps, wTb, np.random.default_rng(3), render=False,
+                              remembered=tuple(memory.values()))
+    checks = [s for s in snaps3 if s.checked_id == GONE]
+    assert len(checks) >= FORGET_EMPTY_IMAGES and all(GONE not in s.visible_ids for s in checks)
+    first = [s for s in snaps3 if s is not checks[1]]  # a day whose second look never came
+    assert GONE in robot_map(memory, day2, first)
+    memory = robot_map(memory, day2, snaps3)
+    assert GONE not in memory and TURNED in memory
+    # day 4: nothing left to check there
+    assert GONE not in [s.object_id for s in plan_stations(day2, remembered=tuple(memory.values()))]
+    snaps4 = camera_snapshots(day2, stamps, wTb, np.random.default_rng(4), render=False,
+                              remembered=tuple(memory.values()))
+    assert not any(s.checked_id == GONE for s in snaps4)

@@ -45,3 +45,8 @@ def test_simulated_days_write_logs_and_the_truth(tmp_path):
     assert all((tmp_path / d["log"]).stat().st_size > 10_000 for d in truth["days"])
     assert truth["days"][1]["changes"] and truth["days"][1]["start_pose"] != truth["days"][0]["start_pose"]
     assert truth["days"][0]["checked"] == {}  # day 1 has no map to check: the single-day household's camera
+    # the robot's map: nothing on day 1; on day 2 the objects day 1's images read (sim.days.robot_map), not the
+    # day before's truth (an object never photographed is not known)
+    assert truth["days"][0]["remembered"] == []
+    first = truth["days"][0]
+    assert truth["days"][1]["remembered"] == sorted(set(first["photographed"]) & set(first["objects"]))
