@@ -64,9 +64,12 @@ class RevisitConfig:
     # threads matching nodes at once (0: one per core). The matches are independent and the matcher's kernels
     # release the GIL, so the result is the same for any count (it sets the stage's wall time, not its result)
     threads: int = 0
-    # the matcher's refinement by Newton's Hessian (``MatchConfig.newton``): 3.7 iterations a match instead of 15
-    # (the keyframe matches were two thirds of a household run's refinements), the household's anchors unchanged
-    newton: bool = True
+    # the matcher's refinement by Newton's Hessian (``MatchConfig.newton``: 3.7 iterations a match instead of 15)
+    # or Gauss-Newton's (False). Gauss-Newton: with Newton's here and in the loop search's refinement, aces' third
+    # session was left unjoined by the lifelong store (an alias 2.1 m along a corridor confirmed by 3 further
+    # submaps instead of 2, over the runner-up ratio; Gauss-Newton in the loop search alone: joined, but the
+    # sessions' error x1.26 the whole log's, x1.16 with both). The household's run is 1.16x 0dc094a's either way
+    newton: bool = False
 
     def __post_init__(self) -> None:
         from holoslam.errors import ConfigError
