@@ -392,7 +392,7 @@ def test_the_wide_search_s_check_counts_only_the_points_both_poses_put_on_explor
 
 def test_angular_step_is_one_cell_at_numpys_range_quantile():
     """The matcher's angular step is the rotation moving the 0.9 quantile of the ranges (numpy's linear quantile,
-    to the last bit) by one cell; two points or one, or none (1 m), and near points floored at two cells."""
+    to 1e-12: another libm's hypot may differ in its last bit) by one cell; two points or one, or none (1 m), and near points floored at two cells."""
     from holoslam.submaps.scanmatch import angular_step
 
     rng = np.random.default_rng(3)
@@ -400,9 +400,9 @@ def test_angular_step_is_one_cell_at_numpys_range_quantile():
         pts = rng.normal(0.0, 4.0, (n, 2))
         d = np.quantile(np.hypot(pts[:, 0], pts[:, 1]), 0.9) if n else 1.0
         d = max(d, 0.1)
-        assert angular_step(pts, 0.05) == math.acos(max(-1.0, 1.0 - 0.05**2 / (2.0 * d * d)))
+        assert angular_step(pts, 0.05) == pytest.approx(math.acos(max(-1.0, 1.0 - 0.05**2 / (2.0 * d * d))), rel=1e-12)
     near = np.full((10, 2), 0.01)
-    assert angular_step(near, 0.05) == math.acos(1.0 - 0.05**2 / (2.0 * 0.1 * 0.1))
+    assert angular_step(near, 0.05) == pytest.approx(math.acos(1.0 - 0.05**2 / (2.0 * 0.1 * 0.1)), rel=1e-12)
 
 
 def test_quickselect_puts_the_sorted_value_at_k():
