@@ -67,11 +67,11 @@ class LoopSearch:
         self.cfg = cfg
         # the refinement against an old map starts from the branch-and-bound pose; its window (for the score
         # surface, hence the covariance) is wide enough to show a corridor's ambiguity along its length; Gauss-Newton's
-        # refinement, as local SLAM's (``RevisitConfig.newton`` says why not Newton's)
+        # refinement, as local SLAM's
         self.refine_cfg = MatchConfig(
             linear_window=0.5, angular_window_deg=3.0, translation_delta_weight=1e3, rotation_delta_weight=1e3, occupied_weight=match_cfg.occupied_weight,
             translation_weight=match_cfg.translation_weight, rotation_weight=match_cfg.rotation_weight,
-            iterations=match_cfg.iterations, kappa=match_cfg.kappa, min_score=0.0, newton=False)
+            iterations=match_cfg.iterations, kappa=match_cfg.kappa, min_score=0.0)
         self.grids: dict[int, ProbGrid] = {}
         self.pre: OrderedDict[int, object] = OrderedDict()
         self.pairs: dict[tuple[int, int], int] = {}

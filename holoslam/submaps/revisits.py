@@ -64,12 +64,6 @@ class RevisitConfig:
     # threads matching nodes at once (0: one per core). The matches are independent and the matcher's kernels
     # release the GIL, so the result is the same for any count (it sets the stage's wall time, not its result)
     threads: int = 0
-    # the matcher's refinement by Newton's Hessian (``MatchConfig.newton``: 3.7 iterations a match instead of 15)
-    # or Gauss-Newton's (False). Gauss-Newton: with Newton's here and in the loop search's refinement, aces' third
-    # session was left unjoined by the lifelong store (an alias 2.1 m along a corridor confirmed by 3 further
-    # submaps instead of 2, over the runner-up ratio; Gauss-Newton in the loop search alone: joined, but the
-    # sessions' error x1.26 the whole log's, x1.16 with both). The household's run is 1.16x 0dc094a's either way
-    newton: bool = False
 
     def __post_init__(self) -> None:
         from holoslam.errors import ConfigError
@@ -156,7 +150,7 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
     match_cfg = match_cfg or MatchConfig()
     wTa = np.asarray(wTa, np.float64).reshape(-1, 3)
     by_index = {int(sm.index): sm for sm in submaps}
-    mcfg = replace(match_cfg, angular_window_deg=cfg.angular_window_deg, newton=cfg.newton)
+    mcfg = replace(match_cfg, angular_window_deg=cfg.angular_window_deg)
     order = sorted(by_index)
     keyframes = np.vstack([g.compose(np.broadcast_to(wTa[k], np.shape(by_index[k].aTb)),
                                       np.asarray(by_index[k].aTb))[:, :2] for k in order]) if order else np.zeros((0, 2))

@@ -7,7 +7,7 @@
    mean probability at the cells its points fall in; the best score, discounted for its distance from the
    prediction (Cartographer's real-time matcher), seeds the next step. Odometry that is metres off is the
    loop-closure search's job (``bnb``); this window covers a scan-to-scan prediction error.
-2. **Continuous refinement**: Gauss-Newton (or Newton, ``MatchConfig.newton``) with Levenberg damping over
+2. **Continuous refinement**: Gauss-Newton with Levenberg damping over
    (x, y, theta), started at the correlative seed, on sum_i (w_occ/sqrt(N) (1 - P(aTb p_i)))^2 + w_t^2 |t - t_pred|^2
    + w_r^2 (theta - theta_pred)^2, P the bicubic interpolation of the grid (Hess et al. 2016); the weak priors
    hold the prediction where the map does not constrain the pose (along a corridor).
@@ -101,14 +101,6 @@ class MatchConfig:
     # (0.1) refused fr079's right corrections at 1.4 Hz (0.0534 -> 0.0579 m at the laser, max 0.29 -> 0.66 m)
     wide_on_explored: bool = True
     wide_explored_margin: float = 0.05
-    # the refinement's Hessian: False Gauss-Newton's (Cartographer's, through Ceres), True Newton's, with the
-    # residuals' second derivatives (``_newton_fast.lsq_match_newton``): 3.7 iterations a match instead of 15, at
-    # a lower cost in 98.6 % of household matches. Local SLAM keeps Gauss-Newton: with Newton's the household's
-    # anchors came out at 5.2-5.3 mm instead of 4.7, though its matches moved 0.04 mm (median; 2.6 mm at the 99th
-    # percentile, no nearer or farther from the prediction): the run is that sensitive; the keyframe stage
-    # (``RevisitConfig.newton``) and the loop search's refinement use Newton's (the household's anchors, the real
-    # logs' errors unchanged)
-    newton: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -221,7 +213,7 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     seed = np.array([pred[0] + off[i], pred[1] + off[j], g.wrap(float(pred[2] + angles[a]))])  # wrap's scalar path
     # the priors pull toward the prediction, not the correlative seed: along a corridor the window's best cell
     # is noise, and a prior at it would let the estimate random-walk along the corridor scan after scan
-    x, y, t, _cost, _occ, _H, _it = _refiner(cfg.newton)(
+    x, y, t, _cost, _occ, _H, _it = fast.lsq_match(
         prob, origin[0], origin[1], res, px, py, seed[0], seed[1], seed[2], pred[0], pred[1], pred[2],
         cfg.occupied_weight, cfg.translation_weight, cfg.rotation_weight, cfg.iterations, outside)
     aTb = np.array([x, y, t])
@@ -229,19 +221,6 @@ def match_scan(prob: np.ndarray, origin: tuple[float, float], resolution: float,
     cov = fast.surface_covariance(S, float(pred[0]), float(pred[1]), float(pred[2]), off, angles, x, y, t,
                                   float(cfg.kappa), res, float(step))
     return Match(aTb, cov, score, bool(score >= cfg.min_score))
-
-
-def _refiner(newton: bool) -> Callable[..., Any]:
-    """The refinement's kernel: ``_grid_fast.lsq_match`` (Gauss-Newton) or ``_newton_fast.lsq_match_newton``."""
-    if not newton:
-        from holoslam.submaps import _grid_fast
-
-        return _grid_fast.lsq_match
-    from holoslam.submaps import _newton_fast
-    from holoslam.warmup import wait_for_kernels
-
-    wait_for_kernels("holoslam.submaps._newton_fast")  # a first run's pool compiling it: not twice
-    return _newton_fast.lsq_match_newton
 
 
 class WidePyramid:
