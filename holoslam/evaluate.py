@@ -17,6 +17,11 @@ need no alignment: for each relation (t1, t2, t_rel, yaw_rel) the estimated rela
 compared with it, translational error ||t(d) - t_rel|| (m), rotational error |wrap(yaw(d) - yaw_rel)| (deg),
 summarised by mean and sample (N-1) standard deviation. X(t) is the estimated pose with the nearest stamp, when
 it is within ``max_dt_ns`` of t (nothing is interpolated); otherwise the relation is unmatched and left out.
+
+A trajectory made of two parts that a run had to join (a kidnap, two sessions) can be compared with a reference
+run of the same log without trusting any ground truth: :func:`placement_difference` fits each part onto the
+reference separately and says how far the two fits disagree, i.e. how wrongly the second part is placed relative
+to the first.
 """
 
 from __future__ import annotations
@@ -43,6 +48,8 @@ __all__ = [
     "truth_at",
     "RelationErrors",
     "relation_errors",
+    "PlacementDifference",
+    "placement_difference",
     "GroundTruthErrors",
     "ground_truth_errors",
     "DEFAULT_MAX_DT_NS",
@@ -370,6 +377,86 @@ def relation_errors(
         rotation_std_deg=rs,
         rotation_max_deg=rx,
         max_dt_ns=int(max_dt_ns),
+    )
+
+
+# ------------------------------------------------------------------------ placement of parts of a trajectory
+
+
+@dataclass(frozen=True, eq=False)
+class PlacementDifference:
+    """How differently two parts of a trajectory sit in a reference trajectory (:func:`placement_difference`).
+
+    ``T_first`` / ``T_second``: the SE(2) transforms (x, y, theta) mapping the trajectory's world to the
+    reference's, each fit (:func:`align_se2`, positions) on one part's poses against the reference's poses at
+    the same stamps; ``rms_first_m`` / ``rms_second_m`` the position residuals of those fits over
+    ``n_first`` / ``n_second`` pose pairs. ``translation_m``: |T_second(c) - T_first(c)| at the centroid c of the
+    second part's positions, which is the mean displacement of the second part between its placement by the
+    first part's fit and by its own (the displacement is affine in the position); ``rotation_deg``:
+    |wrap(theta_second - theta_first)|. Both are independent of the trajectory's and the reference's world frames
+    (the translation of ``between(T_first, T_second)`` is not: it carries the rotation difference times the
+    distance from the trajectory's origin)."""
+
+    T_first: np.ndarray
+    T_second: np.ndarray
+    translation_m: float
+    rotation_deg: float
+    n_first: int
+    n_second: int
+    rms_first_m: float
+    rms_second_m: float
+
+
+def placement_difference(
+    stamps_ns: np.ndarray,
+    wTb: np.ndarray,
+    ref_stamps_ns: np.ndarray,
+    ref_wTb: np.ndarray,
+    first: np.ndarray,
+    second: np.ndarray,
+    max_dt_ns: int = 0,
+) -> PlacementDifference:
+    """The placement of the ``second`` part of a trajectory relative to its ``first`` part, against a reference
+    trajectory (see :class:`PlacementDifference`): zero when the two parts are joined exactly as the reference
+    joins them, whatever either trajectory's world frame.
+
+    ``first`` / ``second``: boolean masks (N,) over the trajectory's poses ``wTb`` (N, 3) at ``stamps_ns`` (N,);
+    poses in neither part are ignored. A pose is paired with the reference pose of the nearest stamp when it is
+    within ``max_dt_ns`` (default 0: the same stamp); unpaired poses are left out. Raises ValueError when a part
+    has no paired pose."""
+    t = np.asarray(stamps_ns, dtype=np.int64).reshape(-1)
+    P = np.asarray(wTb, dtype=np.float64).reshape(-1, 3)
+    if t.shape[0] != P.shape[0]:
+        raise ValueError(f"placement_difference: {t.shape[0]} stamps for {P.shape[0]} poses")
+    if max_dt_ns < 0:
+        raise ValueError(f"placement_difference: max_dt_ns must be >= 0, got {max_dt_ns}")
+    rt, R = _sorted_unique(ref_stamps_ns, ref_wTb, "placement_difference (reference)")
+    idx, dt = _nearest(rt, t)
+    paired = dt <= max_dt_ns
+    fits = []
+    for name, part in (("first", first), ("second", second)):
+        m = np.asarray(part, dtype=bool).reshape(-1)
+        if m.shape[0] != t.shape[0]:
+            raise ValueError(f"placement_difference: the {name} mask has {m.shape[0]} entries for {t.shape[0]} poses")
+        m = m & paired
+        if not m.any():
+            raise ValueError(f"placement_difference: no pose of the {name} part has a reference pose within "
+                             f"{max_dt_ns / 1e9:g} s")
+        T = align_se2(P[m, :2], R[idx[m], :2])
+        r = g.transform_points(T, P[m, :2]) - R[idx[m], :2]
+        fits.append((T, int(m.sum()), float(np.sqrt(np.mean(np.sum(r**2, axis=1)))), P[m, :2]))
+    (T1, n1, rms1, _), (T2, n2, rms2, p2) = fits
+    c = p2.mean(axis=0, keepdims=True)
+    d = g.transform_points(T2, c)[0] - g.transform_points(T1, c)[0]
+    return PlacementDifference(
+        T_first=T1,
+        T_second=T2,
+        translation_m=float(np.hypot(d[0], d[1])),
+        rotation_deg=float(np.degrees(abs(g.wrap(T2[2] - T1[2])))),
+        n_first=n1,
+        n_second=n2,
+        rms_first_m=rms1,
+        rms_second_m=rms2,
     )
 
 
