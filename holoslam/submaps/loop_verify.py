@@ -25,7 +25,7 @@ verdict: the consistency of several closures (``loop_consistency``) still has to
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -46,9 +46,18 @@ class VerifyConfig:
     # (~10) right matches showed 0.82-0.99 (doors, people, the estimate's drift), at 0.3 0.96-1.00, aliases alike
     free_p: float = 0.3
     tolerance_m: float = 0.1  # m: a wall within this of a wall agrees (two 5 cm cells: local drift, cell size)
-    # the fraction of overlapping walls that must agree: right matches 0.96-1.00, aliases 0.33-0.81 (docstring)
+    # the fraction of overlapping walls that must agree: right matches 0.96-1.00, aliases 0.33-0.81 (docstring).
+    # Measured on full-rate lasers; the loop search scales it as it scales its scores (``LoopConfig.score_reference``,
+    # ``scaled``): a sparse laser's walls are less certain where the two sides meet. On aces at 1.4 Hz with half
+    # the beams, kidnapped, the right global matches agreed 0.56-0.85 at their poses (0.63-0.95 at the full run's),
+    # all under 0.9, and the parts were never joined (48 m off); aliases 0.29-0.80: the check alone cannot tell
+    # them apart there, the consistency test's clique of closures from places metres apart does
     min_agreement: float = 0.9
     min_cells: int = 30  # cells of overlap below which the check gives no verdict (a match at a map's edge)
+
+    def scaled(self, scale: float) -> VerifyConfig:
+        """The check with ``min_agreement`` times ``scale`` (the loop search's score scale, at most 1)."""
+        return replace(self, min_agreement=self.min_agreement * min(1.0, scale))
 
 
 @dataclass(frozen=True, slots=True)

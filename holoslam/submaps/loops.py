@@ -293,9 +293,10 @@ class LoopSearch:
         of ``loop_consistency``), counted under ``kind``."""
         c = self.cfg
         if c.verify.enabled:
+            verify = c.verify.scaled(self.scale)  # a sparse laser's walls agree less (``VerifyConfig``)
             agree = map_agreement(self.grids, est_wTa, self._parts(len(est_wTa)), cand.old, cand.new, cand.mTn,
-                                  c.verify)
-            if agree.verdict(c.verify) is False:
+                                  verify)
+            if agree.verdict(verify) is False:
                 self._count(f"{kind}: rejected by the map check")
                 return []
         accepted = self.consistency.offer(cand, est_wTa, travel)

@@ -2,6 +2,7 @@
 the other lacks nearby; the alias that lays one room onto the other is refused, the right match is not."""
 
 import numpy as np
+import pytest
 
 from holoslam.submaps.loop_verify import Agreement, VerifyConfig, map_agreement
 from holoslam.submaps.probgrid import ProbGrid
@@ -64,3 +65,12 @@ def test_no_overlap_gives_no_verdict_and_parts_are_kept_apart():
     part = np.array([0, 0, 0, 0, 0, 1])
     grids[4] = _grid(world, 20, 35)
     assert map_agreement(grids, est, part, 0, 5, np.array([-20.0, 0.0, 0.0]), cfg) == Agreement(0, 0)
+
+
+def test_the_check_is_scaled_like_the_loop_search_s_scores_and_never_raised():
+    """A sparse laser's scale (below 1) lowers the agreement the check asks for in proportion; a scale above 1
+    (a laser fuller than the reference) leaves it as measured on full-rate logs."""
+    cfg = VerifyConfig()
+    assert cfg.scaled(0.8).min_agreement == pytest.approx(0.72)
+    assert cfg.scaled(1.3).min_agreement == cfg.min_agreement
+    assert Agreement(75, 25).verdict(cfg) is False and Agreement(75, 25).verdict(cfg.scaled(0.8)) is True
