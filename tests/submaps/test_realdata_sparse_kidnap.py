@@ -1,8 +1,10 @@
-"""The held-out hospital log's case on real scans: the whole Freiburg aces log (../shared/realdata, not in the
-repository) at 1.4 Hz with every second beam dropped (its laser), kidnapped in its middle (odometry 30 m and
-90 degrees off, the 30 s of scans after the jump removed). Only global matches of sparse scans can join the
-parts; the map check of each, measured on full-rate lasers, refused every right one until it was scaled like the
-loop search's scores (``VerifyConfig.scaled``): the parts then lay 48 m apart."""
+"""The held-out hospital log's case on real scans: a whole Freiburg log (../shared/realdata, not in the
+repository) at 1.4 Hz with every second beam dropped (its laser), kidnapped (odometry 30 m and 90 degrees off,
+the 30 s of scans after the jump removed). Only matches of sparse scans that agree with one another can join the
+parts. aces kidnapped in its middle: the map check of each global match, measured on full-rate lasers, refused
+every right one until it was scaled like the loop search's scores (``VerifyConfig.scaled``; the parts lay 48 m
+apart). intel kidnapped at two thirds: two windowed matches across the break, aliases 14 m and 94-101 deg off,
+were accepted on their own until such matches were offered for agreement like global ones (20 m apart)."""
 
 from __future__ import annotations
 
@@ -20,8 +22,8 @@ pytestmark = [
 SPARSE_HZ, KEEP_EVERY = 1.4, 2  # the hospital log's laser (bench_realdata's sparse variant)
 
 
-@pytest.fixture(scope="module")
-def aces_sparse_kidnapped():
+@pytest.fixture(scope="module", params=[("aces", 0.5), ("intel", 2 / 3)], ids=["aces-middle", "intel-two-thirds"])
+def sparse_kidnapped(request):
     from holoslam import derive
     from holoslam import geometry as g
     from holoslam.config import RunConfig
@@ -31,13 +33,14 @@ def aces_sparse_kidnapped():
     from holoslam.pipeline import run_data
     from holoslam.submaps.frontend import base_to_laser
 
-    log, ingest = read_log(REALDATA / "aces.mcap", require=["odometry", "scan"])
+    name, where = request.param
+    log, ingest = read_log(REALDATA / f"{name}.mcap", require=["odometry", "scan"])
     sparse = derive.drop_beams(derive.decimate_scans(log, SPARSE_HZ), KEEP_EVERY)
-    at = int(sparse.scans[len(sparse.scans) // 2].stamp_ns)
+    at = int(sparse.scans[int(len(sparse.scans) * where)].stamp_ns)
     gap_end = at + 30 * 10**9
     kidnapped = derive.kidnap(sparse, at, np.array([30.0, 0.0, math.pi / 2]), 30.0)
     res = run_data(kidnapped, ingest, RunConfig())
-    rel = read_relations(REALDATA / "aces.relations")
+    rel = read_relations(REALDATA / f"{name}.relations")
     scans = np.array([s.stamp_ns for s in kidnapped.scans], np.int64)
 
     def near(t):  # a kept scan within 0.1 s of the stamp, outside the gap
@@ -49,17 +52,22 @@ def aces_sparse_kidnapped():
     rel = Relations(rel.t1_ns[keep], rel.t2_ns[keep], rel.T[keep])
     bTl = base_to_laser(kidnapped, kidnapped.scans[0].frame_id)
     P = g.compose(res.wTb, np.broadcast_to(bTl, res.wTb.shape))
-    return res, relation_errors(res.stamps_ns, P, rel, 10**8), (rel.t1_ns < at) != (rel.t2_ns < at)
+    return name, res, relation_errors(res.stamps_ns, P, rel, 10**8), (rel.t1_ns < at) != (rel.t2_ns < at)
 
 
-def test_a_sparse_kidnapped_log_is_joined_by_global_matches(aces_sparse_kidnapped):
-    """Joined: the relations across the kidnap (2 of the 101 at kept scans) within 0.2 m (measured 0.076 m; 48 m
-    before), the log's relations as well as the sparse log's without the kidnap (0.0426 m; measured 0.0369)."""
-    res, e, across = aces_sparse_kidnapped
+# measured: across the kidnap (relations at kept scans), largest error; the whole log's relation error
+MEASURED = {"aces": (2, 0.076, 0.0369), "intel": (93, 0.293, 0.0310)}
+LIMITS = {"aces": (0.15, 0.05), "intel": (0.6, 0.045)}  # across m, mean m (the sparse logs alone: 0.0426, 0.0311)
+
+
+def test_a_sparse_kidnapped_log_is_joined_by_matches_that_agree(sparse_kidnapped):
+    """Joined (48 m / 20 m apart before): every relation across the kidnap within the limit, the log's relations
+    near the sparse log's without the kidnap."""
+    name, res, e, across = sparse_kidnapped
     counts = res.frontend.loop_counts
-    assert counts.get("global: accepted (consistent)", 0) + counts.get("global: accepted later (consistent)", 0) >= 3
+    assert counts.get("global: accepted (consistent)", 0) + counts.get("global: accepted later (consistent)", 0) >= 1
     matched = across & e.matched
-    print(e.to_text(), "across", int(matched.sum()), np.nanmax(e.translation_m[matched]))
-    assert matched.sum() >= 2  # of the 101 relations at kept scans, 2 span the kidnap
-    assert np.nanmax(e.translation_m[matched]) < 0.2
-    assert e.translation_mean_m < 0.05
+    print(name, e.to_text(), "across", int(matched.sum()), np.nanmax(e.translation_m[matched]))
+    assert matched.sum() >= MEASURED[name][0]
+    assert np.nanmax(e.translation_m[matched]) < LIMITS[name][0]
+    assert e.translation_mean_m < LIMITS[name][1]
