@@ -34,7 +34,8 @@ The written ``trajectory.tum`` is scored with ``holoslam.evaluate.relation_error
 program: matched counts must be equal and the translational and rotational means agree to 1e-6 (the scorer's
 per-relation CSV has 6 decimals); a check line per log says so, and the script exits 1 when a check fails.
 
-The kidnap row needs the full run of the same log (the same cut): asking for ``kidnap`` runs ``full`` too,
+The kidnap row needs the full run of the same log (the same cut; ``sparse_kidnap`` the ``sparse`` run, below read
+"sparse" for "full"): asking for ``kidnap`` runs ``full`` too,
 before it, and prints its row (it is also the figure the kidnap's relation error is held against). A stored full
 run is not reused: it would have to be the same code and configuration, which nothing here could check. What the
 full run gives the kidnap row (``--variants kidnap`` alone costs the full run's minute as well):
@@ -247,7 +248,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
         cross = ((rel.t1_ns < at) != (rel.t2_ns < at)) & e_laser.matched
         across = float(np.max(e_laser.translation_m[cross])) if cross.any() else math.nan
         if full is None:
-            raise SystemExit(f"{name} kidnap: the full run of the log is needed (module docstring)")
+            raise SystemExit(f"{name} {variant}: the {reference(variant)} run of the log is needed (module docstring)")
         f_stamps, f_wTb, f_laser = full["_trajectory"]
         scan_t = np.load(run_dir.parent / "scan_stamps.npy")
         sel = np.isin(stamps, scan_t)  # the poses at the kidnap run's scans (between them: the odometry's)
@@ -255,7 +256,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
         join = placement_difference(stamps[sel], wTb[sel], f_stamps, f_wTb, stamps[sel] < at, stamps[sel] >= gap_end)
         e_full = relation_errors(f_stamps, f_laser, rel, max_dt)
         vs_full = against_full(rel, cross, e_laser.translation_m, e_full.translation_m, ACROSS_LIMIT_M)
-        check += "\n" + join_text(join, vs_full)
+        check += "\n" + join_text(join, vs_full, reference(variant))
     row = {
         "log": name + ("" if variant == "full" else f" {variant}") + ("" if duration is None else f" ({duration:g} s)"),
         "laser_rot": e_laser.rotation_mean_deg,
@@ -276,9 +277,14 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
         "rss_mb": rss_mb,
         "carto": CARTOGRAPHER[name],
     }
-    if variant == "full":  # what a kidnap row of the same log is measured against
+    if variant in ("full", "sparse"):  # what a kidnap row of the same log is measured against
         row["_trajectory"] = (stamps, wTb, _laser_poses(log, wTb))
     return row, ok, check
+
+
+def reference(variant: str) -> str:
+    """The run a kidnapped variant's join is measured against: the same log without the kidnap."""
+    return "sparse" if variant.startswith("sparse") else "full"
 
 
 def against_full(rel, cross: np.ndarray, kidnap_m: np.ndarray, full_m: np.ndarray, limit_m: float) -> dict:
@@ -300,17 +306,18 @@ def against_full(rel, cross: np.ndarray, kidnap_m: np.ndarray, full_m: np.ndarra
     }
 
 
-def join_text(join, vs: dict) -> str:
-    """The kidnap row's check lines: each part's fit onto the full run, and the across relations against it."""
+def join_text(join, vs: dict, ref: str = "full") -> str:
+    """The kidnap row's check lines: each part's fit onto the ``ref`` run (the same log without the kidnap), and the
+    across relations against it."""
     lines = [
-        f"  join against the full run: part before the kidnap {join.n_first} scan poses (fit rms "
+        f"  join against the {ref} run: part before the kidnap {join.n_first} scan poses (fit rms "
         f"{join.rms_first_m:.4f} m), after the gap {join.n_second} (rms {join.rms_second_m:.4f} m); the second "
         f"part's placement differs by {join.translation_m:.4f} m / {join.rotation_deg:.4f} deg",
-        f"  across relations {vs['n_across']} ({vs['n_compared']} with a full-run pose): kidnap - full error mean "
+        f"  across relations {vs['n_across']} ({vs['n_compared']} with a {ref}-run pose): kidnap - {ref} error mean "
         f"{vs['diff_mean_m']:+.4f} m, max {vs['diff_max_m']:+.4f} m; over {ACROSS_LIMIT_M:g} m: {vs['n_over']}, "
-        f"of which the full run also over {ACROSS_LIMIT_M:g} m: {vs['n_over_full_too']}",
+        f"of which the {ref} run also over {ACROSS_LIMIT_M:g} m: {vs['n_over_full_too']}",
     ]
-    lines += [f"    {t1:.3f} -> {t2:.3f}: kidnap {k:.4f} m, full {f:.4f} m ({k - f:+.4f})" for t1, t2, k, f in vs["over"]]
+    lines += [f"    {t1:.3f} -> {t2:.3f}: kidnap {k:.4f} m, {ref} {f:.4f} m ({k - f:+.4f})" for t1, t2, k, f in vs["over"]]
     return "\n".join(lines)
 
 
@@ -377,16 +384,17 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench_realdata_") as tmp:
         out_root = a.out or Path(tmp)
         rows, all_ok = [], True
-        kidnaps = any("kidnap" in v for v in a.variants)
-        variants = [v for v in VARIANTS if v in a.variants or (v == "full" and kidnaps)]
-        if kidnaps and "full" not in a.variants:
-            print("kidnap: its row is measured against the full run of the same log, which runs first (docstring)")
+        needed = {reference(v) for v in a.variants if "kidnap" in v}
+        variants = [v for v in VARIANTS if v in a.variants or v in needed]
+        if needed - set(a.variants):
+            print(f"kidnap: its row is measured against the {' and '.join(sorted(needed))} run of the same log, "
+                  "which runs first (docstring)")
         for name in a.logs:
-            full = None
+            refs: dict[str, dict] = {}
             for variant in variants:
-                row, ok, check = bench_log(name, a.data, out_root, a.duration, variant, full)
-                if variant == "full":
-                    full = row
+                row, ok, check = bench_log(name, a.data, out_root, a.duration, variant, refs.get(reference(variant)))
+                if variant in ("full", "sparse"):
+                    refs[variant] = row
                 print(f"check {row['log']}: {check}", flush=True)
                 rows.append(row)
                 all_ok &= ok
