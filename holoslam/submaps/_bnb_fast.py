@@ -171,35 +171,6 @@ def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: 
 
 
 @nb.njit(**JIT)
-def _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best, st, sp, cx, cy, cs):  # noqa: E501 # pragma: no cover
-    """Score the (up to four) children of candidate (a, x, y) at level d - 1 and push those above ``best``
-    onto the stack st (a, x, y, level, score arrays) from position sp, best child last: (new sp, children
-    scored). cx, cy, cs: scratch arrays of 4."""
-    h = 1 << (d - 1)
-    x_hi, y_hi = box[1], box[3]
-    ns = scored = 0
-    for dx in range(2):
-        if x + dx * h > x_hi:
-            break
-        for dy in range(2):
-            if y + dy * h > y_hi:
-                break
-            s = _score(prob, levels, starts, d - 1, rows, cols, bb, a, x + dx * h, y + dy * h, quant)
-            scored += 1
-            if s > best:
-                k = ns  # insertion sort, ascending: the best child ends on top of the stack
-                while k > 0 and cs[k - 1] > s:
-                    cx[k], cy[k], cs[k] = cx[k - 1], cy[k - 1], cs[k - 1]
-                    k -= 1
-                cx[k], cy[k], cs[k] = x + dx * h, y + dy * h, s
-                ns += 1
-    for k in range(ns):
-        st[0][sp], st[1][sp], st[2][sp], st[3][sp], st[4][sp] = a, cx[k], cy[k], d - 1, cs[k]
-        sp += 1
-    return sp, scored
-
-
-@nb.njit(**JIT)
 def _boxes(rows, cols):  # pragma: no cover - compiled
     """Per angle a: (min row, max row, min col, max col) of the points' cells."""
     bb = np.empty((rows.shape[0], 4), dtype=np.int64)
@@ -246,7 +217,7 @@ def _defer(buf, n, a, x, y, d, bound):  # pragma: no cover - compiled
     return buf, n + 1
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _workspace(box, d_top, rows, cols, defer):  # pragma: no cover - compiled
     """:func:`descend`'s arrays: the top level's node counts (nx, ny), the scan's cell boxes, the depth-first
     stack (angle, x, y, level, bound), the children scratch (cx, cy, cs) and the set-aside buffer."""
@@ -259,13 +230,13 @@ def _workspace(box, d_top, rows, cols, defer):  # pragma: no cover - compiled
             np.empty((64 if defer >= 0 else 0, 5), dtype=np.float64))
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _seed(seeds, j):  # pragma: no cover - compiled
     """Row j of the seeds (angle, x, y, level, bound) as a stack entry."""
     return int(seeds[j, 0]), int(seeds[j, 1]), int(seeds[j, 2]), int(seeds[j, 3]), seeds[j, 4]
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _top_node(k, nx, ny, x_lo, y_lo, d_top, top):  # pragma: no cover - compiled
     """Top-level node k (angle-major, then x, then y) as a stack entry (angle, x, y, level, bound)."""
     w = 1 << d_top
@@ -333,11 +304,8 @@ def descend(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, ord
                 if first:
                     return best, ba, bx, by, k_break, buf[:nd]
                 continue
-            if defer < 0:
-                sp, _ = _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best, st, sp,
-                                       cx, cy, cs)
-                continue
-            # _push_children, setting aside the children it drops
+            # the (up to four) children at level d - 1: those above the best pushed, best last (on top); with
+            # defer, those dropped within defer of the best set aside
             h = 1 << (d - 1)
             ns = 0
             for dx in range(2):
@@ -348,13 +316,13 @@ def descend(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, ord
                         break
                     sc = _score(prob, levels, starts, d - 1, rows, cols, bb, a, x + dx * h, y + dy * h, quant)
                     if sc > best:
-                        q = ns
+                        q = ns  # insertion sort, ascending
                         while q > 0 and cs[q - 1] > sc:
                             cx[q], cy[q], cs[q] = cx[q - 1], cy[q - 1], cs[q - 1]
                             q -= 1
                         cx[q], cy[q], cs[q] = x + dx * h, y + dy * h, sc
                         ns += 1
-                    elif sc > best - defer:
+                    elif defer >= 0 and sc > best - defer:
                         buf, nd = _defer(buf, nd, a, x + dx * h, y + dy * h, d - 1, sc)
             for q in range(ns):
                 st[0][sp], st[1][sp], st[2][sp], st[3][sp], st[4][sp] = a, cx[q], cy[q], d - 1, cs[q]

@@ -199,7 +199,7 @@ def _corners_and_crossings(S, Ln, corner_gap, gap_per_m, sin_min, extend):  # pr
     return corners[:nc], cross[:keep]
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one caller in a run (scans_features): not compiled a second time on its own
 def scan_features(px, py, gap, gap_per_m, split_tol, min_points, min_length, cos_merge, corner_gap, sin_min,
                   extend, point_max_extent, point_min_points):  # pragma: no cover - compiled
     """Features of one scan's ordered points (px, py): segments (S, 4), lines (S, 3), corners (C, 2),
