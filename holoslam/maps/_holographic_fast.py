@@ -90,7 +90,7 @@ def _push(hd, hv, n, d, v):
     return n + 1
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _pop(hd, hv, n):
     d, v = hd[0], hv[0]
     n -= 1

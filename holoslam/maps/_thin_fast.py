@@ -28,7 +28,7 @@ import numpy as np
 from holoslam._jit import JIT
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _offsets(w2):
     # p2 .. p9: north, north-east, east, south-east, south, south-west, west, north-west
     off = np.empty(8, np.int64)
@@ -43,7 +43,7 @@ def _offsets(w2):
     return off
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _codes(a, off):
     """Neighbour code of every set cell (bit k = p(k+2) set); unset cells get 0xFF (no rule marks it). The
     grid's first and last rows and columns must be 0 (padding)."""
