@@ -3,9 +3,7 @@
 Every kernel file (``*_fast.py`` and the modules of ``holoslam.planning._fast``) imports this module and
 decorates its kernels with ``@nb.njit(**JIT)``: compiled once per machine and loaded from numba's on-disk
 cache (``cache=True``, in the ``__pycache__`` folder next to the file) by later processes, and without the GIL
-(``nogil=True``: a kernel called from several threads runs in parallel), with numpy's error model
-(``error_model="numpy"``: a division by zero gives inf or nan instead of raising ZeroDivisionError; the kernels
-guard their divisors, and the checks were ~12 % of the front end's compile). ``JIT_FASTMATH`` adds
+(``nogil=True``: a kernel called from several threads runs in parallel). ``JIT_FASTMATH`` adds
 ``fastmath=True`` for a kernel whose result does not change under reassociation (a max over finite values,
 which then vectorises); per-kernel options (``inline="always"``) are added at the decorator. A kernel file
 imports this module before it defines a kernel, and the kernels (or kernel modules) of other files it calls
@@ -33,7 +31,7 @@ import os
 import re
 from functools import cache
 from types import ModuleType
-from typing import Literal, TypedDict
+from typing import TypedDict
 
 from numba.core import caching
 from numba.core.dispatcher import Dispatcher
@@ -48,10 +46,9 @@ class JitOptions(TypedDict, total=False):
     cache: bool
     nogil: bool
     fastmath: bool
-    error_model: Literal["python", "numpy"]
 
 
-JIT: JitOptions = {"cache": True, "nogil": True, "error_model": "numpy"}
+JIT: JitOptions = {"cache": True, "nogil": True}
 JIT_FASTMATH: JitOptions = {**JIT, "fastmath": True}
 
 _PARENT, _, _NAME = __name__.rpartition(".")
