@@ -9,6 +9,11 @@ which then vectorises); per-kernel options (``inline="always"``) are added at th
 imports this module before it defines a kernel, and the kernels (or kernel modules) of other files it calls
 at its top.
 
+Compile time (a first run compiles every kernel it calls). A kernel called from a kernel is compiled once more
+for every literal argument type the caller's typing sees: a constant (``f(x, 0)``, ``f(x, True)``) or a count
+started at a constant and passed on; such arguments are written ``np.int64(0)``, ``np.bool_(True)``. A helper
+with one call site is ``inline="always"`` when that compiles faster (measured: not for large ones).
+
 Cache freshness. Numba keeps a cached kernel while its own source file is unchanged, but a kernel that calls
 kernels of *other* files has them compiled into it, and numba does not look at those files (numba issues
 #1833, #9483): after an edit of a called file the caller would silently run the old code. Importing this

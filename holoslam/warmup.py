@@ -115,22 +115,9 @@ def load_signatures(path: str | Path = SIGNATURES_FILE) -> list[KernelSignature]
     return out
 
 
-def _kernel_module(name: str):
-    """Import a kernel module; a module that builds its kernels on first use (``_kernels()``) builds them."""
-    mod = importlib.import_module(name)
-    build = getattr(mod, "_kernels", None)
-    if callable(build):
-        build()
-    return mod
-
-
 def _dispatcher(sig: KernelSignature):
-    """The kernel of ``sig``: a module attribute, or ``NAME[i]``, item i of a module's tuple of kernels (a
-    module that builds its kernels on first use keeps them so: ``holoslam.submaps.bnb_window._KERNELS``)."""
-    mod: Any = _kernel_module(sig.module)
-    name, _, index = sig.function.partition("[")
-    obj = getattr(mod, name)
-    return obj[int(index.rstrip("]"))] if index else obj
+    """The kernel of ``sig``: an attribute of its module."""
+    return getattr(importlib.import_module(sig.module), sig.function)
 
 
 def _kernel_dispatchers(module_names: Iterable[str]) -> list[tuple[str, str, Any]]:
@@ -147,8 +134,6 @@ def _kernel_dispatchers(module_names: Iterable[str]) -> list[tuple[str, str, Any
         for attr, v in sorted(vars(mod).items()):
             if own(v, name):
                 out.append((name, attr, v))
-            elif isinstance(v, tuple):  # kernels built on first use, kept in a tuple (``_dispatcher``)
-                out += [(name, f"{attr}[{i}]", x) for i, x in enumerate(v) if own(x, name)]
     return out
 
 

@@ -37,7 +37,7 @@ def _find(parent, x):
 @nb.njit(**JIT)
 def _union(parent, area, mx, a, b):
     ra = _find(parent, a)
-    rb = _find(parent, b)
+    rb = _find(parent, np.int64(b))  # b is an int32 label: one _find to compile, not one per integer type
     if ra == rb:
         return
     if ra > rb:
@@ -90,7 +90,7 @@ def _push(hd, hv, n, d, v):
     return n + 1
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _pop(hd, hv, n):
     d, v = hd[0], hv[0]
     n -= 1
@@ -130,7 +130,8 @@ def dijkstra_to(indptr, indices, data, source, targets):
     hd = np.empty(cap)
     hv = np.empty(cap, np.int64)
     dist[source] = 0.0
-    m = _push(hd, hv, 0, 0.0, source)
+    # np.int64 arguments: a literal 0 or an int32 node would compile _push once more for that type
+    m = _push(hd, hv, np.int64(0), 0.0, source)
     while m > 0 and left > 0:
         d, u, m = _pop(hd, hv, m)
         if done[u]:
@@ -144,7 +145,7 @@ def dijkstra_to(indptr, indices, data, source, targets):
             if nd < dist[v]:
                 dist[v] = nd
                 pred[v] = u
-                m = _push(hd, hv, m, nd, v)
+                m = _push(hd, hv, m, nd, np.int64(v))
     return dist, pred
 
 

@@ -28,7 +28,7 @@ import numpy as np
 from holoslam._jit import JIT
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _offsets(w2):
     # p2 .. p9: north, north-east, east, south-east, south, south-west, west, north-west
     off = np.empty(8, np.int64)
@@ -43,7 +43,7 @@ def _offsets(w2):
     return off
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _codes(a, off):
     """Neighbour code of every set cell (bit k = p(k+2) set); unset cells get 0xFF (no rule marks it). The
     grid's first and last rows and columns must be 0 (padding)."""
@@ -89,7 +89,7 @@ def _delete_marked(a, code, off, shift, marked, nm, guard, removable, touched, t
     class then comes earlier (a neighbour in row r + 1 of class c - 1 at the same step, before) and every
     neighbour of a higher class later, which is the class-by-class order; the four cursors stay within four
     rows of each other, so the work stays in cache."""
-    nt = 0
+    nt = np.int64(0)  # not the literal 0: numba would compile _delete once more for its type
     if not guard:
         for j in range(nm):
             nt = _delete(a, code, off, marked[j], touched, nt, tst, stamp)
@@ -179,8 +179,10 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
     code = _codes(a, off)
     tst = np.zeros(n, np.uint8)  # stamp of the last subiteration that appended the cell to touched
     cst = np.zeros(n, np.uint8)  # stamp of the last subiteration that looked at the cell as a candidate
-    stamp = 0
-    bnd = _collect(a, code, True)
+    # counts start as np.int64 and flags as np.bool_, not literals: numba compiles a kernel called with a
+    # literal argument once more for each literal type (four _delete_marked, two _collect, ...)
+    stamp = np.int64(0)
+    bnd = _collect(a, code, np.bool_(True))
     prev2 = bnd  # touched at k - 2 (first two subiterations: the boundary)
     n2 = bnd.shape[0]
     prev1 = bnd  # touched at k - 1
@@ -195,7 +197,7 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
         else:
             cand = _by_row(prev1, n1, prev2, n2, shift, nrows)
         marked = np.empty(cand.shape[0], np.int32)
-        nm = 0
+        nm = np.int64(0)
         for j in range(cand.shape[0]):
             i = cand[j]
             if cst[i] != stamp:
@@ -211,15 +213,15 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
         k += 1
     rounds = 0
     if one_cell:
-        cand = _collect(a, code, False)  # first round: every set cell is a candidate
+        cand = _collect(a, code, np.bool_(False))  # first round: every set cell is a candidate
         nc = cand.shape[0]
         while nc:
             rounds += 1
             stamp = _next_stamp(stamp, tst, cst)
             if rounds > 1:
-                cand = _by_row(cand, nc, cand, 0, shift, nrows)
+                cand = _by_row(cand, nc, cand, np.int64(0), shift, nrows)
             marked = np.empty(nc, np.int32)
-            nm = 0
+            nm = np.int64(0)
             for j in range(nc):
                 i = cand[j]
                 if cst[i] != stamp:
@@ -228,7 +230,8 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
                         marked[nm] = i
                         nm += 1
             touched = np.empty(min(8 * nm, n), np.int32)
-            ndel, nt = _delete_marked(a, code, off, shift, marked, nm, True, removable, touched, tst, stamp)
+            ndel, nt = _delete_marked(a, code, off, shift, marked, nm, np.bool_(True), removable, touched, tst,
+                                      stamp)
             if ndel == 0:
                 break
             cand, nc = touched, nt

@@ -1,4 +1,6 @@
-"""Compiled kernels (numba, ``cache=True``) of the branch-and-bound scan matcher, :mod:`holoslam.submaps.bnb`.
+"""Compiled kernels (numba, ``cache=True``) of the branch-and-bound scan matcher, :mod:`holoslam.submaps.bnb`,
+and of the loop search's windows, :mod:`holoslam.submaps.bnb_window`: both search by :func:`top_bounds` then
+:func:`descend` (one pair of kernels to compile, not a second copy of the descent for ``bnb.search``).
 
 Imported lazily by :mod:`holoslam.submaps.bnb` (numba import ~0.5 s; the first call of each kernel compiles it,
 a few seconds once per machine, then loads it from numba's on-disk cache next to this file).
@@ -106,7 +108,8 @@ def pool_levels(q0, depth, q_out):  # pragma: no cover - compiled
         return levels, starts
     big = (1 << (depth - 1)) - 1
     tmp = np.empty((h + big) * (w + big), dtype=np.uint8)
-    _pool(q0.ravel(), h, w, 1, q_out, tmp, levels[starts[1]:starts[2]])
+    # half as np.int64, not the literal 1: numba would compile _pool a second time for that literal type
+    _pool(q0.ravel(), h, w, np.int64(1), q_out, tmp, levels[starts[1]:starts[2]])
     for d in range(2, depth):
         half = 1 << (d - 1)
         hs, ws = h + half - 1, w + half - 1
@@ -168,35 +171,6 @@ def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: 
 
 
 @nb.njit(**JIT)
-def _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best, st, sp, cx, cy, cs):  # noqa: E501 # pragma: no cover
-    """Score the (up to four) children of candidate (a, x, y) at level d - 1 and push those above ``best``
-    onto the stack st (a, x, y, level, score arrays) from position sp, best child last: (new sp, children
-    scored). cx, cy, cs: scratch arrays of 4."""
-    h = 1 << (d - 1)
-    x_hi, y_hi = box[1], box[3]
-    ns = scored = 0
-    for dx in range(2):
-        if x + dx * h > x_hi:
-            break
-        for dy in range(2):
-            if y + dy * h > y_hi:
-                break
-            s = _score(prob, levels, starts, d - 1, rows, cols, bb, a, x + dx * h, y + dy * h, quant)
-            scored += 1
-            if s > best:
-                k = ns  # insertion sort, ascending: the best child ends on top of the stack
-                while k > 0 and cs[k - 1] > s:
-                    cx[k], cy[k], cs[k] = cx[k - 1], cy[k - 1], cs[k - 1]
-                    k -= 1
-                cx[k], cy[k], cs[k] = x + dx * h, y + dy * h, s
-                ns += 1
-    for k in range(ns):
-        st[0][sp], st[1][sp], st[2][sp], st[3][sp], st[4][sp] = a, cx[k], cy[k], d - 1, cs[k]
-        sp += 1
-    return sp, scored
-
-
-@nb.njit(**JIT)
 def _boxes(rows, cols):  # pragma: no cover - compiled
     """Per angle a: (min row, max row, min col, max col) of the points' cells."""
     bb = np.empty((rows.shape[0], 4), dtype=np.int64)
@@ -212,10 +186,9 @@ def _boxes(rows, cols):  # pragma: no cover - compiled
 
 
 @nb.njit(**JIT)
-def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0):  # pragma: no cover
-    """Depth-first branch and bound (Hess et al. 2016, Alg. 3) over angles 0..A-1 (rows/cols (A, N): the
-    points' cells at each angle) and integer offsets box = (x_lo, x_hi, y_lo, y_hi), from level d_top down.
-    Returns (best sum, a, x, y, nodes scored); a = -1 when nothing beats best0 (strictly)."""
+def top_bounds(prob, levels, starts, rows, cols, box, d_top, quant):  # pragma: no cover - compiled
+    """The bounds of the top level's nodes (angle-major, then x, then y) and their order, best first (ties in
+    node order): (bounds (A nx ny,), order)."""
     n_ang = rows.shape[0]
     x_lo, x_hi, y_lo, y_hi = box
     w = 1 << d_top
@@ -228,32 +201,133 @@ def branch_and_bound(prob, levels, starts, rows, cols, box, d_top, quant, best0)
             for iy in range(ny):
                 top[(a * nx + ix) * ny + iy] = _score(prob, levels, starts, d_top, rows, cols, bb, a,
                                                       x_lo + ix * w, y_lo + iy * w, quant)
-    order = argsort_stable(-top)  # np.argsort(-top, kind="mergesort")
+    return top, argsort_stable(-top)  # np.argsort(-top, kind="mergesort")
+
+
+@nb.njit(**JIT)
+def _defer(buf, n, a, x, y, d, bound):  # pragma: no cover - compiled
+    """Append the node (a, x, y, level d, bound) to the (capacity, 5) buffer holding n rows (doubled when full)."""
+    if n == buf.shape[0]:
+        grown = np.empty((2 * buf.shape[0], 5), dtype=np.float64)
+        for i in range(n):  # a loop, not grown[:n] = buf[:n]: that slice copy cost 5-9 s of numba's compile
+            for c in range(5):
+                grown[i, c] = buf[i, c]
+        buf = grown
+    buf[n, 0], buf[n, 1], buf[n, 2], buf[n, 3], buf[n, 4] = a, x, y, d, bound
+    return buf, n + 1
+
+
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
+def _workspace(box, d_top, rows, cols, defer):  # pragma: no cover - compiled
+    """:func:`descend`'s arrays: the top level's node counts (nx, ny), the scan's cell boxes, the depth-first
+    stack (angle, x, y, level, bound), the children scratch (cx, cy, cs) and the set-aside buffer."""
+    w = 1 << d_top
     cap = 4 * d_top + 4
     st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
           np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
-    cx, cy, cs = np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64)
-    best, ba, bx, by = best0, -1, 0, 0
-    nodes = top.size
-    for k in order:
-        if top[k] <= best:
-            break
-        a, rem = divmod(k, nx * ny)
-        st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = a, x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, \
-            d_top, top[k]
+    return ((box[1] - box[0]) // w + 1, (box[3] - box[2]) // w + 1, _boxes(rows, cols), st,
+            np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64),
+            np.empty((64 if defer >= 0 else 0, 5), dtype=np.float64))
+
+
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
+def _seed(seeds, j):  # pragma: no cover - compiled
+    """Row j of the seeds (angle, x, y, level, bound) as a stack entry."""
+    return int(seeds[j, 0]), int(seeds[j, 1]), int(seeds[j, 2]), int(seeds[j, 3]), seeds[j, 4]
+
+
+@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
+def _top_node(k, nx, ny, x_lo, y_lo, d_top, top):  # pragma: no cover - compiled
+    """Top-level node k (angle-major, then x, then y) as a stack entry (angle, x, y, level, bound)."""
+    w = 1 << d_top
+    a, rem = divmod(k, nx * ny)
+    return a, x_lo + (rem // ny) * w, y_lo + (rem % ny) * w, d_top, top[k]
+
+
+@nb.njit(**JIT)
+def descend(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, order, k0, seeds, centres, ex, first,
+            defer):  # pragma: no cover - compiled
+    """Depth-first branch and bound (Hess et al. 2016, Alg. 3; best child first) over angles 0..A-1 (rows/cols
+    (A, N): the points' cells at each angle) and integer offsets box = (x_lo, x_hi, y_lo, y_hi), below the top
+    level d_top whose bounds and order :func:`top_bounds` gave: first from the nodes ``seeds`` (m, 5: angle, x,
+    y, level, bound), then from the top level's nodes ``order[k0:]`` until their bound falls to the best.
+
+    Boxes cut out: no candidate within +-ex[0] offsets (x and y) and +-ex[1] angle indices of any of ``centres``
+    (k, 3: angle, x, y) is returned, and a node whose block lies inside one box is dropped (the bounds of the
+    others are still upper bounds: the result is exact). ``first``: return the first candidate above best0 met
+    instead of the best. ``defer`` >= 0: every node or candidate set aside with a bound above (best at the time -
+    defer) is returned, so that a search for anything above (final best - defer) can start from them and from
+    ``order[k_break:]`` instead of from the top (each node is set aside with a bound <= the best at the time, which
+    never exceeds the final best). Returns (sum, a, x, y, k_break, set-aside nodes (m', 5)); a = -1 when nothing
+    outside the boxes beats best0 (strictly).
+
+    Counts and indices start as ``np.int64`` values, not literals: numba would compile ``_defer`` again for each
+    literal type its first typing pass sees (0, -1)."""
+    x_lo, x_hi, y_lo, y_hi = box
+    nx, ny, bb, st, cx, cy, cs, buf = _workspace(box, d_top, rows, cols, defer)
+    nd = np.int64(0)
+    best, ba, bx, by = best0, np.int64(-1), np.int64(0), np.int64(0)
+    k_break = order.size
+    for kk in range(-seeds.shape[0], order.size - k0):
+        if kk < 0:  # a seed
+            st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = _seed(seeds, kk + seeds.shape[0])
+            if st[4][0] <= best:
+                continue
+        else:
+            k = order[k0 + kk]
+            if top[k] <= best:
+                k_break = k0 + kk
+                break
+            st[0][0], st[1][0], st[2][0], st[3][0], st[4][0] = _top_node(k, nx, ny, x_lo, y_lo, d_top, top)
         sp = 1
         while sp > 0:
             sp -= 1
-            if st[4][sp] <= best:
-                continue
             a, x, y, d = st[0][sp], st[1][sp], st[2][sp], st[3][sp]
-            if d == 0:
-                best, ba, bx, by = st[4][sp], a, x, y
+            if st[4][sp] <= best:
+                if defer >= 0 and st[4][sp] > best - defer:
+                    buf, nd = _defer(buf, nd, a, x, y, d, st[4][sp])
                 continue
-            sp, scored = _push_children(prob, levels, starts, rows, cols, bb, a, x, y, d, box, quant, best, st, sp,
-                                        cx, cy, cs)
-            nodes += scored
-    return best, ba, bx, by, nodes
+            span = (1 << d) - 1
+            cut = False
+            for c in range(centres.shape[0]):
+                if (abs(a - centres[c, 0]) <= ex[1] and x >= centres[c, 1] - ex[0]
+                        and x + span <= centres[c, 1] + ex[0] and y >= centres[c, 2] - ex[0]
+                        and y + span <= centres[c, 2] + ex[0]):
+                    cut = True
+                    break
+            if cut:
+                continue
+            if d == 0:
+                if defer >= 0 and ba >= 0 and best > st[4][sp] - defer:  # the best so far, set aside
+                    buf, nd = _defer(buf, nd, ba, bx, by, d, best)
+                best, ba, bx, by = st[4][sp], a, x, y
+                if first:
+                    return best, ba, bx, by, k_break, buf[:nd]
+                continue
+            # the (up to four) children at level d - 1: those above the best pushed, best last (on top); with
+            # defer, those dropped within defer of the best set aside
+            h = 1 << (d - 1)
+            ns = 0
+            for dx in range(2):
+                if x + dx * h > x_hi:
+                    break
+                for dy in range(2):
+                    if y + dy * h > y_hi:
+                        break
+                    sc = _score(prob, levels, starts, d - 1, rows, cols, bb, a, x + dx * h, y + dy * h, quant)
+                    if sc > best:
+                        q = ns  # insertion sort, ascending
+                        while q > 0 and cs[q - 1] > sc:
+                            cx[q], cy[q], cs[q] = cx[q - 1], cy[q - 1], cs[q - 1]
+                            q -= 1
+                        cx[q], cy[q], cs[q] = x + dx * h, y + dy * h, sc
+                        ns += 1
+                    elif defer >= 0 and sc > best - defer:
+                        buf, nd = _defer(buf, nd, a, x + dx * h, y + dy * h, d - 1, sc)
+            for q in range(ns):
+                st[0][sp], st[1][sp], st[2][sp], st[3][sp], st[4][sp] = a, cx[q], cy[q], d - 1, cs[q]
+                sp += 1
+    return best, ba, bx, by, k_break, buf[:nd]
 
 
 @nb.njit(**JIT)

@@ -183,5 +183,8 @@ def split_pieces(x, y, run_start, run_end, tol):  # pragma: no cover - compiled
             else:
                 ps[n], pe[n] = a, b
                 n += 1
-    order = argsort_stable(ps[:n])  # np.argsort(ps[:n], kind="mergesort")
+    key = np.empty(n)  # the starts as float64 (exact below 2**53): the branch and bound's argsort_stable, one
+    for i in range(n):  # specialisation of it to compile instead of two
+        key[i] = ps[i]
+    order = argsort_stable(key)  # np.argsort(ps[:n], kind="mergesort")
     return ps[:n][order], pe[:n][order]

@@ -199,7 +199,7 @@ def _corners_and_crossings(S, Ln, corner_gap, gap_per_m, sin_min, extend):  # pr
     return corners[:nc], cross[:keep]
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT, inline="always")  # one caller in a run (scans_features): not compiled a second time on its own
 def scan_features(px, py, gap, gap_per_m, split_tol, min_points, min_length, cos_merge, corner_gap, sin_min,
                   extend, point_max_extent, point_min_points):  # pragma: no cover - compiled
     """Features of one scan's ordered points (px, py): segments (S, 4), lines (S, 3), corners (C, 2),
@@ -259,7 +259,7 @@ def scans_features(x, y, start, poses, gap, gap_per_m, split_tol, min_points, mi
     its pose ``poses[k]`` (``features.transform_features``), stacked in scan order."""
     segs_all, lines_all = np.empty((64, 4)), np.empty((64, 3))
     corners_all, cross_all, blobs_all = np.empty((64, 2)), np.empty((64, 2)), np.empty((64, 2))
-    ns = nl = nc = nx = nb_ = 0
+    ns = nl = nc = nx = nb_ = np.int64(0)  # not the literal 0: numba would compile _put once more for its type
     for k in range(poses.shape[0]):
         a, b = start[k], start[k + 1]
         segs, lines, corners, cross, blobs = scan_features(

@@ -221,9 +221,13 @@ def search(
     cand = _candidates(grids, b_pts, seed_aTb, window_xy_m, window_theta_rad, angular_step)
     n = cand.rows.shape[1]
     quant = (grids.q_lo, grids.q_step, float(grids.q_out), float(OUTSIDE), _SLACK * n)
-    best, a, x, y, _nodes = _kernels().branch_and_bound(
-        grids.prob, grids.levels, grids.starts, cand.rows, cand.cols, cand.box, _top_level(grids, cand.box),
-        quant, float(min_score) * n)
+    fast, d_top = _kernels(), _top_level(grids, cand.box)
+    args = (grids.prob, grids.levels, grids.starts, cand.rows, cand.cols, cand.box, d_top, quant)
+    top, order = fast.top_bounds(*args)
+    # the loop search's descent with no seeds, no boxes, nothing set aside: its argument types, so that a run
+    # compiles one descent
+    best, a, x, y, _k, _aside = fast.descend(*args, float(min_score) * n, top, order, 0, np.zeros((0, 5)),
+                                             np.zeros((0, 3), np.int64), np.zeros(2, np.int64), False, -1.0)
     return None if a < 0 else _match(cand, grids.res, a, x, y, best)
 
 

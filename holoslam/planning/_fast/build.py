@@ -142,7 +142,7 @@ def grow_regions(S, blocks, labels, seeds):
     n = blocks.shape[0]
     rob = np.full(n, -1, dtype=np.int64)
     regs = np.empty((n, 4), dtype=np.int64)
-    nr = 0
+    nr = np.int64(0)  # not the literal 0: numba would compile _claim_blocks and csr_group once more for its type
     step = np.empty(4, dtype=np.int64)
     active = np.empty(4, dtype=np.bool_)
     for s in seeds:
