@@ -14,7 +14,8 @@ hospital log's laser), scored over the relations whose two stamps have a kept sc
 also holds a pose at every odometry stamp, which would match every relation; between scans it is the odometry's,
 and the relations of a 1.4 Hz log are at its scans); ``sparse_kidnap`` both, the kidnap at the sparse log's middle
 scan (the held-out hospital log's case: a sparse laser, and a drift only a global search spans), scored as sparse
-with the kidnap row's columns. A variant runs in the child on the log
+with the kidnap row's columns. ``kidnap@F`` / ``sparse_kidnap@F``: the kidnap at the fraction F of the scans
+instead of the middle (e.g. ``sparse_kidnap@0.67``). A variant runs in the child on the log
 in memory (``holoslam.pipeline.run_data``) and writes the trajectory and the report; the independent scorer
 checks the full rows.
 
@@ -126,17 +127,36 @@ def near_scans(rel, scan_stamps_ns: np.ndarray, max_dt_ns: int):
 
 
 def variant_log(data, variant: str):
-    """The log in memory as the variant makes it, and the kidnap's stamp (None for the others)."""
+    """The log in memory as the variant makes it, and the kidnap's stamp (None for the others). A kidnapped
+    variant's name may end in ``@F``: the kidnap at that fraction of the (kept) scans instead of the middle."""
     from holoslam import derive
 
-    if variant == "kidnap":
-        at = int(data.scans[len(data.scans) // 2].stamp_ns)
+    base, _, where = variant.partition("@")
+    if base == "kidnap":
+        at = int(data.scans[int(len(data.scans) * (float(where) if where else 0.5))].stamp_ns)
         return derive.kidnap(data, at, np.array(KIDNAP), KIDNAP_GAP_S), at
-    if variant == "sparse":
+    if base == "sparse":
         return derive.drop_beams(derive.decimate_scans(data, SPARSE_HZ), SPARSE_KEEP_EVERY), None
-    if variant == "sparse_kidnap":
-        return variant_log(variant_log(data, "sparse")[0], "kidnap")
+    if base == "sparse_kidnap":
+        return variant_log(variant_log(data, "sparse")[0], "kidnap" + variant[len(base):])
     return data, None
+
+
+def variant_name(text: str) -> str:
+    """``--variants``' type: one of VARIANTS, a kidnapped one with ``@F`` (0 < F < 1) allowed."""
+    base, at, where = text.partition("@")
+    ok = base in VARIANTS and (not at or ("kidnap" in base and _fraction(where)))
+    if not ok:
+        raise argparse.ArgumentTypeError(f"{text!r}: one of {', '.join(VARIANTS)}; a kidnapped one may end in @F, "
+                                         "F the fraction of the log's scans where the kidnap happens (0 < F < 1)")
+    return text
+
+
+def _fraction(text: str) -> bool:
+    try:
+        return 0.0 < float(text) < 1.0
+    except ValueError:
+        return False
 
 
 def child(log: str, out: str, variant: str = "full") -> None:
@@ -231,7 +251,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
     child_json = json.loads((run_dir.parent / "bench_child.json").read_text())
     if child_json.get("kidnap_ns") is not None:  # relations touching the gap are not scored (docstring)
         rel = without_gap(rel, int(child_json["kidnap_ns"]))
-    max_dt = int(MAX_DT[variant] * 1e9)
+    max_dt = int(MAX_DT[variant.partition("@")[0]] * 1e9)
     if variant.startswith("sparse"):  # the relations at the sparse log's scans (docstring)
         rel = near_scans(rel, np.load(run_dir.parent / "scan_stamps.npy"), max_dt)
     e = relation_errors(stamps, wTb, rel, max_dt)
@@ -340,7 +360,7 @@ def _moved(wTb: np.ndarray, bTp: np.ndarray | float) -> np.ndarray:
 
 def print_table(rows: list[dict]) -> None:
     head = (
-        f"{'log':<20}{'transl m (mean ± std)':>24}{'laser m':>9}{'centre m (at x)':>17}{'rot deg (mean ± std)':>22}{'matched':>12}{'max m':>8}{'across m':>9}{'join m / deg':>17}{'vs full m':>10}{'>0.2 (full too)':>16}"
+        f"{'log':<26}{'transl m (mean ± std)':>24}{'laser m':>9}{'centre m (at x)':>17}{'rot deg (mean ± std)':>22}{'matched':>12}{'max m':>8}{'across m':>9}{'join m / deg':>17}{'vs full m':>10}{'>0.2 (full too)':>16}"
         f"{'run s':>8}{'cpu s':>8}{'pipeline s':>11}{'RSS MB':>8}   {'carto m / deg':<16}{'ratio':>14}{'carto s':>9}"
     )
     print(head)
@@ -348,7 +368,7 @@ def print_table(rows: list[dict]) -> None:
         c = r["carto"]
         ratio = f"{r['transl'][0] / c['transl'][0]:.1f}x/{r['rot'][0] / c['rot'][0]:.1f}x"
         print(
-            f"{r['log']:<20}{r['transl'][0]:>12.4f} ± {r['transl'][1]:<9.4f}{r['laser_m']:>9.4f}"
+            f"{r['log']:<26}{r['transl'][0]:>12.4f} ± {r['transl'][1]:<9.4f}{r['laser_m']:>9.4f}"
             f"{r['centre_m']:>9.4f} ({r['centre_x']:+.3f})"
             f"{r['rot'][0]:>10.3f} ± {r['rot'][1]:<9.3f}"
             f"{r['matched']:>12}{r['max_m']:>8.3f}{r['across_max_m']:>9.3f}{_join(r['join']):>17}{r['vs_full_max_m']:>+10.3f}{r['over']:>16}{r['run_s']:>8.1f}{r['cpu_s']:>8.1f}{r['pipeline_s']:>11.1f}{r['rss_mb']:>8.0f}"
@@ -366,7 +386,7 @@ def main() -> int:
     ap.add_argument("--duration", type=float, help="run on a cut of the first S seconds of each log")
     ap.add_argument("--data", type=Path, default=DATA, help=f"folder of the logs (default {DATA})")
     ap.add_argument("--out", type=Path, help="keep the run folders here (default: a temporary folder)")
-    ap.add_argument("--variants", nargs="+", choices=VARIANTS, default=["full"],
+    ap.add_argument("--variants", nargs="+", type=variant_name, default=["full"],
                     help="the logs as they are and/or derived (module docstring; default: full)")
     ap.add_argument("--child", nargs=3, metavar=("LOG", "OUT", "VARIANT"), help=argparse.SUPPRESS)
     a = ap.parse_args()
@@ -385,7 +405,8 @@ def main() -> int:
         out_root = a.out or Path(tmp)
         rows, all_ok = [], True
         needed = {reference(v) for v in a.variants if "kidnap" in v}
-        variants = [v for v in VARIANTS if v in a.variants or v in needed]
+        variants = [v for v in VARIANTS if v in needed and v not in a.variants]
+        variants += [v for v in sorted(a.variants, key=lambda v: VARIANTS.index(v.partition("@")[0]))]
         if needed - set(a.variants):
             print(f"kidnap: its row is measured against the {' and '.join(sorted(needed))} run of the same log, "
                   "which runs first (docstring)")
