@@ -225,8 +225,9 @@ def scorer_check(scorer: Path, tum: Path, rel_path: Path, errors, workdir: Path)
 
 def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
               variant: str = "full", full: dict | None = None) -> tuple[dict, bool, str]:
-    """One row of the table (and the check text); ``full``: the same log's full row, which the kidnap row is
-    measured against (module docstring)."""
+    """One row of the table (and the check text); ``full``: for a kidnapped variant, the row of the same log
+    without the kidnap (``reference``: the full or the sparse run), which its join is measured against (module
+    docstring)."""
     from holoslam.evaluate import placement_difference, relation_errors
     from holoslam.io.mcap_cut import cut_log
     from holoslam.io.relations import cut_relations, read_relations, write_relations
@@ -251,7 +252,7 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
     child_json = json.loads((run_dir.parent / "bench_child.json").read_text())
     if child_json.get("kidnap_ns") is not None:  # relations touching the gap are not scored (docstring)
         rel = without_gap(rel, int(child_json["kidnap_ns"]))
-    max_dt = int(MAX_DT[variant.partition("@")[0]] * 1e9)
+    max_dt = int(MAX_DT[base_variant(variant)] * 1e9)
     if variant.startswith("sparse"):  # the relations at the sparse log's scans (docstring)
         rel = near_scans(rel, np.load(run_dir.parent / "scan_stamps.npy"), max_dt)
     e = relation_errors(stamps, wTb, rel, max_dt)
@@ -300,6 +301,11 @@ def bench_log(name: str, data: Path, out_root: Path, duration: float | None,
     if variant in ("full", "sparse"):  # what a kidnap row of the same log is measured against
         row["_trajectory"] = (stamps, wTb, _laser_poses(log, wTb))
     return row, ok, check
+
+
+def base_variant(variant: str) -> str:
+    """The variant's name without the kidnap's place (``sparse_kidnap@0.67`` -> ``sparse_kidnap``)."""
+    return variant.partition("@")[0]
 
 
 def reference(variant: str) -> str:
@@ -406,7 +412,7 @@ def main() -> int:
         rows, all_ok = [], True
         needed = {reference(v) for v in a.variants if "kidnap" in v}
         variants = [v for v in VARIANTS if v in needed and v not in a.variants]
-        variants += [v for v in sorted(a.variants, key=lambda v: VARIANTS.index(v.partition("@")[0]))]
+        variants += sorted(a.variants, key=lambda v: VARIANTS.index(base_variant(v)))
         if needed - set(a.variants):
             print(f"kidnap: its row is measured against the {' and '.join(sorted(needed))} run of the same log, "
                   "which runs first (docstring)")

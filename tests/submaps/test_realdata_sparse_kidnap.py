@@ -8,51 +8,51 @@ were accepted on their own until such matches were offered for agreement like gl
 
 from __future__ import annotations
 
-import math
+import importlib.util
+import sys
 
 import numpy as np
 import pytest
-from repo_paths import SHARED
+from repo_paths import REPO, SHARED
 
 REALDATA = SHARED / "realdata"
 pytestmark = [
     pytest.mark.slow,
     pytest.mark.skipif(not (REALDATA / "aces.mcap").exists(), reason="../shared/realdata is not here"),
 ]
-SPARSE_HZ, KEEP_EVERY = 1.4, 2  # the hospital log's laser (bench_realdata's sparse variant)
+
+
+@pytest.fixture(scope="module")
+def bench():
+    """benchmarks/bench_realdata.py: its variants of a log and the relations it scores them on."""
+    path = REPO / "benchmarks" / "bench_realdata.py"
+    spec = importlib.util.spec_from_file_location("bench_realdata", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("bench_realdata", mod)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 @pytest.fixture(scope="module", params=[("aces", 0.5), ("intel", 2 / 3)], ids=["aces-middle", "intel-two-thirds"])
-def sparse_kidnapped(request):
-    from holoslam import derive
+def sparse_kidnapped(request, bench):
     from holoslam import geometry as g
     from holoslam.config import RunConfig
     from holoslam.evaluate import relation_errors
     from holoslam.io.mcap import read_log
-    from holoslam.io.relations import Relations, read_relations
+    from holoslam.io.relations import read_relations
     from holoslam.pipeline import run_data
     from holoslam.submaps.frontend import base_to_laser
 
     name, where = request.param
     log, ingest = read_log(REALDATA / f"{name}.mcap", require=["odometry", "scan"])
-    sparse = derive.drop_beams(derive.decimate_scans(log, SPARSE_HZ), KEEP_EVERY)
-    at = int(sparse.scans[int(len(sparse.scans) * where)].stamp_ns)
-    gap_end = at + 30 * 10**9
-    kidnapped = derive.kidnap(sparse, at, np.array([30.0, 0.0, math.pi / 2]), 30.0)
+    kidnapped, at = bench.variant_log(log, f"sparse_kidnap@{where}")
     res = run_data(kidnapped, ingest, RunConfig())
-    rel = read_relations(REALDATA / f"{name}.relations")
+    max_dt = int(bench.MAX_DT["sparse_kidnap"] * 1e9)  # a kept scan within 0.1 s of each stamp, outside the gap
     scans = np.array([s.stamp_ns for s in kidnapped.scans], np.int64)
-
-    def near(t):  # a kept scan within 0.1 s of the stamp, outside the gap
-        i = np.clip(np.searchsorted(scans, t), 1, len(scans) - 1)
-        d = np.minimum(np.abs(scans[i] - t), np.abs(scans[i - 1] - t))
-        return (d <= 10**8) & ~((t >= at) & (t < gap_end))
-
-    keep = near(rel.t1_ns) & near(rel.t2_ns)
-    rel = Relations(rel.t1_ns[keep], rel.t2_ns[keep], rel.T[keep])
+    rel = bench.near_scans(bench.without_gap(read_relations(REALDATA / f"{name}.relations"), at), scans, max_dt)
     bTl = base_to_laser(kidnapped, kidnapped.scans[0].frame_id)
     P = g.compose(res.wTb, np.broadcast_to(bTl, res.wTb.shape))
-    return name, res, relation_errors(res.stamps_ns, P, rel, 10**8), (rel.t1_ns < at) != (rel.t2_ns < at)
+    return name, res, relation_errors(res.stamps_ns, P, rel, max_dt), (rel.t1_ns < at) != (rel.t2_ns < at)
 
 
 # measured: across the kidnap (relations at kept scans), largest error; the whole log's relation error
