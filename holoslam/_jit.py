@@ -31,7 +31,7 @@ import os
 import re
 from functools import cache
 from types import ModuleType
-from typing import TypedDict
+from typing import Literal, TypedDict
 
 from numba.core import caching
 from numba.core.dispatcher import Dispatcher
@@ -45,7 +45,7 @@ class JitOptions(TypedDict, total=False):
     cache: bool
     nogil: bool
     fastmath: bool
-    error_model: str
+    error_model: Literal["python", "numpy"]
 
 
 # ``error_model="numpy"``: a float division by zero gives inf or nan as numpy's does (the rest of holoslam is
