@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Mapping
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -16,11 +17,36 @@ def _ingest_text(ing: Mapping[str, Any]) -> list[str]:
     lines = [
         f"  ingest: {len(chans)} channels, {sum(c.get('decoded', 0) for c in chans)} messages decoded, "
         f"{sum(c.get('failed', 0) for c in chans)} failed, {sum(c.get('skipped', 0) for c in chans)} "
-        f"skipped, {len(ing.get('warnings', []))} warnings; base frame {ing.get('base_frame', '?')}"
+        f"skipped, {len(ing.get('warnings', []))} warnings"
+        + (f", {len(ing['lost'])} damaged stretch(es) left out" if ing.get("lost") else "")
+        + f"; base frame {ing.get('base_frame', '?')}"
     ]
     for c in ing.get("choices", []):
         lines.append(f"    {c['role']}: {c['topic']} used, not {', '.join(c['others'])} ({c['rule']})")
     lines.extend(f"    levelled: {m}" for m in ing.get("levelled", []))
+    return lines + _ingest_problems(ing)
+
+
+def _ingest_problems(ing: Mapping[str, Any]) -> list[str]:
+    """The log's damage and doubts, each on a line (what, where, what was kept): the run goes on with every good
+    record, and a user reading only the printed report must still learn what it did without."""
+    lines = []
+    t0 = ing.get("start_ns") or 0
+    for x in ing.get("lost", []):
+        start, end = x.get("start_ns") or 0, x.get("end_ns") or 0
+        span = (f"{(start - t0) / 1e9:.1f}..{(end - t0) / 1e9:.1f} s into the log ({(end - start) / 1e9:.1f} s)"
+                if end else "time range unknown")
+        lines.append(f"    lost: {Path(x.get('file', '?')).name} byte {x.get('offset')}: {span}: {x.get('reason')}; "
+                     "every record outside it is used")
+    lines.extend(f"    missing transform: {m}" for m in ing.get("missing_transforms", []))
+    lines.extend(f"    re-based: {m}" for m in ing.get("rebased", []))
+    for c in ing.get("channels", []):
+        if c.get("failed"):
+            lines.append(f"    failed: {c['topic']}: {c['failed']} message(s) not decoded, kept out; first error: "
+                         f"{c.get('first_error', '')}")
+    lines.extend(f"    warning: {w}" for w in ing.get("warnings", []))
+    if lines:
+        lines.append(f"    (holoslam inspect {ing.get('source') or 'LOG'} lists every problem of the log by channel)")
     return lines
 
 

@@ -117,6 +117,31 @@ def test_flipped_byte_in_a_chunk_loses_only_that_chunk(tmp_path, records, compre
     assert "lost:" in format_report(report)
 
 
+def test_the_run_report_text_names_a_lost_stretch_with_its_place_in_the_log(tmp_path, records):
+    """What ``holoslam run`` prints: the damaged stretch with its byte, its seconds into the log and the reason,
+    not only a count (a user who reads the printed report learns what the run did without)."""
+    from holoslam.io.mcap import report_to_dict
+    from holoslam.report_text import _ingest_text
+
+    full = write_ros2_log(tmp_path / "full.mcap", records, chunk_size=4096)
+    victim = _chunks(full)[2]
+    raw = bytearray(full.read_bytes())
+    raw[victim.chunk_start_offset + victim.chunk_length // 2] ^= 0xFF
+    bad = tmp_path / "flipped.mcap"
+    bad.write_bytes(bytes(raw))
+    _, report = read_log(bad)
+    lines = _ingest_text(report_to_dict(report))
+    assert lines[0].endswith("1 damaged stretch(es) left out; base frame base_link")
+    (lost,) = [line for line in lines if line.startswith("    lost: flipped.mcap byte ")]
+    t0, t1 = (victim.message_start_time - report.start_ns) / 1e9, (victim.message_end_time - report.start_ns) / 1e9
+    assert f"byte {victim.chunk_start_offset}: {t0:.1f}..{t1:.1f} s into the log" in lost
+    assert "CRC" in lost or "decompress" in lost
+    assert lines[-1] == f"    (holoslam inspect {bad} lists every problem of the log by channel)"
+    # an undamaged log prints no problem lines
+    _, clean = read_log(full)
+    assert len(_ingest_text(report_to_dict(clean))) == 1
+
+
 def _plain_writer(f):
     from mcap.writer import Writer
 
