@@ -4,8 +4,9 @@
 
 The issue's budget: a log of 80 minutes maps in under 2 GB. The shared logs are shorter (intel: 45 min), so the
 log is played ``N`` times in a row in memory: the copies' stamps follow each other, and each copy's odometry
-continues from where the last ended (the robot is carried back to its start: a kidnapping, which the front end
-sees as a jump of metres and the loop search closes). Each row runs in a child process (this script with
+continues from where the last ended (``holoslam.derive.repeat``: the robot carried back to its start with its laser
+on; local SLAM sees its scans stop fitting the map where the odometry puts them, starts afresh, and the global
+loop search joins the copy to the first). Each row runs in a child process (this script with
 ``--child``) doing what ``holoslam run`` does on the read log (``holoslam.pipeline.run_data``, default
 settings, nothing written); the child's peak resident set is the largest of its stages' peaks and of
 ``os.wait4``'s rusage (the stages reset the kernel's peak as they begin), and the parent times it. Columns: minutes of log, scans, submaps, wall s, peak RSS MB, RSS per log minute above the 1-copy
@@ -22,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import json
 import os
 import subprocess
@@ -36,20 +36,10 @@ DATA = ROOT.parent / "shared" / "realdata"
 
 
 def repeated(log, times: int):
-    """``log`` (a ``LogData``) with its odometry and scans played ``times`` times end to end (module docstring)."""
-    from holoslam import geometry as g
-    from holoslam.types import Pose2
+    """``log`` (a ``LogData``) with its odometry and scans played ``times`` times end to end (``derive.repeat``)."""
+    from holoslam import derive
 
-    span = log.scans[-1].stamp_ns - log.scans[0].stamp_ns + 1_000_000_000  # the next copy starts 1 s later
-    odo, scans = list(log.odometry), list(log.scans)
-    o_first = log.odometry[0].odomTb.as_array()
-    for k in range(1, times):
-        T = g.compose(odo[-1].odomTb.as_array(), g.inverse(o_first))
-        odo += [dataclasses.replace(o, stamp_ns=o.stamp_ns + k * span,
-                                    odomTb=Pose2.from_array(g.compose(T, o.odomTb.as_array())))
-                for o in log.odometry]
-        scans += [dataclasses.replace(s, stamp_ns=s.stamp_ns + k * span) for s in log.scans]
-    return dataclasses.replace(log, odometry=tuple(odo), scans=tuple(scans))
+    return derive.repeat(log, times)
 
 
 def _vm_mb(field: str) -> float:

@@ -12,7 +12,10 @@ original's ground truth (``.relations``) still names the same scan.
 - :func:`cap_ranges`: returns beyond ``max_range_m`` become no-returns (a cheaper laser);
 - :func:`kidnap`: from stamp ``at_ns`` on, the odometry (and the odometry frame's transforms) is moved by a
   rigid transform the mapper is not told about, and the scans of the ``gap_s`` after it are removed, so the
-  two parts of the log share no scan that would let the local matcher bridge them: only a global search can.
+  two parts of the log share no scan that would let the local matcher bridge them: only a global search can;
+- :func:`repeat`: the log driven ``times`` times, the robot carried back to its start between copies with its
+  laser on and its odometer counting on from where it stopped (a second apart: no gap in the laser to tell).
+  Its stamps are new, the copy ``k``'s stamps being the original's plus ``k`` times :func:`repeat_span_ns`.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.types import LogData, Odometry, Pose2, Scan
 
-__all__ = ["decimate_scans", "drop_beams", "cap_ranges", "kidnap"]
+__all__ = ["decimate_scans", "drop_beams", "cap_ranges", "kidnap", "repeat", "repeat_span_ns"]
 
 
 def decimate_scans(log: LogData, rate_hz: float) -> LogData:
@@ -97,3 +100,32 @@ def _moved_transform(t, jump: np.ndarray):
     hc, hs = math.cos(jump[2] / 2), math.sin(jump[2] / 2)  # q_jump = (0, 0, hs, hc); q' = q_jump * q
     q = (hc * qx - hs * qy, hc * qy + hs * qx, hc * qz + hs * qw, hc * qw - hs * qz)
     return replace(t, translation=(jump[0] + c * x - s * y, jump[1] + s * x + c * y, z), rotation_xyzw=q)
+
+
+def repeat_span_ns(log: LogData) -> int:
+    """ns between a scan of one copy of :func:`repeat` and the same scan of the next: the scans' span plus 1 s."""
+    if not log.scans:
+        raise ValueError("repeat: the log has no scans")
+    return int(log.scans[-1].stamp_ns - log.scans[0].stamp_ns) + 1_000_000_000
+
+
+def repeat(log: LogData, times: int) -> LogData:
+    """The log's odometry, scans and headings played ``times`` times end to end, each copy a
+    :func:`repeat_span_ns` after the last: the robot carried back to where it started with its laser on, the
+    odometer going on from where it stopped (each copy's odometry composed onto the last pose of the copy before),
+    the compass as it was (it measures the true heading). Images, tags, transforms and ground truth are the first
+    copy's only."""
+    if not (isinstance(times, int) and times >= 1):
+        raise ValueError(f"repeat: times must be an integer >= 1, got {times!r}")
+    if not log.odometry:
+        raise ValueError("repeat: the log has no odometry")
+    span = repeat_span_ns(log)
+    odo, scans, heads = list(log.odometry), list(log.scans), list(log.headings)
+    o_first = log.odometry[0].odomTb.as_array()
+    for k in range(1, times):
+        T = g.compose(odo[-1].odomTb.as_array(), g.inverse(o_first))
+        odo += [replace(o, stamp_ns=o.stamp_ns + k * span, odomTb=Pose2.from_array(g.compose(T, o.odomTb.as_array())))
+                for o in log.odometry]
+        scans += [replace(s, stamp_ns=s.stamp_ns + k * span) for s in log.scans]
+        heads += [replace(h, stamp_ns=h.stamp_ns + k * span) for h in log.headings]
+    return replace(log, odometry=tuple(odo), scans=tuple(scans), headings=tuple(heads))

@@ -58,7 +58,8 @@ class SubmapSummary:
     # transform (holoslam.submaps.mounting.mounting_check); None when the robot turned too little to tell
     laser_mounting: dict[str, Any] | None = None
     # the loop search's searches and their outcomes by reason (windowed / global; accepted, no match, ambiguous,
-    # waiting for a consistent second closure...), and the breaks of local SLAM (a gap in the laser: lost)
+    # waiting for a consistent second closure...), and the breaks of local SLAM (a gap in the laser or
+    # scans that stopped fitting the map: lost)
     loop_search: dict[str, int] | None = None
     breaks: int = 0
 

@@ -88,7 +88,8 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
         )
     if sm.loop_search:
         lines.append("  loop search: " + ", ".join(f"{k} {v}" for k, v in sm.loop_search.items())
-                     + (f"; {sm.breaks} gaps in the laser began afresh (lost)" if sm.breaks else ""))
+                     + (f"; the submaps began afresh {sm.breaks} time(s) (lost: a gap in the laser, or "
+                        "scans that fit nowhere near the odometry: carried)" if sm.breaks else ""))
     if sm.keyframes_solved:
         lines.append(
             f"  keyframes: solved as poses against the old submaps they revisit, {sm.keyframe_matches} of "

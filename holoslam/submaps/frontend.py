@@ -106,7 +106,9 @@ class FrontEnd:
     loop_groups: int = 0  # anchor pairs joined by loop closures (each pair's closures count as one, AnchorGraph)
     dead_reckoning_slips: int = 0  # dead-reckoning segments down-weighted for disagreeing with their scan match
     loop_counts: dict[str, int] = field(default_factory=dict)  # the loop search's outcomes by reason
-    breaks: int = 0  # local SLAM started afresh after a gap in the laser (``LocalSlamConfig.lost_gap_s``)
+    # local SLAM started afresh after a gap in the laser (``LocalSlamConfig.lost_gap_s``) or where its scans stopped
+    # fitting the map (``LocalSlamConfig.lost_after_misses``)
+    breaks: int = 0
     score_scale: float = 1.0  # the loop search's threshold scale at the end (``LoopConfig.score_reference``)
 
 

@@ -62,6 +62,14 @@ class LocalSlamConfig:
     # glued to the old one by a prediction nothing checked. 10 s is twice the motion filter's time (a standing
     # robot's laser yields a node every motion_time_s) and 7x the slowest real laser period met (1.4 Hz)
     lost_gap_s: float = 10.0
+    # node matches in a row that fail (score under ``match.min_score`` after the wide search) in a submap they
+    # should fit (``min_scans_to_match`` scans, the laser's usual score known) before local SLAM starts afresh as
+    # after a gap: the robot was carried with its laser on (picked up, an elevator) and the odometry no longer says
+    # where it is. A node whose match fails is not inserted (a scan no match placed must not write walls into the
+    # map; inserted, the next scans of a carried robot matched into it: a Freiburg log played twice end to end,
+    # the second copy never rejoined). On the shared logs (full rate and 1.4 Hz with half the beams, the
+    # household) failed matches came at most 2 in a row; a carried robot's keep failing. 0: never
+    lost_after_misses: int = 3
     # m/s^2: the laser's own prediction (the last matched pose moved on at the last matched velocity) is offered to
     # the matcher only while a change of speed at this rate moves it less than the matcher's window
     # (1/2 a dt^2 <= ``match.linear_window``: 0.45 s at 1 m/s^2 and 0.1 m). A wheeled indoor robot accelerates well
@@ -171,6 +179,10 @@ class LocalSlam:
         # velocity between the last two (m/s, m/s, rad/s), the alternative to a wheel odometry that is wrong
         self._last_fix: tuple[int, int, np.ndarray] | None = None
         self._twist = np.zeros(3)
+        # the nodes whose matches failed in a row (``lost_after_misses``): index in ``nodes``, odometry pose, ranges,
+        # angles, odometer; left out of the map until a match succeeds (forgotten) or a break re-homes them
+        self._missed: list[tuple[int, np.ndarray, np.ndarray, np.ndarray, float]] = []
+        self.unmatched_breaks = 0  # breaks started by failed matches rather than by a gap in the laser
 
     def wants(self, stamp: int, odo: np.ndarray) -> bool:
         """The motion filter: is a scan at ``stamp`` with odometry pose ``odo`` a new node?"""
@@ -200,6 +212,7 @@ class LocalSlam:
                  if host.count >= self.cfg.min_scans_to_match else None)
             drift = self._drift(travelled - host.travelled0)
             if m is not None and m.ok:
+                self._missed.clear()
                 node = Node(int(stamp), host.index, self._polish(host, b_pts, m.aTb), m.cov_aTb + drift, b_pts,
                             m.score, True)
                 self._fix(host, stamp, node.aTb)
@@ -207,7 +220,36 @@ class LocalSlam:
                 prev_cov = last.cov_aTb if last.submap == host.index else np.zeros((3, 3))
                 node = Node(int(stamp), host.index, pred, prev_cov + cov_odo_step() + drift, b_pts,
                             0.0 if m is None else m.score, False)
+                if m is not None and self.cfg.lost_after_misses and len(self._scores) >= 20:
+                    self._missed.append((len(self.nodes), np.asarray(odo, np.float64), ranges, angles, travelled))
+                    if len(self._missed) < self.cfg.lost_after_misses:
+                        return self._keep(node, odo, stamp)  # placed by the odometry, not inserted
+                    return self._keep(self._rehome(node), odo, stamp)
         self._insert(node, ranges, angles, travelled)
+        return self._keep(node, odo, stamp)
+
+    def _rehome(self, node: Node) -> Node:
+        """The scans fit nowhere near the odometry ``lost_after_misses`` times in a row: carried. Start afresh at
+        the first of those nodes, each of them placed in the new submap by the odometry since it and inserted;
+        returns ``node`` (the last) re-homed."""
+        first_i, o1, _, _, t1 = self._missed[0]
+        self.unmatched_breaks += 1
+        self._lose()
+        self._start(self.nodes[first_i].stamp_ns if first_i < len(self.nodes) else node.stamp_ns, t1)
+        index = self.active[0].index
+        for i, odo_i, ranges, angles, trav in self._missed:
+            old = self.nodes[i] if i < len(self.nodes) else node
+            new = Node(old.stamp_ns, index, g.between(o1, odo_i), np.zeros((3, 3)) if i == first_i else old.cov_aTb,
+                       old.b_points, 1.0 if i == first_i else old.score, i == first_i)
+            self._insert(new, ranges, angles, trav)
+            if i < len(self.nodes):
+                self.nodes[i] = new
+            else:
+                node = new
+        self._missed.clear()
+        return node
+
+    def _keep(self, node: Node, odo: np.ndarray, stamp: int) -> Node:
         self.nodes.append(node)
         self._last_odo, self._last_stamp = np.asarray(odo, np.float64), int(stamp)
         return node

@@ -1,7 +1,9 @@
 """A kidnapped robot on real scans: 300 s of the Freiburg fr079 log (../shared/realdata, not in the repository)
 whose odometry jumps by 30 m and 90 degrees in its middle, with the 30 s of scans after the jump removed
 (``holoslam.derive.kidnap``). Local SLAM starts afresh after the gap, and only the global loop search can put the
-second part back onto the first: it must, as well as the uncut log maps it."""
+second part back onto the first: it must, as well as the uncut log maps it. And the same 300 s driven twice,
+the robot carried back to its start between with its laser on (``holoslam.derive.repeat``: no gap in the laser,
+the odometer counting on): local SLAM must notice that its scans stopped fitting the map and start afresh."""
 
 from __future__ import annotations
 
@@ -58,6 +60,40 @@ def fr079_kidnapped(tmp_path_factory):
         out[name] = (fe, relation_errors(stamps, g.compose(wTb, np.broadcast_to(bTl, wTb.shape)), rel))
     across = (rel.t1_ns < at) != (rel.t2_ns < at)
     return out, across
+
+
+@pytest.fixture(scope="module")
+def fr079_carried(fr079_kidnapped, tmp_path_factory):
+    from holoslam import derive
+    from holoslam import geometry as g
+    from holoslam.evaluate import relation_errors
+    from holoslam.io.mcap import read_log
+    from holoslam.io.mcap_cut import cut_log
+    from holoslam.io.relations import Relations, cut_relations, read_relations
+    from holoslam.submaps.frontend import base_to_laser
+
+    path = tmp_path_factory.mktemp("fr079c") / "cut.mcap"
+    cut_log(REALDATA / "fr079.mcap", path, START_S, DURATION_S)
+    log, _ = read_log(path, require=["odometry", "scan"])
+    twice, span = derive.repeat(log, 2), derive.repeat_span_ns(log)
+    rel = cut_relations(read_relations(REALDATA / "fr079.relations"), int(log.scans[0].stamp_ns),
+                        int(log.scans[-1].stamp_ns) + 1)
+    fe, stamps, wTb = _mapped(twice)
+    wTl = g.compose(wTb, np.broadcast_to(base_to_laser(log, log.scans[0].frame_id), wTb.shape))
+    second = relation_errors(stamps, wTl, Relations(rel.t1_ns + span, rel.t2_ns + span, rel.T))
+    same = np.array([s.stamp_ns for s in log.scans[::10]], dtype=np.int64)  # a scan and its copy: one pose
+    across = relation_errors(stamps, wTl, Relations(same, same + span, np.zeros((len(same), 3))))
+    return fe, second, across, fr079_kidnapped[0]["plain"][1]
+
+
+def test_a_robot_carried_back_to_its_start_with_its_laser_on_is_joined(fr079_carried):
+    fe, second, across, plain = fr079_carried
+    print("second copy", second.to_text(), "a scan against its copy", across.to_text())
+    assert fe.breaks == 1  # local SLAM began afresh where the scans stopped fitting, not before nor twice
+    assert across.n_matched >= 90
+    assert across.translation_max_m < 0.3  # every scan of the second copy where the first one put it
+    assert second.translation_mean_m < 1.5 * plain.translation_mean_m
+    assert second.rotation_mean_deg < 1.5 * plain.rotation_mean_deg
 
 
 def test_the_two_parts_of_a_kidnapped_log_are_joined(fr079_kidnapped):
