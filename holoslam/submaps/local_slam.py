@@ -182,7 +182,6 @@ class LocalSlam:
         # the nodes whose matches failed in a row (``lost_after_misses``): index in ``nodes``, odometry pose, ranges,
         # angles, odometer; left out of the map until a match succeeds (forgotten) or a break re-homes them
         self._missed: list[tuple[int, np.ndarray, np.ndarray, np.ndarray, float]] = []
-        self.unmatched_breaks = 0  # breaks started by failed matches rather than by a gap in the laser
 
     def wants(self, stamp: int, odo: np.ndarray) -> bool:
         """The motion filter: is a scan at ``stamp`` with odometry pose ``odo`` a new node?"""
@@ -222,32 +221,27 @@ class LocalSlam:
                             0.0 if m is None else m.score, False)
                 if m is not None and self.cfg.lost_after_misses and len(self._scores) >= 20:
                     self._missed.append((len(self.nodes), np.asarray(odo, np.float64), ranges, angles, travelled))
-                    if len(self._missed) < self.cfg.lost_after_misses:
-                        return self._keep(node, odo, stamp)  # placed by the odometry, not inserted
-                    return self._keep(self._rehome(node), odo, stamp)
+                    self._keep(node, odo, stamp)  # placed by the odometry, not inserted
+                    if len(self._missed) >= self.cfg.lost_after_misses:
+                        self._rehome()
+                    return self.nodes[-1]
         self._insert(node, ranges, angles, travelled)
         return self._keep(node, odo, stamp)
 
-    def _rehome(self, node: Node) -> Node:
+    def _rehome(self) -> None:
         """The scans fit nowhere near the odometry ``lost_after_misses`` times in a row: carried. Start afresh at
-        the first of those nodes, each of them placed in the new submap by the odometry since it and inserted;
-        returns ``node`` (the last) re-homed."""
-        first_i, o1, _, _, t1 = self._missed[0]
-        self.unmatched_breaks += 1
+        the first of those nodes, each of them placed in the new submap by the odometry since it and inserted."""
+        first, o1, _, _, t1 = self._missed[0]
         self._lose()
-        self._start(self.nodes[first_i].stamp_ns if first_i < len(self.nodes) else node.stamp_ns, t1)
+        self._start(self.nodes[first].stamp_ns, t1)
         index = self.active[0].index
-        for i, odo_i, ranges, angles, trav in self._missed:
-            old = self.nodes[i] if i < len(self.nodes) else node
-            new = Node(old.stamp_ns, index, g.between(o1, odo_i), np.zeros((3, 3)) if i == first_i else old.cov_aTb,
-                       old.b_points, 1.0 if i == first_i else old.score, i == first_i)
-            self._insert(new, ranges, angles, trav)
-            if i < len(self.nodes):
-                self.nodes[i] = new
-            else:
-                node = new
+        for i, odo_i, ranges, angles, travelled in self._missed:
+            old = self.nodes[i]
+            self.nodes[i] = Node(old.stamp_ns, index, g.between(o1, odo_i),
+                                 np.zeros((3, 3)) if i == first else old.cov_aTb, old.b_points,
+                                 1.0 if i == first else old.score, i == first)  # the first is the new anchor
+            self._insert(self.nodes[i], ranges, angles, travelled)
         self._missed.clear()
-        return node
 
     def _keep(self, node: Node, odo: np.ndarray, stamp: int) -> Node:
         self.nodes.append(node)
