@@ -87,3 +87,50 @@ def test_an_object_at_its_place_out_of_sight_and_a_visible_move_on_its_day(lt):
     truth["days"][2]["photographed"] = ["O05"]
     obs = lt.observable_truth(truth, worlds, [cams[0], cams[1], cams[1]])
     assert obs.days[2] == {"O05": "moved"}
+
+
+def _image_at(lt, o: WorldObject, r: float, off_deg: float = 0.0, aim_off_deg: float = 0.0, zoom: float = 8.0):
+    """An image taken from a base ``r`` m in front of ``o``'s label (``off_deg`` around its normal), the head
+    aimed at the label (``aim_off_deg`` of pan away from it) at ``zoom``."""
+    from holoslam.sim.camera import camera_pose_world, intrinsics
+
+    a = o.label_yaw + math.radians(off_deg)
+    base = np.array([o.position[0] + r * math.cos(a), o.position[1] + r * math.sin(a), a + math.pi])
+    _, c = camera_pose_world(base, 0.0, 0.0)
+    rel = np.asarray(o.position) - c
+    pan = math.atan2(rel[1], rel[0]) - base[2] + math.radians(aim_off_deg)
+    tilt = math.atan2(rel[2], math.hypot(rel[0], rel[1]))
+    wRc, wtc = camera_pose_world(base, pan, tilt)
+    return lt.ImageCamera(0, intrinsics(zoom), wRc, wtc, (640, 480))
+
+
+def test_an_image_reads_a_label_only_aimed_at_it_facing_it_and_with_nothing_between(lt):
+    o = _obj("O05", 5.0, 5.0, 0.0)
+    w = _home(o)
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5)]) == 1
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5), _image_at(lt, o, 2.0, 30.0)]) == 2
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5, aim_off_deg=20.0)]) == 0  # aimed elsewhere: off the picture
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5, 70.0)]) == 0  # 70 deg off its normal
+    assert lt.image_reads(w, o, [_image_at(lt, o, 3.0, zoom=1.0)]) == 0  # 6 cm at 3 m, zoom 1: modules under 3 px
+    walled = _home(o, walls=[(6.0, 3.0, 6.0, 7.0)])
+    assert lt.image_reads(walled, o, [_image_at(lt, o, 1.5)]) == 0
+
+
+def test_the_image_rule_counts_what_the_days_images_held_not_what_the_poses_could_have(lt):
+    """The goal's rule (``images``): an object moved where the day's poses could photograph it but no image read
+    it is gone that day when an image held its old place, and moved on the day an image reads it; the
+    photographable rule calls it moved on the first day."""
+    cup_a, cup_b = _obj("O05", 2.0, 2.0, 0.0), _obj("O05", 12.0, 2.0, 0.0)
+    worlds = [_home(cup_a), _home(cup_b), _home(cup_b), _home(cup_b)]
+    poses = [_cam_at(cup_a, 1.5), np.vstack([_cam_at(cup_a, 1.5), _cam_at(cup_b, 1.5)]),
+             _cam_at(cup_b, 1.5), _cam_at(cup_b, 1.5)]
+    images = [[_image_at(lt, cup_a, 1.5)], [_image_at(lt, cup_a, 1.5)], [], [_image_at(lt, cup_b, 1.5)]]
+    truth = {"days": [{"objects": {"O05": []}, "photographed": ["O05"]}, {"objects": {}}, {"objects": {}},
+                      {"objects": {}, "photographed": ["O05"]}]}
+    assert lt.observable_truth(truth, worlds, poses).days[1:] == [{"O05": "moved"}, {}, {}]
+    # day 2: its new place photographable from a pose, but the day's one image was of the old place, empty: gone;
+    # day 3: no image at all; day 4: read
+    assert lt.observable_truth(truth, worlds, poses, images).days[1:] == [{"O05": "gone"}, {}, {"O05": "moved"}]
+    # an old place no image held: the gone waits
+    images[1] = []
+    assert lt.observable_truth(truth, worlds, poses, images).days[1:] == [{}, {}, {"O05": "moved"}]
