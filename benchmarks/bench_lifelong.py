@@ -9,19 +9,19 @@ each day), each day's log run into one store (``holoslam.lifelong.session.run_se
 change detection's precision and recall per kind against two truths, both printed and labelled:
 
 - the **observable truth** (what the issue's goal is judged on; ``lifelong_truth.py`` has the rule and its
-  named thresholds): the simulator's changes as the images the day's camera actually took could show them,
-  decided from the simulator's truth, the day's true trajectory and each image's true camera pose, pan, tilt and
-  zoom (the log's ``/tf`` and ``camera_info``) alone. A label is observable on a day when one of the day's images
-  read it; its place when one of the day's images would have read the label standing there (the simulator's own
-  reading test: inside the picture, facing the camera within 60 deg in 3-D, modules of 3 px, no wall or furniture
-  as tall as the label between). An object that moved where no image of the day read it is "gone" that day when
-  an image held its old place (not seen although its place was in view), and "moved" against its last known
-  place on the first later day an image reads it; a gone (taken away, or moved out of sight) counts on the first
-  day an image holds its last known place; an added object is "new" on the first day an image reads it;
-- the **photographable truth** (the rule before, printed beside it): the same with "observable" meaning
-  photographable from one true pose of the day (every 0.25 s) within the camera's reading limits (tilt within 45
-  deg, modules of 3 px at the full 10x zoom) whether or not the camera took that image. It called seed 4's ``O35``
-  "moved" on a day it was photographable for 3.5 s and no image read it;
+  named thresholds): the simulator's changes as the day's camera could observe them, decided from the
+  simulator's truth and the day's true trajectory alone. A label is observable on a day when one of the images
+  the day's camera took read it (``days.json`` ``photographed``: a label's identity is known only from an image
+  that read it); its place is in view when the label standing there was photographable from a true pose of the
+  day (every 0.25 s; within the camera's reading limits: facing it within 60 deg in 3-D, tilt within 45 deg,
+  modules of 3 px at the full 10x zoom, no wall or furniture as tall as the label between; absence is also seen by
+  the laser). An object that moved where no image of the day read it is "gone" that day when its old place was in
+  view (not seen although its place was in view), and "moved" against its last known place on the first later
+  day an image reads it; a gone (taken away, or moved out of sight) counts on the first day its last known place
+  is in view; an added object is "new" on the first day an image reads it;
+- the **photographable truth** (the rule before, printed beside it): a label also observable when photographable
+  from one true pose of the day, whether or not an image was taken. It called seed 4's ``O35`` (whole tours)
+  "moved" on a day it was photographable for 3.5 s and read in none of the day's 115 images;
 - the **raw simulator truth**: days.json's changes on their days (moved / gone = removed / new = added).
 
 In both an object the store did not know before and sees for the first time counts as a false "new" unless it
@@ -168,9 +168,9 @@ def _observable(out: Path, truth: dict, worlds: list, detail: list) -> None:
         x["truth_observable"], x["truth_photographable"], x["truth_rule"] = t, p, "images"
     (out / "sim_detail.json").write_text(json.dumps(detail, indent=1))
     det = [x["detected"] for x in detail]
-    print("\n" + format_scores("change detection against the OBSERVABLE truth (the issue's goal: what the images the "
-                               "day's camera took held readable, benchmarks/lifelong_truth.py)", score(obs.days, det)))
-    print("\n" + format_scores("change detection against the PHOTOGRAPHABLE truth (the rule before: what the day's "
+    print("\n" + format_scores("change detection against the OBSERVABLE truth (the issue's goal: labels read in the images "
+                               "the day's camera took, benchmarks/lifelong_truth.py)", score(obs.days, det)))
+    print("\n" + format_scores("change detection against the PHOTOGRAPHABLE truth (the rule before: labels the day's "
                                "true poses could have photographed for 0.25 s)", score(photo.days, det)))
 
 

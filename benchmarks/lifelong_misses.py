@@ -43,17 +43,16 @@ def _diff(a: float, b: float) -> float:
 
 
 def _observable_errors(out: Path, truth: dict, detail: list, worlds: list) -> None:
-    """Every false and missed change against the observable truth (``lifelong_truth``: what the images the day's
-    camera took held readable), the goal's truth; computed when the run's ``sim_detail.json`` predates that rule."""
-    from lifelong_truth import camera_positions, image_cameras, observable_truth
+    """Every false and missed change against the observable truth (``lifelong_truth``: labels read in the day's
+    images, places photographable), the goal's truth; computed when the run's ``sim_detail.json`` predates it."""
+    from lifelong_truth import camera_positions, observable_truth
 
-    if all(x.get("truth_rule") == "images" for x in detail):
+    if all(x.get("truth_rule") == "read" for x in detail):
         obs = [x["truth_observable"] for x in detail]
     else:  # a run before the image rule: its stored truth_observable is the photographable rule's
         days = truth["days"][: len(detail)]
         obs = observable_truth({**truth, "days": days}, worlds[: len(days)],
-                               [camera_positions(out / d["log"]) for d in days],
-                               [image_cameras(out / d["log"]) for d in days]).days
+                               [camera_positions(out / d["log"]) for d in days]).days
     print("errors against the observable truth (day object: truth -> detected)")
     for x, t in zip(detail, obs, strict=True):
         det = x["detected"]
