@@ -6,7 +6,7 @@
 ``sim``: ``--days`` simulated days of the household (``holoslam.sim.days``: 5-10 changes a day, a new start
 each day), each day's log run into one store (``holoslam.lifelong.session.run_session``, what
 ``holoslam run LOG --map STORE`` calls). Printed per day: joined / by what, relocalisation s, run s; then the
-change detection's precision and recall per kind against two truths, both printed and labelled:
+change detection's precision and recall per kind against three truths, all printed and labelled:
 
 - the **observable truth** (what the issue's goal is judged on; ``lifelong_truth.py`` has the rule and its
   named thresholds): the simulator's changes as the day's camera could observe them, decided from the
@@ -24,7 +24,7 @@ change detection's precision and recall per kind against two truths, both printe
   "moved" on a day it was photographable for 3.5 s and read in none of the day's 115 images;
 - the **raw simulator truth**: days.json's changes on their days (moved / gone = removed / new = added).
 
-In both an object the store did not know before and sees for the first time counts as a false "new" unless it
+In each an object the store did not know before and sees for the first time counts as a false "new" unless it
 was added. Then the unchanged objects' position RMSE in the world (world -> map by day 1's start pose, the store's frame)
 against the same day's single-session result (the session's own solve, moved to the map by the true start
 pose), and the joint solve of the last day re-solved by batch LM and by iSAM2 over the whole graph (median of 3,
@@ -154,18 +154,17 @@ def _score_gone(det: dict, tru: dict, d: dict, world_before, log: Path, acc: lis
 
 
 def _observable(out: Path, truth: dict, worlds: list, detail: list) -> None:
-    """The change detection against the observable truth (``lifelong_truth``: what the day's images held readable)
-    and against the photographable truth (the rule before it: what the day's poses could have photographed), both
-    kept per day in ``detail``."""
-    from lifelong_truth import camera_positions, format_scores, image_cameras, observable_truth, score
+    """The change detection against the observable truth (``lifelong_truth``: a label observable when the day's
+    images read it) and against the photographable truth (the rule before it: also when the day's poses could have
+    photographed it), both kept per day in ``detail``."""
+    from lifelong_truth import camera_positions, format_scores, observable_truth, score
 
     days = truth["days"][: len(detail)]
     cams = [camera_positions(out / d["log"]) for d in days]
-    obs = observable_truth({**truth, "days": days}, worlds[: len(days)], cams,
-                           [image_cameras(out / d["log"]) for d in days])
-    photo = observable_truth({**truth, "days": days}, worlds[: len(days)], cams)
+    obs = observable_truth({**truth, "days": days}, worlds[: len(days)], cams)
+    photo = observable_truth({**truth, "days": days}, worlds[: len(days)], cams, "photographable")
     for x, t, p in zip(detail, obs.days, photo.days, strict=True):
-        x["truth_observable"], x["truth_photographable"], x["truth_rule"] = t, p, "images"
+        x["truth_observable"], x["truth_photographable"], x["truth_rule"] = t, p, "read"
     (out / "sim_detail.json").write_text(json.dumps(detail, indent=1))
     det = [x["detected"] for x in detail]
     print("\n" + format_scores("change detection against the OBSERVABLE truth (the issue's goal: labels read in the images "

@@ -49,7 +49,7 @@ def _observable_errors(out: Path, truth: dict, detail: list, worlds: list) -> No
 
     if all(x.get("truth_rule") == "read" for x in detail):
         obs = [x["truth_observable"] for x in detail]
-    else:  # a run before the image rule: its stored truth_observable is the photographable rule's
+    else:  # a run scored before the read rule: its stored truth_observable is the photographable rule's
         days = truth["days"][: len(detail)]
         obs = observable_truth({**truth, "days": days}, worlds[: len(days)],
                                [camera_positions(out / d["log"]) for d in days]).days
