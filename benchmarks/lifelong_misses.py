@@ -43,13 +43,13 @@ def _diff(a: float, b: float) -> float:
 
 
 def _observable_errors(out: Path, truth: dict, detail: list, worlds: list) -> None:
-    """Every false and missed change against the observable truth (``lifelong_truth``: what the day's camera
-    could photograph), the goal's truth; computed when the run's ``sim_detail.json`` predates it."""
+    """Every false and missed change against the observable truth (``lifelong_truth``: labels read in the day's
+    images, places photographable), the goal's truth; computed when the run's ``sim_detail.json`` predates it."""
     from lifelong_truth import camera_positions, observable_truth
 
-    if all("truth_observable" in x for x in detail):
+    if all(x.get("truth_rule") == "read" for x in detail):
         obs = [x["truth_observable"] for x in detail]
-    else:
+    else:  # a run scored before the read rule: its stored truth_observable is the photographable rule's
         days = truth["days"][: len(detail)]
         obs = observable_truth({**truth, "days": days}, worlds[: len(days)],
                                [camera_positions(out / d["log"]) for d in days]).days

@@ -66,13 +66,17 @@ def test_a_move_out_of_sight_is_gone_then_moved_and_gone_waits_for_its_place(lt)
     assert not lt.readable_mask(_home(cup_b), cup_b, cam_a)[0]
     worlds = [_home(cup_a, remote), _home(cup_b, added), _home(cup_b, added), _home(cup_b, added)]
     cams = [np.vstack([cam_a, cam_r]), cam_a, np.vstack([cam_a, cam_n]), np.vstack([cam_b, cam_r])]
-    truth = {"days": [{"objects": {"O05": [], "O06": []}}] + [{"objects": {}} for _ in range(3)]}
-    obs = lt.observable_truth(truth, worlds, cams)
-    # day 2: the cup moved where nothing photographed it, its old place photographed: gone; the remote's place not
-    # photographable: its gone waits; the added object not photographable: not new yet
-    assert obs.days[1] == {"O05": "gone"}
-    assert obs.days[2] == {"O36": "new"}  # photographed; the cup's empty place again: already gone
-    assert obs.days[3] == {"O05": "moved", "O06": "gone"}  # the cup found, moved against its last known place
+    # the images read what the poses could photograph (the simulator's record): both rules agree
+    read = [["O05", "O06"], [], ["O36"], ["O05"]]
+    truth = {"days": [{"objects": {"O05": [], "O06": []}, "photographed": read[0]}]
+             + [{"objects": {}, "photographed": r} for r in read[1:]]}
+    for rule in ("read", "photographable"):
+        obs = lt.observable_truth(truth, worlds, cams, rule)
+        # day 2: the cup moved where nothing photographed it, its old place photographed: gone; the remote's place
+        # not photographable: its gone waits; the added object not photographable: not new yet
+        assert obs.days[1] == {"O05": "gone"}
+        assert obs.days[2] == {"O36": "new"}  # photographed; the cup's empty place again: already gone
+        assert obs.days[3] == {"O05": "moved", "O06": "gone"}  # the cup found, moved against its last known place
 
 
 def test_an_object_at_its_place_out_of_sight_and_a_visible_move_on_its_day(lt):
@@ -80,10 +84,61 @@ def test_an_object_at_its_place_out_of_sight_and_a_visible_move_on_its_day(lt):
     worlds = [_home(cup_a), _home(cup_a), _home(cup_b)]
     cams = [_cam_at(cup_a, 1.0), _cam_at(cup_a, 1.0, 180.0), _cam_at(cup_b, 1.0)]
     truth = {"days": [{"objects": {"O05": []}}, {"objects": {}}, {"objects": {}}]}
-    obs = lt.observable_truth(truth, worlds, cams)
+    obs = lt.observable_truth(truth, worlds, cams, "photographable")
     assert obs.days[1] == {}  # at its place, not photographable: no change
     assert obs.days[2] == {"O05": "moved"}  # 2 m, photographable on its day
+    assert lt.observable_truth(truth, worlds, cams).days[2] == {}  # the goal's rule: read in no image, not seen
     # read in the day's images (the simulator's record) counts as observable whatever the geometry says
-    truth["days"][2]["photographed"] = ["O05"]
-    obs = lt.observable_truth(truth, worlds, [cams[0], cams[1], cams[1]])
-    assert obs.days[2] == {"O05": "moved"}
+    truth["days"][0]["photographed"] = truth["days"][2]["photographed"] = ["O05"]
+    for rule in ("read", "photographable"):
+        obs = lt.observable_truth(truth, worlds, [cams[0], cams[1], cams[1]], rule)
+        assert obs.days[2] == {"O05": "moved"}
+
+
+def _image_at(lt, o: WorldObject, r: float, off_deg: float = 0.0, aim_off_deg: float = 0.0, zoom: float = 8.0):
+    """An image taken from a base ``r`` m in front of ``o``'s label (``off_deg`` around its normal), the head
+    aimed at the label (``aim_off_deg`` of pan away from it) at ``zoom``."""
+    from holoslam.sim.camera import camera_pose_world, intrinsics
+
+    a = o.label_yaw + math.radians(off_deg)
+    base = np.array([o.position[0] + r * math.cos(a), o.position[1] + r * math.sin(a), a + math.pi])
+    _, c = camera_pose_world(base, 0.0, 0.0)
+    rel = np.asarray(o.position) - c
+    pan = math.atan2(rel[1], rel[0]) - base[2] + math.radians(aim_off_deg)
+    tilt = math.atan2(rel[2], math.hypot(rel[0], rel[1]))
+    wRc, wtc = camera_pose_world(base, pan, tilt)
+    return lt.ImageCamera(0, intrinsics(zoom), wRc, wtc, (640, 480))
+
+
+def test_an_image_reads_a_label_only_aimed_at_it_facing_it_and_with_nothing_between(lt):
+    o = _obj("O05", 5.0, 5.0, 0.0)
+    w = _home(o)
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5)]) == 1
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5), _image_at(lt, o, 2.0, 30.0)]) == 2
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5, aim_off_deg=20.0)]) == 0  # aimed elsewhere: off the picture
+    assert lt.image_reads(w, o, [_image_at(lt, o, 1.5, 70.0)]) == 0  # 70 deg off its normal
+    assert lt.image_reads(w, o, [_image_at(lt, o, 3.0, zoom=1.0)]) == 0  # 6 cm at 3 m, zoom 1: modules under 3 px
+    walled = _home(o, walls=[(6.0, 3.0, 6.0, 7.0)])
+    assert lt.image_reads(walled, o, [_image_at(lt, o, 1.5)]) == 0
+
+
+def test_the_goals_rule_counts_a_label_seen_only_when_an_image_read_it(lt):
+    """The goal's rule ("read"): an object moved where the day's poses could photograph it but no image read it is
+    gone that day when its old place was in view, and moved on the day an image reads it; the photographable rule
+    calls it moved on the first day. An added object is new on the day an image reads it."""
+    cup_a, cup_b = _obj("O05", 2.0, 2.0, 0.0), _obj("O05", 12.0, 2.0, 0.0)
+    added = _obj("O36", 12.0, 12.0, 0.0)
+    worlds = [_home(cup_a), _home(cup_b, added), _home(cup_b, added), _home(cup_b, added)]
+    poses = [_cam_at(cup_a, 1.5), np.vstack([_cam_at(cup_a, 1.5), _cam_at(cup_b, 1.5), _cam_at(added, 1.5)]),
+             _cam_at(cup_b, 1.5), _cam_at(cup_b, 1.5)]
+    truth = {"days": [{"objects": {"O05": []}, "photographed": ["O05"]}, {"objects": {}}, {"objects": {}},
+                      {"objects": {}, "photographed": ["O05", "O36"]}]}
+    assert lt.observable_truth(truth, worlds, poses, "photographable").days[1:] == [
+        {"O05": "moved", "O36": "new"}, {}, {}]
+    # day 2: read in no image, its old place in view: gone; day 3 nothing read; day 4 both read
+    assert lt.observable_truth(truth, worlds, poses).days[1:] == [{"O05": "gone"}, {}, {"O05": "moved", "O36": "new"}]
+    # an old place not in view: the gone waits (and the move is reported on the day it is read)
+    poses[1] = _cam_at(cup_b, 1.5)
+    assert lt.observable_truth(truth, worlds, poses).days[1:] == [{}, {}, {"O05": "moved", "O36": "new"}]
+    with pytest.raises(ValueError):
+        lt.observable_truth(truth, worlds, poses, "images")
