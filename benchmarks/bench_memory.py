@@ -35,13 +35,6 @@ ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "realdata"
 
 
-def repeated(log, times: int):
-    """``log`` (a ``LogData``) with its odometry and scans played ``times`` times end to end (``derive.repeat``)."""
-    from holoslam import derive
-
-    return derive.repeat(log, times)
-
-
 def _vm_mb(field: str) -> float:
     """The process's ``VmHWM`` / ``VmRSS`` (MB) from /proc/self/status; 0 where there is none."""
     with contextlib.suppress(OSError):
@@ -86,12 +79,13 @@ def _accuracy(report) -> dict | None:
 
 
 def child(log_path: str, times: int, out: str, write: bool) -> None:
+    from holoslam import derive
     from holoslam.io.mcap import read_log
     from holoslam.pipeline import run_data
 
     peaks = StagePeaks("ingest")
     log, ingest = read_log(log_path, require=["odometry", "scan"])
-    log = repeated(log, times)
+    log = derive.repeat(log, times)
     result = run_data(log, ingest, progress=peaks)
     peaks.close()
     minutes = (log.scans[-1].stamp_ns - log.scans[0].stamp_ns) / 60e9

@@ -3,19 +3,13 @@ says how many each located (issue 13: 35 -> 32 matched went unreported, and the 
 
 from __future__ import annotations
 
-import importlib.util
-
 import pytest
-from repo_paths import REPO
+from repo_paths import benchmark_module
 
 
 @pytest.fixture(scope="module")
 def bench():
-    path = REPO / "benchmarks" / "bench_household_accuracy.py"
-    spec = importlib.util.spec_from_file_location("bench_household_accuracy", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return benchmark_module("bench_household_accuracy")
 
 
 def test_a_corrupted_run_that_loses_objects_says_so(bench):

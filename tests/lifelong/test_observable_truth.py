@@ -5,25 +5,18 @@ object is new on the first day it can be photographed), decided from the truth a
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import sys
 
 import numpy as np
 import pytest
-from repo_paths import REPO
+from repo_paths import benchmark_module
 
 from holoslam.sim.world import World, WorldObject
 
 
 @pytest.fixture(scope="module")
 def lt():
-    path = REPO / "benchmarks" / "lifelong_truth.py"
-    spec = importlib.util.spec_from_file_location("lifelong_truth", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("lifelong_truth", mod)
-    spec.loader.exec_module(mod)
-    return mod
+    return benchmark_module("lifelong_truth")
 
 
 def _obj(oid: str, x: float, y: float, yaw: float, z: float = 0.5) -> WorldObject:

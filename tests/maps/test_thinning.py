@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from repo_paths import REPO
+from repo_paths import benchmark_module
 
 from holoslam.errors import MapError
 from holoslam.maps.thinning import (
@@ -208,12 +208,7 @@ def test_compiled_equals_numpy_and_reference_on_the_bare_rule():
 
 @pytest.mark.slow
 def test_compiled_equals_numpy_on_benchmark_maps():
-    import importlib.util
-
-    path = REPO / "benchmarks" / "bench_thinning.py"
-    spec = importlib.util.spec_from_file_location("bench_thinning", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = benchmark_module("bench_thinning")
     grid = bench.household_grid()[0]
     household = grid.free
     maps = [household, np.tile(household, (3, 3))[:1000, :1000], bench.apartment(1000)]

@@ -8,12 +8,9 @@ were accepted on their own until such matches were offered for agreement like gl
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-
 import numpy as np
 import pytest
-from repo_paths import REPO, SHARED
+from repo_paths import SHARED, benchmark_module
 
 REALDATA = SHARED / "realdata"
 pytestmark = [
@@ -25,12 +22,7 @@ pytestmark = [
 @pytest.fixture(scope="module")
 def bench():
     """benchmarks/bench_realdata.py: its variants of a log and the relations it scores them on."""
-    path = REPO / "benchmarks" / "bench_realdata.py"
-    spec = importlib.util.spec_from_file_location("bench_realdata", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("bench_realdata", mod)
-    spec.loader.exec_module(mod)
-    return mod
+    return benchmark_module("bench_realdata")
 
 
 @pytest.fixture(scope="module", params=[("aces", 0.5), ("intel", 2 / 3)], ids=["aces-middle", "intel-two-thirds"])
