@@ -13,7 +13,11 @@ part onto the old one. Closures c1, c2 agree when Delta_c1 and Delta_c2 move anc
 their covariances plus the drift the map may have between them: ``sigma_m + rate * d`` (m) and ``sigma_deg +
 deg_rate * d`` (deg), d the distance the robot travelled between n1 and n2 plus between m1 and m2 (local SLAM's
 drift over that much travel; the map is rigid below it). The squared Mahalanobis distance of the difference must
-stay under the chi-square(3) gate. A closure is accepted when it and ``min_agreeing`` - 1 others all agree with one
+stay under the chi-square(3) gate. The allowance must stay able to tell an alias: closures whose heading
+allowance would exceed ``max_allowance_deg`` do not vouch for each other (thousands of metres apart, any two
+corrections would agree, a half turn included), nor do closures whose new anchors lie on either side of a break
+of local SLAM (two parts of the run that no rigid correction links: a closure waiting from the part before a
+second kidnap agreed with an alias of the part after it, and joined that 180 deg wrong). A closure is accepted when it and ``min_agreeing`` - 1 others all agree with one
 another (a clique, as in pairwise consistency maximisation); those are accepted with it. The others wait (``pending``), at most ``max_pending``, the oldest forgotten first.
 """
 
@@ -51,6 +55,11 @@ class ConsistencyConfig:
     deg_rate: float = 0.05  # deg per m travelled
     gate: float = 16.27  # chi-square(3) 99.9 %
     max_pending: int = 200  # closures waiting for agreement; older ones are forgotten
+    # deg: closures whose heading allowance (sigma_deg + deg_rate * their distance) would exceed this do not vouch
+    # for each other: the gate (4 sigma) then spans 60 deg either way, and wider it would pass a corridor's 90 deg
+    # or a half-turn's alias as agreeing. 15 deg is 280 m of travel between the closures; the right joins of the
+    # kidnapped shared logs (full rate and 1.4 Hz with half the beams) gathered their three within 176 m
+    max_allowance_deg: float = 15.0
 
 
 def correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:
@@ -58,20 +67,27 @@ def correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:
     return g.compose(g.compose(wTm, mTn), g.inverse(wTn))
 
 
-def agreement(c1, c2, est_wTa: np.ndarray, travel: np.ndarray, cfg: ConsistencyConfig) -> float:
+def agreement(c1, c2, est_wTa: np.ndarray, travel: np.ndarray, cfg: ConsistencyConfig,
+              parts: np.ndarray | None = None) -> float:
     """The squared Mahalanobis distance between what closures ``c1`` and ``c2`` (``LoopCandidate``-like: old,
     new, mTn, cov_mTn, travelled: the odometer at the node) say of anchor c2.new (module docstring); infinite for
-    closures from nodes nearer than ``min_separation_m``."""
+    closures from nodes nearer than ``min_separation_m``, and for closures whose new anchors lie in different
+    parts of the run (``parts[a]``: the breaks of local SLAM before anchor a), which no rigid correction links."""
     if abs(c1.travelled - c2.travelled) < cfg.min_separation_m:
+        return math.inf
+    if parts is not None and parts[c1.new] != parts[c2.new]:
+        return math.inf
+    dist = abs(travel[c1.new] - travel[c2.new]) + abs(travel[c1.old] - travel[c2.old])
+    s_deg = cfg.sigma_deg + cfg.deg_rate * dist
+    if s_deg > cfg.max_allowance_deg:
         return math.inf
     d1 = correction(est_wTa[c1.old], c1.mTn, est_wTa[c1.new])
     d2 = correction(est_wTa[c2.old], c2.mTn, est_wTa[c2.new])
     wTn = est_wTa[c2.new]
     e = g.between(g.compose(d1, wTn), g.compose(d2, wTn))
     e[2] = g.wrap(e[2])
-    dist = abs(travel[c1.new] - travel[c2.new]) + abs(travel[c1.old] - travel[c2.old])
     s_xy = cfg.sigma_m + cfg.rate * dist
-    s_th = math.radians(cfg.sigma_deg + cfg.deg_rate * dist)
+    s_th = math.radians(s_deg)
     # both closures' covariances are of anchor n in its own frame; c1's is moved to c2's anchor
     n1Tn2 = g.between(est_wTa[c1.new], wTn)
     A = g.adjoint(g.inverse(n1Tn2))
@@ -87,15 +103,16 @@ class LoopConsistency:
         self.pending: list = []
         self.accepted: list = []  # wide closures accepted so far (a new one may agree with these too)
 
-    def offer(self, c, est_wTa: np.ndarray, travel: np.ndarray) -> list:
+    def offer(self, c, est_wTa: np.ndarray, travel: np.ndarray, parts: np.ndarray | None = None) -> list:
         """The closures to accept now: ``c`` and a set of waiting ones that agree with it and with one another
         (with the closures accepted before, which are trusted, agreeing with ``c`` counting too), when they are
-        ``min_agreeing`` in all; else ``c`` waits and nothing is accepted."""
+        ``min_agreeing`` in all; else ``c`` waits and nothing is accepted. ``parts`` (optional, per anchor): the
+        part of the run each anchor is in (``agreement``)."""
         est_wTa, travel = np.asarray(est_wTa), np.asarray(travel)
         gate = self.cfg.gate
 
         def agree(a, b) -> bool:
-            return agreement(a, b, est_wTa, travel, self.cfg) <= gate
+            return agreement(a, b, est_wTa, travel, self.cfg, parts) <= gate
 
         trusted = sum(agree(a, c) for a in self.accepted)
         group: list = []

@@ -305,7 +305,7 @@ class LoopSearch:
             if agree.verdict(verify) is False:
                 self._count(f"{kind}: rejected by the map check")
                 return []
-        accepted = self.consistency.offer(cand, est_wTa, travel)
+        accepted = self.consistency.offer(cand, est_wTa, travel, self._parts(len(est_wTa)))
         self._count(f"{kind}: accepted (consistent)" if accepted else f"{kind}: waiting for agreement")
         for a in accepted:
             if a is not cand:

@@ -78,3 +78,34 @@ def test_two_wrong_closures_that_agree_with_each_other_do_not_join_alone():
     assert pool.offer(closure(0, 2, 300.0, wrong), EST, TRAVEL) == []
     assert pool.offer(closure(1, 3, 306.0, wrong), EST, TRAVEL) == []  # they agree, but only two
     assert pool.offer(closure(0, 3, 312.0), EST, TRAVEL) == []  # a right one disagrees with both
+
+
+def test_closures_too_far_apart_to_tell_a_half_turn_do_not_vouch_for_each_other():
+    # 3 km of travel between two closures would allow 150 deg (1 sigma): a half-turn alias would agree. The
+    # allowance is capped (max_allowance_deg): such closures do not vouch for each other at all
+    cfg = ConsistencyConfig()
+    far = TRAVEL.copy()
+    far[3] = 3300.0
+    half_turn = closure(1, 3, 3300.0, error=(0.0, 0.0, math.pi))
+    assert math.isinf(agreement(closure(0, 2, 300.0), half_turn, EST, far, cfg))
+    # uncapped, the same pair would pass the gate: the cap is what keeps it out
+    loose = ConsistencyConfig(max_allowance_deg=1e9)
+    assert agreement(closure(0, 2, 300.0), half_turn, EST, far, loose) < loose.gate
+    # a right pair just under 280 m apart (new sides and old sides' travel together) is still judged
+    mid = TRAVEL.copy()
+    mid[3] = 300.0 + (cfg.max_allowance_deg - cfg.sigma_deg) / cfg.deg_rate - (TRAVEL[1] - TRAVEL[0]) - 1.0
+    assert agreement(closure(0, 2, 300.0), closure(1, 3, float(mid[3])), EST, mid, cfg) < 1.0
+
+
+def test_closures_of_different_parts_of_the_run_do_not_vouch_for_each_other():
+    # anchors 2 and 3 on either side of a break of local SLAM: no rigid correction links them, so a closure
+    # waiting from the earlier part (here one that agrees by chance) cannot help join the later one
+    cfg = ConsistencyConfig()
+    parts = np.array([0, 0, 1, 2])
+    assert agreement(closure(0, 2, 300.0), closure(1, 3, 306.0), EST, TRAVEL, cfg) < 1.0
+    assert math.isinf(agreement(closure(0, 2, 300.0), closure(1, 3, 306.0), EST, TRAVEL, cfg, parts))
+    pool = LoopConsistency()
+    assert pool.offer(closure(0, 2, 300.0), EST, TRAVEL, parts) == []
+    assert pool.offer(closure(1, 3, 306.0), EST, TRAVEL, parts) == []
+    assert pool.offer(closure(0, 3, 312.0), EST, TRAVEL, parts) == []  # two of part 2 agree: not yet three
+    assert len(pool.pending) == 3
