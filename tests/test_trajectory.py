@@ -1,9 +1,12 @@
-"""The run's trajectory between optimised keyframes (``holoslam.trajectory.optimised_trajectory``)."""
+"""The run's trajectory between optimised keyframes (``holoslam.trajectory.optimised_trajectory``) and the
+scans localised between them (``node_keyframe_poses``)."""
+
+from types import SimpleNamespace
 
 import numpy as np
 
 from holoslam import geometry as g
-from holoslam.trajectory import optimised_trajectory
+from holoslam.trajectory import node_keyframe_poses, optimised_trajectory
 
 
 def _drive(n: int = 201, dt_ns: int = 50_000_000):
@@ -44,3 +47,21 @@ def test_before_the_first_and_after_the_last_keyframe_the_odometry_carries_the_p
     before = g.compose(true[40], g.between(odo[40], odo[10]))
     np.testing.assert_allclose(wTb[150], after, atol=1e-9)
     np.testing.assert_allclose(wTb[10], before, atol=1e-9)
+
+
+def test_a_scan_tracked_between_two_keyframes_follows_both_of_their_solved_poses():
+    # a submap with keyframes at 0 and 1 s; the node solve moved the second 4 cm and 0.6 deg relative to where the
+    # submap's frame put it (what the solve corrects of local SLAM between them). A scan localised (not inserted) at
+    # 0.75 s takes three quarters of that correction, instead of hanging from the first keyframe alone
+    aTk = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    sm = SimpleNamespace(scan_stamps_ns=np.array([0, 1_000_000_000]), aTb=aTk,
+                         track_stamps_ns=np.array([750_000_000]), track_aTb=np.array([[0.375, 0.0, 0.0]]))
+    wTs = np.array([2.0, 1.0, 0.3])  # the submap's frame as the first keyframe's solved pose puts it
+    fix = np.array([0.04, 0.0, np.radians(0.6)])
+    wTn = np.array([g.compose(wTs, aTk[0]), g.compose(g.compose(wTs, fix), aTk[1])])
+    stamps, poses = node_keyframe_poses([sm], sm.scan_stamps_ns, wTn)
+    assert stamps.tolist() == [0, 750_000_000, 1_000_000_000]
+    expected = g.compose(g.compose(wTs, 0.75 * fix), sm.track_aTb[0])
+    np.testing.assert_allclose(poses[1], expected, atol=1e-12)
+    hung_from_first = g.compose(wTs, sm.track_aTb[0])
+    assert np.hypot(*(poses[1][:2] - hung_from_first[:2])) > 0.025
