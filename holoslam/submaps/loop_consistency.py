@@ -15,10 +15,10 @@ deg_rate * d`` (deg), d the distance the robot travelled between n1 and n2 plus 
 drift over that much travel; the map is rigid below it). The squared Mahalanobis distance of the difference must
 stay under the chi-square(3) gate. The allowance must stay able to tell an alias: closures whose heading
 allowance would exceed ``max_allowance_deg`` do not vouch for each other (thousands of metres apart, any two
-corrections would agree, a half turn included), nor do closures whose new anchors lie on either side of a break
-of local SLAM (two parts of the run that no rigid correction links: a closure waiting from the part before a
-second kidnap agreed with an alias of the part after it, and joined that 180 deg wrong). A closure is accepted when it and ``min_agreeing`` - 1 others all agree with one
-another (a clique, as in pairwise consistency maximisation); those are accepted with it. The others wait (``pending``), at most ``max_pending``, the oldest forgotten first.
+corrections agree, a half turn included: a closure waiting since a robot's second carry agreed with an alias
+after its third, 2,000 m later, and joined that 180 deg wrong). A closure is accepted when it and
+``min_agreeing`` - 1 others all agree with one another (a clique, as in pairwise consistency maximisation); those
+are accepted with it. The others wait (``pending``), at most ``max_pending``, the oldest forgotten first.
 """
 
 from __future__ import annotations
@@ -67,15 +67,12 @@ def correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:
     return g.compose(g.compose(wTm, mTn), g.inverse(wTn))
 
 
-def agreement(c1, c2, est_wTa: np.ndarray, travel: np.ndarray, cfg: ConsistencyConfig,
-              parts: np.ndarray | None = None) -> float:
+def agreement(c1, c2, est_wTa: np.ndarray, travel: np.ndarray, cfg: ConsistencyConfig) -> float:
     """The squared Mahalanobis distance between what closures ``c1`` and ``c2`` (``LoopCandidate``-like: old,
     new, mTn, cov_mTn, travelled: the odometer at the node) say of anchor c2.new (module docstring); infinite for
-    closures from nodes nearer than ``min_separation_m``, and for closures whose new anchors lie in different
-    parts of the run (``parts[a]``: the breaks of local SLAM before anchor a), which no rigid correction links."""
+    closures from nodes nearer than ``min_separation_m`` and for closures too far apart to tell an alias
+    (``max_allowance_deg``)."""
     if abs(c1.travelled - c2.travelled) < cfg.min_separation_m:
-        return math.inf
-    if parts is not None and parts[c1.new] != parts[c2.new]:
         return math.inf
     dist = abs(travel[c1.new] - travel[c2.new]) + abs(travel[c1.old] - travel[c2.old])
     s_deg = cfg.sigma_deg + cfg.deg_rate * dist
@@ -103,16 +100,15 @@ class LoopConsistency:
         self.pending: list = []
         self.accepted: list = []  # wide closures accepted so far (a new one may agree with these too)
 
-    def offer(self, c, est_wTa: np.ndarray, travel: np.ndarray, parts: np.ndarray | None = None) -> list:
+    def offer(self, c, est_wTa: np.ndarray, travel: np.ndarray) -> list:
         """The closures to accept now: ``c`` and a set of waiting ones that agree with it and with one another
         (with the closures accepted before, which are trusted, agreeing with ``c`` counting too), when they are
-        ``min_agreeing`` in all; else ``c`` waits and nothing is accepted. ``parts`` (optional, per anchor): the
-        part of the run each anchor is in (``agreement``)."""
+        ``min_agreeing`` in all; else ``c`` waits and nothing is accepted."""
         est_wTa, travel = np.asarray(est_wTa), np.asarray(travel)
         gate = self.cfg.gate
 
         def agree(a, b) -> bool:
-            return agreement(a, b, est_wTa, travel, self.cfg, parts) <= gate
+            return agreement(a, b, est_wTa, travel, self.cfg) <= gate
 
         trusted = sum(agree(a, c) for a in self.accepted)
         group: list = []

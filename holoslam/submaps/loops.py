@@ -208,6 +208,9 @@ class LoopSearch:
         seeds = g.between(np.asarray(est_wTa[olds_arr], float), np.broadcast_to(wTr, (len(olds_arr), 3)))
         covs = None if rel_cov is None else np.einsum("ij,mjk,lk->mil", A, rel_cov[olds_arr], A) + cov_nTr
         dis = None if disagreement is None else (disagreement[0][olds_arr], disagreement[1][olds_arr])
+        # the node's heading sigma relative to each old submap: a global match may turn the estimate by at most
+        # ``global_heading_sigmas`` of it (``LoopConfig``)
+        sig_th = None if covs is None else np.sqrt(np.maximum(covs[:, 2, 2], 0.0))
         loose = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
         win = self._agreement_bound(loose, dis)
         bounded = (win[0] < loose[0]) | (win[1] < loose[1]) | (win[2] < loose[2])  # narrowed by the agreement
@@ -219,7 +222,9 @@ class LoopSearch:
             # after 142 m of graph was 13 m / 20 deg off, where the drift window said 8 m and 3 sigma of the
             # covariance 3.4 m / 14 deg; so the global search covers the whole old submap (``_global``)
             if self._is_global(wx, wy, wth):
-                globals_.append((m, seed, wx, wy, wth))
+                gate = wth if sig_th is None or c.global_heading_sigmas <= 0 else min(
+                    wth, c.global_heading_sigmas * float(sig_th[q]))
+                globals_.append((m, seed, wx, wy, gate))
             across = max(wx, wy) >= _LOST_M  # reached only across a break of local SLAM
             wx, wy = min(wx, c.max_window_xy), min(wy, c.max_window_xy)
             wth = min(wth, math.radians(c.max_window_deg))
@@ -305,7 +310,7 @@ class LoopSearch:
             if agree.verdict(verify) is False:
                 self._count(f"{kind}: rejected by the map check")
                 return []
-        accepted = self.consistency.offer(cand, est_wTa, travel, self._parts(len(est_wTa)))
+        accepted = self.consistency.offer(cand, est_wTa, travel)
         self._count(f"{kind}: accepted (consistent)" if accepted else f"{kind}: waiting for agreement")
         for a in accepted:
             if a is not cand:

@@ -96,16 +96,3 @@ def test_closures_too_far_apart_to_tell_a_half_turn_do_not_vouch_for_each_other(
     mid[3] = 300.0 + (cfg.max_allowance_deg - cfg.sigma_deg) / cfg.deg_rate - (TRAVEL[1] - TRAVEL[0]) - 1.0
     assert agreement(closure(0, 2, 300.0), closure(1, 3, float(mid[3])), EST, mid, cfg) < 1.0
 
-
-def test_closures_of_different_parts_of_the_run_do_not_vouch_for_each_other():
-    # anchors 2 and 3 on either side of a break of local SLAM: no rigid correction links them, so a closure
-    # waiting from the earlier part (here one that agrees by chance) cannot help join the later one
-    cfg = ConsistencyConfig()
-    parts = np.array([0, 0, 1, 2])
-    assert agreement(closure(0, 2, 300.0), closure(1, 3, 306.0), EST, TRAVEL, cfg) < 1.0
-    assert math.isinf(agreement(closure(0, 2, 300.0), closure(1, 3, 306.0), EST, TRAVEL, cfg, parts))
-    pool = LoopConsistency()
-    assert pool.offer(closure(0, 2, 300.0), EST, TRAVEL, parts) == []
-    assert pool.offer(closure(1, 3, 306.0), EST, TRAVEL, parts) == []
-    assert pool.offer(closure(0, 3, 312.0), EST, TRAVEL, parts) == []  # two of part 2 agree: not yet three
-    assert len(pool.pending) == 3

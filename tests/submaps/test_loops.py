@@ -505,3 +505,29 @@ def test_a_twin_room_is_told_apart_where_dead_reckoning_agrees_with_the_estimate
     e = g.between(true_mTn, found[0].mTn)
     assert math.hypot(e[0], e[1]) < 0.05 and abs(e[2]) < math.radians(0.5), e
     assert found[0].window_xy == pytest.approx(1.2)
+
+
+def test_a_global_search_may_turn_the_estimate_only_a_few_sigmas_of_its_heading(household_place):
+    # 200 m of graph since the old submap: the drift window (11 m, 210 deg) sends it to the global search, whose
+    # heading gate is then the node's heading sigma relative to the old submap times global_heading_sigmas (6), not
+    # the drift window's every heading: in a building whose wings read alike turned by a quarter or a half, right
+    # closures turned the estimate by at most 1.3 sigma and such aliases by 9.6-68 sigma
+    segs, grid, wTm, wTn, wTr = household_place
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(3)))
+    est = np.zeros((6, 3))
+    est[0], est[5] = wTm, wTn
+
+    def gates(sigma_deg: float, cfg: LoopConfig | None = None) -> list[float]:
+        ls = LoopSearch(cfg or LoopConfig(), MatchConfig())
+        ls.add_submap(0, grid)
+        seen: list[float] = []
+        ls._global_round = lambda *a: seen.extend(t[4] for t in a[5]) or []  # the targets (m, seed, wx, wy, gate)
+        rel_cov = np.zeros((6, 3, 3))
+        rel_cov[:] = np.diag([0.5 ** 2, 0.5 ** 2, math.radians(sigma_deg) ** 2])
+        ls.search(5, g.between(wTn, wTr), np.diag([1e-4, 1e-4, 1e-8]), b_pts, est, np.full(6, 200.0),
+                  travelled=300.0, rel_cov=rel_cov, travel=np.linspace(0.0, 300.0, 6))
+        return seen
+
+    assert gates(2.0) == [pytest.approx(math.radians(12.0), rel=1e-3)]
+    assert gates(40.0) == [pytest.approx(math.pi)]  # 6 sigma beyond a half turn: the drift window's every heading
+    assert gates(2.0, LoopConfig(global_heading_sigmas=0.0)) == [pytest.approx(math.pi)]  # 0: off
