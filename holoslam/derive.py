@@ -113,14 +113,14 @@ def repeat(log: LogData, times: int) -> LogData:
     """The log's odometry, scans and headings played ``times`` times end to end, each copy a
     :func:`repeat_span_ns` after the last: the robot carried back to where it started with its laser on, the
     odometer going on from where it stopped (each copy's odometry composed onto the last pose of the copy before),
-    the compass as it was (it measures the true heading). Images, tags, transforms and ground truth are the first
-    copy's only."""
+    the compass as it was (it measures the true heading), the ground truth as it was too (the robot drives the
+    same path again, so each copy's accuracy is scored). Images, tags and transforms are the first copy's only."""
     if not (isinstance(times, int) and times >= 1):
         raise ValueError(f"repeat: times must be an integer >= 1, got {times!r}")
     if not log.odometry:
         raise ValueError("repeat: the log has no odometry")
     span = repeat_span_ns(log)
-    odo, scans, heads = list(log.odometry), list(log.scans), list(log.headings)
+    odo, scans, heads, truth = list(log.odometry), list(log.scans), list(log.headings), list(log.ground_truth)
     o_first = log.odometry[0].odomTb.as_array()
     for k in range(1, times):
         T = g.compose(odo[-1].odomTb.as_array(), g.inverse(o_first))
@@ -128,4 +128,5 @@ def repeat(log: LogData, times: int) -> LogData:
                 for o in log.odometry]
         scans += [replace(s, stamp_ns=s.stamp_ns + k * span) for s in log.scans]
         heads += [replace(h, stamp_ns=h.stamp_ns + k * span) for h in log.headings]
-    return replace(log, odometry=tuple(odo), scans=tuple(scans), headings=tuple(heads))
+        truth += [replace(t, stamp_ns=t.stamp_ns + k * span) for t in log.ground_truth]
+    return replace(log, odometry=tuple(odo), scans=tuple(scans), headings=tuple(heads), ground_truth=tuple(truth))
