@@ -163,11 +163,12 @@ class LoopConfig:
     # aliases agreed and joined (the simulated 350 m building without its compass, seed 28: 180 deg, 79-106 m off).
     # Measured on every closure offered for agreement (the real logs, full and at 1.4 Hz with half the beams; the
     # simulated building, seeds 26-28, without its compass: 131 offered, 111 wrong, 95 of them turned by more than
-    # 45 deg): right ones turned the estimate by at most 1.3 sigma (an earlier fr079 revisit at 1.4 Hz: 20 deg
-    # against 3 sigma of 14 deg, 4.3 sigma), the aliases turned by more than 45 deg by 9.6-68 sigma; 6 lies between
-    # (1.4x the right ones' most, 1.6x under the aliases' least). 0: off. Across a break of local SLAM the sigma is
-    # unbounded: every heading
-    global_heading_sigmas: float = 6.0
+    # 45 deg): right ones turned the estimate by at most 1.3 sigma; the aliases turned by more than 45 deg by 9.6-68
+    # sigma, those that were accepted (by agreement) by 22-41 sigma. 10 keeps a margin for the matches' overconfident
+    # covariances (an fr079 revisit at 1.4 Hz on 2026-12-04's code: 20 deg against 3 sigma of 14 deg, 4.3 sigma; a
+    # right closure there turned 38 deg after 142 m of graph, some 9 sigma by today's covariances) and stays under
+    # the accepted aliases by 2x. 0: off. Across a break of local SLAM the sigma is unbounded: every heading
+    global_heading_sigmas: float = 10.0
     # and its position within this many times the window's uncapped half-widths (wx, wy: the drift since the last
     # closure, or window_sigmas of the covariance), ``global_ambiguous_window_ratio`` when the match has second peaks
     # (``global_ambiguity_peaks``: the scan alone does not tell where it is, so only the estimate can). Measured on
