@@ -126,7 +126,12 @@ def repeat(log: LogData, times: int) -> LogData:
         T = g.compose(odo[-1].odomTb.as_array(), g.inverse(o_first))
         odo += [replace(o, stamp_ns=o.stamp_ns + k * span, odomTb=Pose2.from_array(g.compose(T, o.odomTb.as_array())))
                 for o in log.odometry]
-        scans += [replace(s, stamp_ns=s.stamp_ns + k * span) for s in log.scans]
-        heads += [replace(h, stamp_ns=h.stamp_ns + k * span) for h in log.headings]
-        truth += [replace(t, stamp_ns=t.stamp_ns + k * span) for t in log.ground_truth]
+        scans += _later(log.scans, k * span)
+        heads += _later(log.headings, k * span)
+        truth += _later(log.ground_truth, k * span)
     return replace(log, odometry=tuple(odo), scans=tuple(scans), headings=tuple(heads), ground_truth=tuple(truth))
+
+
+def _later(records, dt_ns: int) -> list:
+    """The stamped records (frozen dataclasses with ``stamp_ns``) ``dt_ns`` later."""
+    return [replace(r, stamp_ns=r.stamp_ns + dt_ns) for r in records]

@@ -103,9 +103,10 @@ def node_keyframe_poses(submaps: Sequence[Any], node_stamps_ns: np.ndarray, wTn:
                         ) -> tuple[np.ndarray, np.ndarray]:
     """``keyframe_poses`` from solved node poses ``wTn`` at ``node_stamps_ns`` (``holoslam.graph.nodes``): the
     keyframes are the nodes; a scan localised in a submap without being inserted is placed in the submap's frame
-    as the solved poses of the keyframes of that submap before and after it put the frame, interpolated:
-    wTs_k = wTn_k ∘ aTn_k^-1, wTb = wTs_k ∘ a (wTs_k^-1 ∘ wTs_k+1) ∘ aTb with a its time's share between them (the
-    frame as the earlier keyframe alone put it left fr079 at 0.4404 deg mean relation error, 0.4392 with both)."""
+    as the solved poses of the keyframes of that submap before and after it put the frame, wTs_k = wTn_k ∘ aTn_k^-1,
+    interpolated at its stamp (``geometry.interpolate_poses``; the first or last keyframe's beyond them): wTb =
+    wTs(t) ∘ aTb (the frame as the earlier keyframe alone put it left fr079 at 0.4404 deg mean relation error,
+    0.4392 with both)."""
     node_t = np.asarray(node_stamps_ns, np.int64)
     stamps, poses = [node_t], [np.asarray(wTn, np.float64).reshape(-1, 3)]
     for sm in submaps:
@@ -113,20 +114,11 @@ def node_keyframe_poses(submaps: Sequence[Any], node_stamps_ns: np.ndarray, wTn:
         if not tt.size:
             continue
         kt = np.asarray(sm.scan_stamps_ns, np.int64)
-        aTk = np.reshape(sm.aTb, (-1, 3))
-        q = np.clip(np.searchsorted(kt, tt, side="right") - 1, 0, len(kt) - 1)
         n = np.clip(np.searchsorted(node_t, kt), 0, len(node_t) - 1)
-        wTs = g.compose(poses[0][n], g.inverse(aTk))  # the submap's frame as each keyframe's solved pose puts it
-        C = wTs[q]
-        nxt = (tt > kt[q]) & (q + 1 < len(kt))
-        if nxt.any():  # between two keyframes: the frame runs from the one's placement into the other's
-            qi = q[nxt]
-            D = g.between(wTs[qi], wTs[qi + 1])
-            D[:, 2] = g.wrap(D[:, 2])
-            a = (tt[nxt] - kt[qi]) / np.maximum(kt[qi + 1] - kt[qi], 1).astype(np.float64)
-            C[nxt] = g.compose(C[nxt], D * a[:, None])
+        # the submap's frame as each keyframe's solved pose puts it, interpolated at the tracked scans' stamps
+        wTs = g.compose(poses[0][n], g.inverse(np.reshape(sm.aTb, (-1, 3))))
         stamps.append(tt)
-        poses.append(g.compose(C, np.reshape(sm.track_aTb, (-1, 3))))
+        poses.append(g.compose(g.interpolate_poses(kt, wTs, tt), np.reshape(sm.track_aTb, (-1, 3))))
     return _first_per_stamp(stamps, poses)
 
 

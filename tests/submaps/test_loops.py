@@ -528,6 +528,7 @@ def test_a_global_search_may_turn_the_estimate_only_a_few_sigmas_of_its_heading(
                   travelled=300.0, rel_cov=rel_cov, travel=np.linspace(0.0, 300.0, 6))
         return seen
 
-    assert gates(2.0) == [pytest.approx(math.radians(20.0), rel=1e-3)]
-    assert gates(20.0) == [pytest.approx(math.pi)]  # 10 sigma beyond a half turn: the drift window's every heading
+    k = LoopConfig().global_heading_sigmas
+    assert gates(2.0) == [pytest.approx(math.radians(k * 2.0), rel=1e-3)]
+    assert gates(200.0 / k) == [pytest.approx(math.pi)]  # k sigma beyond a half turn: the drift window's every heading
     assert gates(2.0, LoopConfig(global_heading_sigmas=0.0)) == [pytest.approx(math.pi)]  # 0: off
