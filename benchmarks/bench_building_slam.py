@@ -12,8 +12,9 @@ dead reckoning's RMSE at the same stamps, closures returned and wrong, the CPU s
 median over seeds. The benchmark's metric of the held-out hospital log is the Freiburg one, relations between poses
 at two laser stamps (``holoslam.evaluate.relation_errors``); ``building_relations`` draws such relations from the
 simulator's truth (``REL_GROUPS``: 1-5 s apart along the path, 5-30 s apart, and revisits, two scans more than ten
-minutes apart within 2 m and 45 deg of each other; 2,000 of each) and the trajectory at every scan is scored on them:
-columns rel (mean translational error, m, per group; rotational error over all, deg). ``--loops`` overrides
+minutes apart within 2 m and 45 deg of each other; up to 2,000 of each: a drive has fewer revisits, counted in the
+last column) and the trajectory at every scan is scored on them: columns rel (mean translational error, m, per group;
+rotational error over all, deg). ``--loops`` overrides
 ``LoopConfig`` settings (JSON) to compare against the defaults in the same process. A floor of identical rooms is harder than a real building in one respect (every room has twins) and
 easier in another (no clutter, no people): it proves nothing alone; the real logs (``bench_realdata.py``) judge.
 """
@@ -58,17 +59,33 @@ def building_relations(scan_ns: np.ndarray, truth_wTb: np.ndarray, seed: int = 0
     t = (scan_ns - scan_ns[0]) / 1e9
     out = {}
     for name, lo, hi in REL_GROUPS:
-        i = rng.integers(0, len(t), 40 * REL_PER_GROUP)
-        j = rng.integers(0, len(t), 40 * REL_PER_GROUP)
+        i = rng.permutation(len(t))
         if hi < np.inf:  # a partner lo..hi s later along the path
             j = np.searchsorted(t, t[i] + rng.uniform(lo, hi, len(i)))
-            ok = j < len(t)
-        else:
-            d = np.hypot(*(truth_wTb[i, :2] - truth_wTb[j, :2]).T)
-            turn = np.abs(g.wrap(truth_wTb[i, 2] - truth_wTb[j, 2]))
-            ok = (np.abs(t[j] - t[i]) >= lo) & (d <= REVISIT_M) & (turn <= np.radians(REVISIT_DEG))
+        else:  # a partner at least lo s away in time whose true pose is near: a pass of another time
+            j = _revisit_partners(t, truth_wTb, i, lo, rng)
+        ok = (j >= 0) & (j < len(t))
         i, j = i[ok][:REL_PER_GROUP], j[ok][:REL_PER_GROUP]
         out[name] = Relations(scan_ns[i], scan_ns[j], g.between(truth_wTb[i], truth_wTb[j]))
+    return out
+
+
+def _revisit_partners(t: np.ndarray, wTb: np.ndarray, i: np.ndarray, min_gap_s: float, rng) -> np.ndarray:
+    """For each scan i, a random scan at least ``min_gap_s`` away in time within REVISIT_M and REVISIT_DEG of its
+    true pose (-1 when none)."""
+    from scipy.spatial import cKDTree
+
+    from holoslam import geometry as g
+
+    near = cKDTree(wTb[:, :2]).query_ball_point(wTb[i, :2], REVISIT_M)
+    out = np.full(len(i), -1, np.int64)
+    for q, (k, cand) in enumerate(zip(i, near, strict=True)):
+        c = np.asarray(cand, np.int64)
+        c = c[(np.abs(t[c] - t[k]) >= min_gap_s) & (np.abs(g.wrap(wTb[c, 2] - wTb[k, 2])) <= np.radians(REVISIT_DEG))]
+        if len(c):
+            out[q] = rng.choice(c)
+        if (out[: q + 1] >= 0).sum() >= REL_PER_GROUP:
+            break
     return out
 
 
@@ -126,7 +143,8 @@ def map_building(path: Path, loops: dict, compass: bool = True) -> dict:
     return {"rmse": err.rmse_m, "max": err.max_m, "heading": err.heading_rmse_deg, "dr": dr.rmse_m,
             "closures": len(closures), "wrong": wrong, "cpu": cpu, "anchors": len(truth),
             **{f"rel {k}": e.translation_mean_m for k, e in scored.items()},
-            "rel deg": float(np.nanmean(np.concatenate([e.rotation_deg for e in scored.values()])))}
+            "rel deg": float(np.nanmean(np.concatenate([e.rotation_deg for e in scored.values()]))),
+            "revisits": int(scored["revisit"].n_matched)}
 
 
 def main() -> int:
@@ -143,13 +161,14 @@ def main() -> int:
     rows = []
     rel_cols = [f"rel {name}" for name, _, _ in REL_GROUPS]
     print(f"{'seed':>5}{'anchors':>9}{'RMSE m':>9}{'max m':>8}{'head deg':>10}{'DR RMSE m':>11}{'closures':>10}"
-          f"{'wrong':>7}{'cpu s':>8}" + "".join(f"{c + ' m':>15}" for c in rel_cols) + f"{'rel deg':>9}", flush=True)
+          f"{'wrong':>7}{'cpu s':>8}" + "".join(f"{c + ' m':>15}" for c in rel_cols) + f"{'rel deg':>9}{'revisits':>10}",
+          flush=True)
     for seed in args.seeds:
         r = map_building(building_log(seed, args.duration, args.out), loops, compass=not args.no_compass)
         rows.append(r)
         print(f"{seed:>5}{r['anchors']:>9}{r['rmse']:>9.3f}{r['max']:>8.2f}{r['heading']:>10.2f}{r['dr']:>11.3f}"
               f"{r['closures']:>10}{r['wrong']:>7}{r['cpu']:>8.1f}" + "".join(f"{r[c]:>15.3f}" for c in rel_cols)
-              + f"{r['rel deg']:>9.3f}", flush=True)
+              + f"{r['rel deg']:>9.3f}{r['revisits']:>10}", flush=True)
     med = {k: float(np.median([r[k] for r in rows])) for k in ("rmse", "dr", "cpu", *rel_cols)}
     print(f"median RMSE {med['rmse']:.3f} m against dead reckoning {med['dr']:.3f} m "
           f"({med['rmse'] / med['dr']:.2f}x), {med['cpu']:.0f} s CPU; loops {loops or 'defaults'}"
