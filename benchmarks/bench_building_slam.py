@@ -5,18 +5,19 @@ anchors' error against the simulator's truth, dead reckoning's, and the loop clo
                                                        [--loops '{"agreement_factor": 0}']
 
 Each seed's log is ``holoslam simulate --building --seed S --duration D`` (simulated once into ``--out``, reused
-when present). The SLAM part of a run (``holoslam.optimise.map_log``'s stages: front end with its loop search, final
-solve, keyframe stage; then the trajectory at every scan) maps it; every closure the loop search returns is recorded and scored against the truth at
-its two anchors (wrong: more than 1 m off). Columns: anchors RMSE and max after SE(2) alignment, heading RMSE,
-dead reckoning's RMSE at the same stamps, closures returned and wrong, the CPU seconds of the mapping, and the
-median over seeds. The benchmark's metric of the held-out hospital log is the Freiburg one, relations between poses
-at two laser stamps (``holoslam.evaluate.relation_errors``); ``building_relations`` draws such relations from the
-simulator's truth (``REL_GROUPS``: 1-5 s apart along the path, 5-30 s apart, and revisits, two scans more than ten
-minutes apart within 2 m and 45 deg of each other; up to 2,000 of each: a drive has fewer revisits, counted in the
-last column) and the trajectory at every scan is scored on them: columns rel (mean translational error, m, per group;
-rotational error over all, deg). ``--loops`` overrides
-``LoopConfig`` settings (JSON) to compare against the defaults in the same process. A floor of identical rooms is harder than a real building in one respect (every room has twins) and
-easier in another (no clutter, no people): it proves nothing alone; the real logs (``bench_realdata.py``) judge.
+when present). The SLAM part of a run (``holoslam.optimise.map_log_keyframes``: front end with its loop search,
+final solve, keyframe stage; then the trajectory at every scan) maps it; every closure the loop search returns is
+recorded and scored against the truth at its two anchors (wrong: more than 1 m off). Columns: anchors RMSE and max
+after SE(2) alignment, heading RMSE, dead reckoning's RMSE at the same stamps, closures returned and wrong, the CPU
+seconds of the mapping, and the median over seeds. The held-out hospital log's metric is the Freiburg one, relations
+between poses at two laser stamps (``holoslam.evaluate.relation_errors``); ``building_relations`` draws such
+relations from the simulator's truth (``REL_GROUPS``: 1-5 s apart along the path, 5-30 s apart, and revisits, two
+scans more than ten minutes apart within 2 m and 45 deg of each other; up to 2,000 of each: a drive has fewer
+revisits, counted in the last column) and the trajectory at every scan is scored on them: columns rel (mean
+translational error, m, per group; rotational error over all, deg). ``--loops`` overrides ``LoopConfig`` settings
+(JSON) to compare against the defaults in the same process. A floor of identical rooms is harder than a real
+building in one respect (every room has twins) and easier in another (no clutter, no people): it proves nothing
+alone; the real logs (``bench_realdata.py``) judge.
 """
 
 from __future__ import annotations
@@ -79,38 +80,28 @@ def _revisit_partners(t: np.ndarray, wTb: np.ndarray, i: np.ndarray, min_gap_s: 
 
     near = cKDTree(wTb[:, :2]).query_ball_point(wTb[i, :2], REVISIT_M)
     out = np.full(len(i), -1, np.int64)
+    found = 0
     for q, (k, cand) in enumerate(zip(i, near, strict=True)):
         c = np.asarray(cand, np.int64)
         c = c[(np.abs(t[c] - t[k]) >= min_gap_s) & (np.abs(g.wrap(wTb[c, 2] - wTb[k, 2])) <= np.radians(REVISIT_DEG))]
         if len(c):
             out[q] = rng.choice(c)
-        if (out[: q + 1] >= 0).sum() >= REL_PER_GROUP:
-            break
+            found += 1
+            if found == REL_PER_GROUP:
+                break
     return out
 
 
-def _slam(log, cfg):
-    """``optimise.map_log``'s stages, with the trajectory at every scan (``trajectory.run_trajectory``)."""
-    from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, run_build_options
-    from holoslam.solve import CovarianceScope, SolveOptions, solve
-    from holoslam.submaps.frontend import build_problem
-    from holoslam.trajectory import run_trajectory
-
-    fe = build_problem(log, config=cfg, optimize=reestimate_anchors)
-    sol = solve(fe.problem, SolveOptions(covariances=CovarianceScope.NONE, build=run_build_options()))
-    nodes = revisit_nodes(fe, sol, cfg)
-    sol = keyframe_anchors(sol, fe.anchor_stamps_ns, nodes)
-    return fe, sol, run_trajectory(log, fe, sol, nodes)
-
-
 def map_building(path: Path, loops: dict, compass: bool = True) -> dict:
-    """One seed: map_log with the closures recorded; the errors against the truth. ``compass`` False: the log's
+    """One seed: map_log_keyframes with the closures recorded; the errors against the truth. ``compass`` False: the log's
     headings left out (a robot with wheel odometry and a laser only, as the held-out hospital log's)."""
     from holoslam import geometry as g
     from holoslam.evaluate import relation_errors, trajectory_errors, truth_at
     from holoslam.io.mcap import read_log
+    from holoslam.optimise import map_log_keyframes
     from holoslam.submaps import loops as loops_mod
     from holoslam.submaps.frontend import FrontEndConfig
+    from holoslam.trajectory import run_trajectory
 
     log, _ = read_log(path)
     if not compass:
@@ -128,7 +119,8 @@ def map_building(path: Path, loops: dict, compass: bool = True) -> dict:
     loops_mod.LoopSearch.search = recording  # type: ignore[method-assign]
     try:
         t0 = time.process_time()
-        fe, sol, traj = _slam(log, cfg)
+        fe, sol, nodes = map_log_keyframes(log, cfg, covariances=False)
+        traj = run_trajectory(log, fe, sol, nodes)
         cpu = time.process_time() - t0
     finally:
         loops_mod.LoopSearch.search = search  # type: ignore[method-assign]
@@ -173,7 +165,7 @@ def main() -> int:
     print(f"median RMSE {med['rmse']:.3f} m against dead reckoning {med['dr']:.3f} m "
           f"({med['rmse'] / med['dr']:.2f}x), {med['cpu']:.0f} s CPU; loops {loops or 'defaults'}"
           f"{'; without the compass' if args.no_compass else ''}")
-    print("median relation error (m): " + ", ".join(f"{c[4:]} {med[c]:.3f}" for c in rel_cols)
+    print("median relation error (m): " + ", ".join(f"{name} {med[f'rel {name}']:.3f}" for name, _, _ in REL_GROUPS)
           + " (the hospital log's goal, Cartographer's figure over all its relations: 0.1078 m)")
     return 0
 

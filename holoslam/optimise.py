@@ -13,7 +13,8 @@ if TYPE_CHECKING:
     from holoslam.graph.nodes import KeyframeSolve
     from holoslam.solve import SolveOptions
 
-__all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes", "keyframe_anchors", "map_log"]
+__all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes", "keyframe_anchors", "map_log",
+           "map_log_keyframes"]
 
 
 def solve_options(cfg: SolverConfig) -> SolveOptions:
@@ -94,6 +95,13 @@ def map_log(log: Any, frontend: Any = None, covariances: bool = True) -> tuple[A
     final solve (the run's kernels and outlier rounds; anchor covariances when ``covariances``), the keyframe
     solve and its anchors, as ``holoslam.pipeline.run`` does. ``frontend``: a ``FrontEndConfig`` (default
     settings when None). Returns ``(FrontEnd, Solution)``."""
+    fe, sol, _ = map_log_keyframes(log, frontend, covariances)
+    return fe, sol
+
+
+def map_log_keyframes(log: Any, frontend: Any = None, covariances: bool = True) -> tuple[Any, Any, Any]:
+    """:func:`map_log`, and the keyframe solve (``KeyframeSolve`` or None) that places every scan of the run's
+    trajectory (``trajectory.run_trajectory(log, fe, sol, nodes)``)."""
     from holoslam.solve import CovarianceScope, SolveOptions, solve
     from holoslam.submaps.frontend import FrontEndConfig, build_problem
 
@@ -101,4 +109,5 @@ def map_log(log: Any, frontend: Any = None, covariances: bool = True) -> tuple[A
     fe = build_problem(log, config=cfg, optimize=reestimate_anchors)
     scope = CovarianceScope.ANCHORS if covariances else CovarianceScope.NONE
     sol = solve(fe.problem, SolveOptions(covariances=scope, build=run_build_options()))
-    return fe, keyframe_anchors(sol, fe.anchor_stamps_ns, revisit_nodes(fe, sol, cfg))
+    nodes = revisit_nodes(fe, sol, cfg)
+    return fe, keyframe_anchors(sol, fe.anchor_stamps_ns, nodes), nodes
