@@ -2,7 +2,7 @@
 next to Cartographer's published figures.
 
     .venv/bin/python benchmarks/bench_realdata.py [--logs intel aces fr079] [--duration S] [--out DIR]
-                                                  [--variants full kidnap sparse sparse_kidnap]
+                                                  [--variants full kidnap sparse sparse_kidnap drift sparse_drift]
 
 Variants (``holoslam.derive``, what a hospital's or a carried robot's log makes of the same real scans):
 ``full`` the log as it is; ``kidnap`` the odometry jumps by (30 m, 0, 90 deg) at the middle scan with the 30 s of
@@ -15,7 +15,9 @@ also holds a pose at every odometry stamp, which would match every relation; bet
 and the relations of a 1.4 Hz log are at its scans); ``sparse_kidnap`` both, the kidnap at the sparse log's middle
 scan (the held-out hospital log's case: a sparse laser, and a drift only a global search spans), scored as sparse
 with the kidnap row's columns. ``kidnap@F`` / ``sparse_kidnap@F``: the kidnap at the fraction F of the scans
-instead of the middle (e.g. ``sparse_kidnap@0.67``). A variant runs in the child on the log
+instead of the middle (e.g. ``sparse_kidnap@0.67``). ``drift`` / ``sparse_drift``: the odometer biased
+(``holoslam.derive.bias_odometry``: 5 % long, turning 0.5 deg per metre, a wheel 0.35 % smaller than its twin on a
+0.4 m axle), scored as full / sparse. A variant runs in the child on the log
 in memory (``holoslam.pipeline.run_data``) and writes the trajectory and the report; the independent scorer
 checks the full rows.
 
@@ -96,9 +98,10 @@ MEAN_TOLERANCE = 1e-6
 KIDNAP = (30.0, 0.0, math.pi / 2)  # m, m, rad: the odometry's jump at the middle scan
 KIDNAP_GAP_S = 30.0
 SPARSE_HZ, SPARSE_KEEP_EVERY = 1.4, 2
+DRIFT_SCALE, DRIFT_YAW_DEG_PER_M = 1.05, 0.5  # the drift variants' odometer: 5 % long, turning 0.5 deg per m
 ACROSS_LIMIT_M = 0.2  # m: issue 25's "every relation across the kidnap within 0.2 m"
-VARIANTS = ("full", "kidnap", "sparse", "sparse_kidnap")
-MAX_DT = {"full": 0.05, "kidnap": 0.05, "sparse": 0.1, "sparse_kidnap": 0.1}  # s, relation stamp to the nearest pose
+VARIANTS = ("full", "kidnap", "sparse", "sparse_kidnap", "drift", "sparse_drift")
+MAX_DT = {"full": 0.05, "kidnap": 0.05, "sparse": 0.1, "sparse_kidnap": 0.1, "drift": 0.05, "sparse_drift": 0.1}  # s, relation stamp to the nearest pose
 
 
 def without_gap(rel, at_ns: int):
@@ -139,6 +142,10 @@ def variant_log(data, variant: str):
         return derive.drop_beams(derive.decimate_scans(data, SPARSE_HZ), SPARSE_KEEP_EVERY), None
     if base == "sparse_kidnap":
         return variant_log(variant_log(data, "sparse")[0], "kidnap" + variant[len(base):])
+    if base == "drift":
+        return derive.bias_odometry(data, DRIFT_SCALE, DRIFT_YAW_DEG_PER_M), None
+    if base == "sparse_drift":
+        return variant_log(variant_log(data, "sparse")[0], "drift")
     return data, None
 
 

@@ -13,6 +13,9 @@ original's ground truth (``.relations``) still names the same scan.
 - :func:`kidnap`: from stamp ``at_ns`` on, the odometry (and the odometry frame's transforms) is moved by a
   rigid transform the mapper is not told about, and the scans of the ``gap_s`` after it are removed, so the
   two parts of the log share no scan that would let the local matcher bridge them: only a global search can;
+- :func:`bias_odometry`: the odometer's motions scaled and turned by a fixed bias per metre (a worn or mis-sized
+  wheel: its distance a few per cent off, its heading drifting with the distance), the error that grows along a
+  corridor where the laser cannot see motion along it;
 - :func:`repeat`: the log driven ``times`` times, the robot carried back to its start between copies with its
   laser on and its odometer counting on from where it stopped (a second apart: no gap in the laser to tell).
   Its stamps are new, the copy ``k``'s stamps being the original's plus ``k`` times :func:`repeat_span_ns`.
@@ -28,7 +31,7 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.types import LogData, Odometry, Pose2, Scan
 
-__all__ = ["decimate_scans", "drop_beams", "cap_ranges", "kidnap", "repeat", "repeat_span_ns"]
+__all__ = ["decimate_scans", "drop_beams", "cap_ranges", "kidnap", "bias_odometry", "repeat", "repeat_span_ns"]
 
 
 def decimate_scans(log: LogData, rate_hz: float) -> LogData:
@@ -90,6 +93,43 @@ def kidnap(log: LogData, at_ns: int, jump: np.ndarray, gap_s: float = 30.0) -> L
     gap_end = at_ns + int(round(gap_s * 1e9))
     scans = tuple(s for s in log.scans if not at_ns <= s.stamp_ns < gap_end)
     return replace(log, odometry=tuple(odo), transforms=transforms, scans=scans)
+
+
+def bias_odometry(log: LogData, scale: float, yaw_deg_per_m: float) -> LogData:
+    """The log with a biased odometer: each odometry step (the motion between two odometry poses, in the
+    earlier pose's frame) has its translation times ``scale`` and its rotation plus ``yaw_deg_per_m`` per metre of
+    the (scaled) step, integrated from the first pose; the dynamic transforms from the odometry frame are moved
+    with the pose at their stamp. Scans, compass, ground truth and the rest are unchanged (the compass, if any,
+    keeps measuring the true heading)."""
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"bias_odometry: scale must be a finite number > 0, got {scale}")
+    if not math.isfinite(yaw_deg_per_m):
+        raise ValueError(f"bias_odometry: yaw_deg_per_m must be finite, got {yaw_deg_per_m}")
+    if not log.odometry:
+        return log
+    P = np.array([o.odomTb.as_array() for o in log.odometry], np.float64)
+    steps = g.between(P[:-1], P[1:])
+    steps[:, :2] *= scale
+    steps[:, 2] += math.radians(yaw_deg_per_m) * np.hypot(steps[:, 0], steps[:, 1])
+    # integrated from the first pose: step k turns by the headings before it
+    th = P[0, 2] + np.concatenate([[0.0], np.cumsum(steps[:, 2])])
+    c, s = np.cos(th[:-1]), np.sin(th[:-1])
+    xy = P[0, :2] + np.concatenate([[[0.0, 0.0]], np.cumsum(np.stack([c * steps[:, 0] - s * steps[:, 1],
+                                                                         s * steps[:, 0] + c * steps[:, 1]], 1), 0)])
+    Q = np.column_stack([xy, g.wrap(th)])
+    odo = tuple(replace(o, odomTb=Pose2(float(q[0]), float(q[1]), float(q[2])))
+                for o, q in zip(log.odometry, Q, strict=True))
+    stamps = np.array([o.stamp_ns for o in log.odometry], np.int64)
+    corr = g.compose(Q, g.inverse(P))  # biased ∘ true^-1 at each odometry stamp: how far the odometer has moved
+    odom_frames = {o.frame_id for o in log.odometry}
+
+    def moved(t):
+        if t.static or t.parent not in odom_frames:
+            return t
+        k = max(0, int(np.searchsorted(stamps, t.stamp_ns, side="right")) - 1)
+        return _moved_transform(t, corr[k])
+
+    return replace(log, odometry=odo, transforms=tuple(moved(t) for t in log.transforms))
 
 
 def _moved_transform(t, jump: np.ndarray):

@@ -1,5 +1,5 @@
 """Logs derived from a log (``holoslam.derive``): a log played several times end to end, as a robot carried back
-to its start would record it."""
+to its start would record it; a biased odometer."""
 
 import math
 
@@ -8,7 +8,7 @@ import pytest
 
 from holoslam import derive
 from holoslam import geometry as g
-from holoslam.types import GroundTruthPose, LogData, Odometry, Pose2, Scan
+from holoslam.types import GroundTruthPose, LogData, Odometry, Pose2, Scan, Transform
 
 
 def _drive() -> LogData:
@@ -43,3 +43,26 @@ def test_a_repeat_needs_a_whole_count_and_odometry():
         derive.repeat(_drive(), 0)
     with pytest.raises(ValueError, match="no odometry"):
         derive.repeat(LogData(source="drive.mcap", scans=_drive().scans), 2)
+
+
+def test_a_biased_odometer_drives_its_steps_longer_and_turns_with_the_distance():
+    log = _drive()
+    tf = Transform(stamp_ns=2_000_000_000, parent="odom", child="base_link", translation=(1.0, 0.0, 0.0),
+                   rotation_xyzw=(0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)), static=False)
+    log = LogData(source=log.source, odometry=log.odometry, scans=log.scans, ground_truth=log.ground_truth,
+                  transforms=(tf,))
+    same = derive.bias_odometry(log, 1.0, 0.0)
+    np.testing.assert_allclose([o.odomTb.as_array() for o in same.odometry],
+                               [o.odomTb.as_array() for o in log.odometry], atol=1e-12)
+    biased = derive.bias_odometry(log, 1.05, 2.0)
+    odo = np.array([o.odomTb.as_array() for o in biased.odometry])
+    # the 1 m step is 1.05 m and turns by 2.1 deg; the turn in place adds no bias: 90 deg more
+    np.testing.assert_allclose(odo[1], [1.05, 0.0, math.radians(2.1)], atol=1e-12)
+    np.testing.assert_allclose(odo[2], [1.05, 0.0, math.radians(92.1)], atol=1e-12)
+    # the odometry frame's transform at the last stamp moved with the pose there; the scans and truth unchanged
+    (moved,) = biased.transforms
+    assert moved.translation[:2] == pytest.approx((1.05, 0.0), abs=1e-12)
+    assert 2 * math.atan2(moved.rotation_xyzw[2], moved.rotation_xyzw[3]) == pytest.approx(math.radians(92.1))
+    assert biased.scans == log.scans and biased.ground_truth == log.ground_truth
+    with pytest.raises(ValueError, match="scale must be"):
+        derive.bias_odometry(log, 0.0, 0.0)

@@ -94,6 +94,17 @@ class Node:
     matched: bool
 
 
+@dataclass(frozen=True, slots=True)
+class Break:
+    """Local SLAM started afresh: submap ``new`` after submap ``last`` (a gap in the laser, or scans that stopped
+    fitting), and ``fix``, the last node matched before it (None when none was): where the robot last was by its
+    scans, from which the odometry to the new anchor is shorter than from any anchor."""
+
+    last: int
+    new: int
+    fix: Node | None
+
+
 class ActiveSubmap:
     """A submap being filled (mutable; ``finish`` freezes its grid)."""
 
@@ -174,7 +185,7 @@ class LocalSlam:
         self._track_cfg = replace(cfg.match, angular_window_deg=cfg.track_angular_window_deg)
         self._pyramid = WidePyramid()  # the wide search's pyramid of the host's grid, while it is unchanged
         self.arrivals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # (m, n, mTn, cov) of new anchors
-        self.breaks: list[tuple[int, int]] = []  # (m, n): submap n started afresh after m (``lost_gap_s``)
+        self.breaks: list[Break] = []  # submaps started afresh (``lost_gap_s``, ``lost_after_misses``)
         # the laser's own motion: the last matched pose (host frame, host index, stamp) and the body-frame
         # velocity between the last two (m/s, m/s, rad/s), the alternative to a wheel odometry that is wrong
         self._last_fix: tuple[int, int, np.ndarray] | None = None
@@ -365,8 +376,9 @@ class LocalSlam:
     def _lose(self) -> None:
         """Finish the active submaps; the next node starts a new one, tied to them only by a break."""
         last = self.active[-1].index
+        fix = next((nd for nd in reversed(self.nodes) if nd.matched), None)
         self.close()
-        self.breaks.append((last, self.next_index))
+        self.breaks.append(Break(last, self.next_index, fix))
         self._last_fix, self._twist = None, np.zeros(3)
 
     def pop_finished(self) -> list[ActiveSubmap]:

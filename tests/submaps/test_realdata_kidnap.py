@@ -3,7 +3,9 @@ whose odometry jumps by 30 m and 90 degrees in its middle, with the 30 s of scan
 (``holoslam.derive.kidnap``). Local SLAM starts afresh after the gap, and only the global loop search can put the
 second part back onto the first: it must, as well as the uncut log maps it. And the same 300 s driven twice,
 the robot carried back to its start between with its laser on (``holoslam.derive.repeat``: no gap in the laser,
-the odometer counting on): local SLAM must notice that its scans stopped fitting the map and start afresh."""
+the odometer counting on): local SLAM must notice that its scans stopped fitting the map and start afresh. And a
+laser silent for 11 s near the end of 200 s with a biased odometer: the last part, which no closure rejoins, stands
+where the odometry across the silence puts it."""
 
 from __future__ import annotations
 
@@ -112,3 +114,34 @@ def test_a_kidnapped_log_maps_as_well_as_the_uncut_one(fr079_kidnapped):
     print("plain", plain.to_text(), "kidnapped", kidnapped.to_text())
     assert kidnapped.translation_mean_m < 1.5 * plain.translation_mean_m
     assert kidnapped.rotation_mean_deg < 1.5 * plain.rotation_mean_deg
+
+
+@pytest.fixture(scope="module")
+def fr079_silent_laser(tmp_path_factory):
+    """fr079 from 70 s for 200 s mapped as it is, and with an odometer turning 2 deg per metre (``bias_odometry``)
+    whose laser falls silent for 11 s at 86 % of the scans (``kidnap`` by nothing): local SLAM breaks there, and
+    the 78 scans after it are too few for a loop closure. Returns the broken run's front end and the placement
+    of its part after the silence against the plain run's."""
+    from holoslam import derive
+    from holoslam.evaluate import placement_difference
+    from holoslam.io.mcap import read_log
+    from holoslam.io.mcap_cut import cut_log
+
+    path = tmp_path_factory.mktemp("fr079s") / "cut.mcap"
+    cut_log(REALDATA / "fr079.mcap", path, START_S, 200.0)
+    log, _ = read_log(path, require=["odometry", "scan"])
+    at = int(log.scans[int(0.86 * len(log.scans))].stamp_ns)
+    silent = derive.kidnap(derive.bias_odometry(log, 1.0, 2.0), at, np.zeros(3), 11.0)
+    _, ref_stamps, ref_wTb = _mapped(log)
+    fe, stamps, wTb = _mapped(silent)
+    return fe, placement_difference(stamps, wTb, ref_stamps, ref_wTb, stamps < at, stamps >= at + 11_000_000_000)
+
+
+def test_a_part_no_closure_rejoins_is_placed_by_the_odometry_across_the_break_alone(fr079_silent_laser):
+    fe, placed = fr079_silent_laser
+    print(placed)
+    assert fe.breaks == 1
+    # the break's link runs from the last scan matched before it: 4.2 m of odometry across the silence. From the
+    # last anchor, 2.4 m further back, the biased odometer turned the part by 10.4 deg and moved it by 0.49 m
+    assert placed.rotation_deg < 5.0  # measured 1.6
+    assert placed.translation_m < 0.3  # measured 0.09
