@@ -61,6 +61,16 @@ class LoopConfig:
     # logs (kidnapped aces) the bound cost a join 34 m later and a 0.72 m relation error; there it is not used.
     # 0: off
     agreement_factor: float = 2.0
+    # Without a compass (where the bound above is not used), a window is at least the base plus this many times
+    # dead reckoning's disagreement with the estimate, up to max_window_xy: where the scans shorten a corridor the
+    # odometry measures right, the estimate drifts more than window_rate allows. The shared aces log with its
+    # ranges cut at 5 m (a cheap laser): 48 windowed searches from its pass at 800-870 s into its first minute,
+    # 2.8-3.9 m windows, the right pose 6.2-6.7 m from their seeds (scoring up to 0.68 there): no closure, 0.0698 m
+    # mean relation error (2.1 m max); at 1.0: 0.0501 (0.53 max). Off by default: the windows then reach the cap
+    # wherever the odometry's heading has drifted, and the loop search costs 2-3x its CPU on the shared full-rate
+    # logs (intel 41 -> 114 s, fr079 40 -> 89 s; fr079's wall time 57 s against Cartographer's 62 s) for the same
+    # error (intel 0.0187, aces 0.0355, fr079 0.0427 m at the laser; sparse and kidnapped alike or better). 0: off
+    disagreement_window: float = 0.0
     min_score: float = 0.55
     min_score_wide: float = 0.6
     # > 0: on a laser sparser than the thresholds' reference (``score_reference``: the score scale below 1), a

@@ -64,6 +64,8 @@ class LoopSearch:
     def __init__(self, cfg: LoopConfig, match_cfg: MatchConfig) -> None:
         if cfg.ambiguity not in ("reject", "span", "off"):
             raise ValueError(f"LoopConfig.ambiguity must be 'reject', 'span' or 'off', got {cfg.ambiguity!r}")
+        if not (math.isfinite(cfg.disagreement_window) and cfg.disagreement_window >= 0):
+            raise ValueError(f"LoopConfig.disagreement_window must be a finite number >= 0, got {cfg.disagreement_window!r}")
         self.cfg = cfg
         # the refinement against an old map starts from the branch-and-bound pose; its window (for the score
         # surface, hence the covariance) is wide enough to show a corridor's ambiguity along its length; Gauss-Newton's
@@ -174,7 +176,8 @@ class LoopSearch:
                graph_distance: np.ndarray, travelled: float = 0.0, rel_cov: np.ndarray | None = None,
                travel: np.ndarray | None = None,
                bundle: Callable[[], np.ndarray] | None = None,
-               disagreement: tuple[np.ndarray, np.ndarray] | None = None) -> list[LoopCandidate]:
+               disagreement: tuple[np.ndarray, np.ndarray] | None = None,
+               floor: np.ndarray | None = None) -> list[LoopCandidate]:
         """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps;
         ``graph_distance[m]`` is the graph path length from m to n (see the module docstring); ``travelled``
         the odometer reading, which spaces wide searches of one old submap ``wide_search_spacing`` apart (a
@@ -184,7 +187,8 @@ class LoopSearch:
         drift allowance); ``bundle`` makes the points of the node and those behind it (``global_bundle_m``, node
         frame) that the global search matches, called only when a global round runs; ``disagreement`` (m (N,), rad
         (N,), per anchor: ``AnchorGraph.dead_reckoning_disagreement``) bounds the windows where dead reckoning
-        agrees with the estimate. Closures of windowed searches are returned at once; those of global
+        agrees with the estimate; ``floor`` (m (N,), the same disagreement without a compass) widens them to it
+        (``LoopConfig.disagreement_window``). Closures of windowed searches are returned at once; those of global
         ones when another agrees (``loop_consistency``)."""
         from holoslam.warmup import wait_for_kernels
 
@@ -213,6 +217,10 @@ class LoopSearch:
         sig_th = None if covs is None else np.sqrt(np.maximum(covs[:, 2, 2], 0.0))
         loose = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
         win = self._agreement_bound(loose, dis)
+        if floor is not None and c.disagreement_window > 0:  # no compass: at least the disagreement (``LoopConfig``)
+            f = np.asarray(floor, float)[olds_arr]
+            f = np.where(np.isfinite(f), np.minimum(c.base_window_xy + c.disagreement_window * f, c.max_window_xy), 0.0)
+            win = (np.maximum(win[0], f), np.maximum(win[1], f), win[2])
         bounded = (win[0] < loose[0]) | (win[1] < loose[1]) | (win[2] < loose[2])  # narrowed by the agreement
         for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
                                                     strict=True)):
