@@ -334,9 +334,8 @@ def _walk_scans(
                                  graph.graph_distance(node.submap), float(travelled[k]),
                                  graph.relative_covariances(node.submap), np.array(graph.travel),
                                  partial(slam.bundle, node, cfg.loops.global_bundle_m),
-                                 graph.dead_reckoning_disagreement(node.submap) if run.have_h else None,
-                                 None if run.have_h or cfg.loops.disagreement_window <= 0
-                                 else graph.dead_reckoning_disagreement(node.submap)[0])
+                                 graph.dead_reckoning_disagreement(node.submap)
+                                 if run.have_h or cfg.loops.disagreement_window > 0 else None, run.have_h)
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found and graph.disagree(found, cfg.loops.resolve_min_d2):

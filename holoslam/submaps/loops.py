@@ -139,13 +139,22 @@ class LoopSearch:
         return self._agreement_bound(self._covariance_windows(xy, th, cov_mTr, mTr), disagreement)
 
     def _agreement_bound(self, win: tuple[np.ndarray, np.ndarray, np.ndarray],
-                         disagreement: tuple[np.ndarray, np.ndarray] | None
+                         disagreement: tuple[np.ndarray, np.ndarray] | None, compass: bool = True
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Windows (wx, wy, wth) at most the base plus ``agreement_factor`` times dead reckoning's disagreement
-        (m, rad) with the estimate; unchanged without one."""
+        """Windows (wx, wy, wth) bounded by dead reckoning's disagreement (m, rad) with the estimate: with a
+        compass at most the base plus ``agreement_factor`` times it, without one at least the base plus
+        ``disagreement_window`` times it (up to ``max_window_xy``; ``LoopConfig``); unchanged without one."""
         c = self.cfg
         wx, wy, wth = win
-        if disagreement is None or c.agreement_factor <= 0:
+        if disagreement is None:
+            return wx, wy, wth
+        if not compass:
+            if c.disagreement_window <= 0:
+                return wx, wy, wth
+            d = disagreement[0]
+            f = np.where(np.isfinite(d), np.minimum(c.base_window_xy + c.disagreement_window * d, c.max_window_xy), 0.0)
+            return np.maximum(wx, f), np.maximum(wy, f), wth
+        if c.agreement_factor <= 0:
             return wx, wy, wth
         bxy = c.base_window_xy + c.agreement_factor * disagreement[0]
         return (np.minimum(wx, bxy), np.minimum(wy, bxy),
@@ -177,7 +186,7 @@ class LoopSearch:
                travel: np.ndarray | None = None,
                bundle: Callable[[], np.ndarray] | None = None,
                disagreement: tuple[np.ndarray, np.ndarray] | None = None,
-               floor: np.ndarray | None = None) -> list[LoopCandidate]:
+               compass: bool = True) -> list[LoopCandidate]:
         """Loop candidates of node r (pose ``nTr`` in submap n) against the finished submaps;
         ``graph_distance[m]`` is the graph path length from m to n (see the module docstring); ``travelled``
         the odometer reading, which spaces wide searches of one old submap ``wide_search_spacing`` apart (a
@@ -187,8 +196,8 @@ class LoopSearch:
         drift allowance); ``bundle`` makes the points of the node and those behind it (``global_bundle_m``, node
         frame) that the global search matches, called only when a global round runs; ``disagreement`` (m (N,), rad
         (N,), per anchor: ``AnchorGraph.dead_reckoning_disagreement``) bounds the windows where dead reckoning
-        agrees with the estimate; ``floor`` (m (N,), the same disagreement without a compass) widens them to it
-        (``LoopConfig.disagreement_window``). Closures of windowed searches are returned at once; those of global
+        agrees with the estimate, or widens them to it when its heading is the odometry's (``compass`` False:
+        ``LoopConfig.disagreement_window``). Closures of windowed searches are returned at once; those of global
         ones when another agrees (``loop_consistency``)."""
         from holoslam.warmup import wait_for_kernels
 
@@ -216,11 +225,7 @@ class LoopSearch:
         # ``global_heading_sigmas`` of it (``LoopConfig``)
         sig_th = None if covs is None else np.sqrt(np.maximum(covs[:, 2, 2], 0.0))
         loose = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
-        win = self._agreement_bound(loose, dis)
-        if floor is not None and c.disagreement_window > 0:  # no compass: at least the disagreement (``LoopConfig``)
-            f = np.asarray(floor, float)[olds_arr]
-            f = np.where(np.isfinite(f), np.minimum(c.base_window_xy + c.disagreement_window * f, c.max_window_xy), 0.0)
-            win = (np.maximum(win[0], f), np.maximum(win[1], f), win[2])
+        win = self._agreement_bound(loose, dis, compass)
         bounded = (win[0] < loose[0]) | (win[1] < loose[1]) | (win[2] < loose[2])  # narrowed by the agreement
         for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
                                                     strict=True)):
