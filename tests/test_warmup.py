@@ -81,3 +81,29 @@ def test_a_stage_waits_for_the_pools_compile_of_its_kernels_instead_of_compiling
     t0 = time.perf_counter()
     warmup.wait_for_kernels("holoslam.maps")
     assert time.perf_counter() - t0 < 0.05
+
+
+def test_the_pool_forks_a_single_threaded_process_on_linux_and_compiles_there(tmp_path):
+    """``_pool_context``: ``fork`` on Linux while one thread runs (the workers start with numba set up), ``spawn``
+    once another thread runs (a fork could copy a lock that thread holds); a forked pool fills numba's cache."""
+    code = (
+        "import threading\n"
+        "from holoslam import warmup\n"
+        "alone = warmup._pool_context().get_start_method()\n"
+        "stop = threading.Event()\n"
+        "t = threading.Thread(target=stop.wait)\n"
+        "t.start()\n"
+        "beside = warmup._pool_context().get_start_method()\n"
+        "stop.set()\n"
+        "t.join()\n"
+        "sigs = [s for s in warmup.load_signatures() if s.module in "
+        "('holoslam.maps._raycast_fast', 'holoslam.submaps._graph_fast')]\n"
+        "done = warmup.warm_up(sigs, workers=2)\n"
+        "print(alone, beside, len(sigs), sum(not d[3] for d in done), len(warmup.pending(sigs)))\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    alone, beside, n, compiled, left = out.stdout.split()
+    assert (alone, beside) == ("fork" if sys.platform.startswith("linux") else "spawn", "spawn")
+    assert int(n) >= 2 and int(compiled) == int(n) and left == "0"
