@@ -45,9 +45,10 @@ def _count(items: Iterable[str]) -> dict[str, int]:
     return out
 
 
-def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None) -> SubmapSummary:
+def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None, odometer: Any = None) -> SubmapSummary:
     """The front end's summary; ``revisits`` the keyframe stage's ``holoslam.graph.nodes.KeyframeSolve``,
-    ``mounting`` the laser mounting check (``laser_mounting``) or None."""
+    ``mounting`` the laser mounting check (``laser_mounting``) or None, ``odometer`` the odometer check
+    (``odometer_check``) or None."""
     return SubmapSummary(
         count=len(fe.submaps),
         split_reasons=_count(str(sm.reason) for sm in fe.submaps),
@@ -63,9 +64,22 @@ def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None) -> Subma
         keyframe_matches=0 if revisits is None else len(revisits.matches),
         keyframe_matches_tried=0 if revisits is None else int(revisits.matches.tried),
         laser_mounting=mounting,
+        odometer=odometer,
         loop_search=dict(fe.loop_counts) or None,
         breaks=int(fe.breaks),
     )
+
+
+def odometer_check(log: Any, trajectory: Any) -> dict[str, Any] | None:
+    """The odometer check of a run: its raw odometry against the scan-matched keyframes
+    (``holoslam.submaps.odometer``); None when the run drove too few straight stretches."""
+    from holoslam.submaps.odometer import odometer_bias
+
+    if not log.odometry:
+        return None
+    odom_stamps, odomTb = log.odometry_arrays()
+    m = odometer_bias(trajectory.key_stamps_ns, trajectory.wTk, odom_stamps, odomTb)
+    return None if m is None else m.to_dict()
 
 
 def laser_mounting(log: Any, fe: Any, trajectory: Any) -> dict[str, Any] | None:
@@ -170,7 +184,7 @@ def build_report(*, log: Any, ingest_report: Any, sightings: Any, fe: Any, sol: 
         inputs_absent=absent_inputs(log),
         ingest=report_to_dict(ingest_report),
         vision=sightings.report,
-        submaps=submap_summary(fe, revisits, laser_mounting(log, fe, trajectory)),
+        submaps=submap_summary(fe, revisits, laser_mounting(log, fe, trajectory), odometer_check(log, trajectory)),
         factors=factor_counts(fe.problem),
         solver=solver_summary(sol),
         objects=object_summary(objects, sol, maps.holographic, located_by),

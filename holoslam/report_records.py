@@ -57,6 +57,9 @@ class SubmapSummary:
     # the laser's position from the point the robot turns about, measured from its motion, against the log's
     # transform (holoslam.submaps.mounting.mounting_check); None when the robot turned too little to tell
     laser_mounting: dict[str, Any] | None = None
+    # the odometer's distance scale and heading drift against the scan-matched keyframes on straight stretches
+    # (holoslam.submaps.odometer); None when the run drove too few straight stretches to tell
+    odometer: dict[str, Any] | None = None
     # the loop search's searches and their outcomes by reason (windowed / global; accepted, no match, ambiguous,
     # waiting for a consistent second closure...), and the breaks of local SLAM (a gap in the laser or
     # scans that stopped fitting the map: lost)

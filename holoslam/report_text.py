@@ -101,6 +101,10 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
         from holoslam.submaps.mounting import mounting_text
 
         lines.extend(mounting_text(sm.laser_mounting))
+    if sm.odometer:
+        from holoslam.submaps.odometer import odometer_text
+
+        lines.extend(odometer_text(sm.odometer))
     return lines
 
 

@@ -32,6 +32,8 @@ REPORT = {
                 "laser_mounting": {"laser_x_m": -0.018, "laser_x_std_m": 0.0007, "pairs": 4932, "turns": 2895,
                                    "tf_laser_x_m": 0.04, "centre_in_base_x_m": 0.058, "base_off_centre": True,
                                    "base_frame": "base_link", "laser_frame": "laser"},
+                "odometer": {"scale": 0.9926, "scale_std": 0.0013, "yaw_deg_per_m": -0.916, "yaw_std": 0.072,
+                             "stretches": 62, "distance_m": 122.7, "off": True},
                 "loop_search": {"global searches": 12, "global: accepted (consistent)": 2, "windowed searches": 1585},
                 "breaks": 1},
     "factors": {"relative_pose/dead_reckoning": 42, "relative_pose/loop": 497, "compass_heading": 42,
