@@ -19,10 +19,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _find(parent, x):
     root = x
     while parent[root] != root:
@@ -34,7 +34,7 @@ def _find(parent, x):
     return root
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _union(parent, area, mx, a, b):
     ra = _find(parent, a)
     rb = _find(parent, np.int64(b))  # b is an int32 label: one _find to compile, not one per integer type
@@ -75,7 +75,7 @@ def restore(cells, lab, parent, area, mx, clr, next_id, w):
     return next_id + k
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _push(hd, hv, n, d, v):
     i = n
     hd[i] = d
@@ -261,7 +261,7 @@ def cut_lines(free, cells, reach):
     return p1, p2, ok
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _free_at(free, r, c):
     h, w = free.shape
     ri = int(np.rint(r))

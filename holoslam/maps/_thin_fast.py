@@ -25,7 +25,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 
 
 @nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
@@ -59,7 +59,7 @@ def _codes(a, off):
     return code
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _delete(a, code, off, i, touched, nt, tst, stamp):
     """Delete set cell i: clear it, update its set neighbours' codes, append them (once per stamp) to
     touched (room for 8 per deleted cell). Returns the new length of touched."""
@@ -77,7 +77,7 @@ def _delete(a, code, off, i, touched, nt, tst, stamp):
     return nt
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _delete_marked(a, code, off, shift, marked, nm, guard, removable, touched, tst, stamp):
     """Delete marked[:nm] (sorted by row): all of them (guard False), or as if class by class (row % 2,
     col % 2 of the padded grid, rows of 2**shift cells; classes 0, 1, 2, 3 in turn), each if still removable
@@ -117,7 +117,7 @@ def _delete_marked(a, code, off, shift, marked, nm, guard, removable, touched, t
     return ndel, nt
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _by_row(l1, n1, l2, n2, shift, nrows):
     """l1[:n1] and l2[:n2] together, ordered by row (counting sort; order within a row kept)."""
     cnt = np.zeros(nrows + 1, np.int64)
@@ -139,7 +139,7 @@ def _by_row(l1, n1, l2, n2, shift, nrows):
     return out
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _collect(a, code, boundary_only):
     """Set cells (with boundary_only: those with an unset neighbour), in memory order."""
     n = a.shape[0]
@@ -156,7 +156,7 @@ def _collect(a, code, boundary_only):
     return out
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _next_stamp(stamp, tst, cst):
     """Stamps are uint8: after 255 subiterations both stamp arrays are cleared and numbering starts again."""
     if stamp == 255:

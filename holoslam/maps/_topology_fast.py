@@ -20,10 +20,10 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _nbr(flat, code, index, offs, i, k):
     """Index of neighbour k of cell i, or -1."""
     if (code[i] >> k) & 1:
@@ -79,7 +79,7 @@ def nodes(flat, code, index, offs, deg, is_node, tip2, clr):
     return node_of, kind, rep
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _find(parent, x):
     while parent[x] != x:
         parent[x] = parent[parent[x]]

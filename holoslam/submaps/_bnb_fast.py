@@ -27,7 +27,7 @@ import numba as nb
 import numpy as np
 
 from holoslam._common_fast import argsort_stable
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 
 
 @nb.njit(**JIT)
@@ -50,7 +50,7 @@ def quantise(prob, lo, step):  # pragma: no cover - compiled
     return q.reshape(h, w)
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _max2(dst, a, b):  # pragma: no cover - compiled
     """dst = max(a, b) elementwise (slices: the loop vectorises)."""
     for j in range(dst.size):
@@ -58,7 +58,7 @@ def _max2(dst, a, b):  # pragma: no cover - compiled
         dst[j] = u if u > v else v
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _max1(dst, a, q_out):  # pragma: no cover - compiled
     """dst = max(a, q_out) elementwise."""
     for j in range(dst.size):
@@ -66,7 +66,7 @@ def _max1(dst, a, q_out):  # pragma: no cover - compiled
         dst[j] = u if u > q_out else q_out
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _pool(src, hs, ws, half, q_out, tmp, dst):  # pragma: no cover - compiled
     """One doubling step: src (hs x ws, flat) -> dst ((hs + half) x (ws + half), flat), through tmp
     (hs x (ws + half)): each cell the max of the cell and the one ``half`` before it (cells outside count
@@ -157,7 +157,7 @@ def _bound(levels, start, hd, wd, sh, rows, cols, bb, a, x, y, q_out):  # pragma
     return s
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: no cover - compiled
     """The exact sum (d = 0) or the bound (d >= 1) of candidate (a, x, y); quant = (lo, step, q_out, p_out,
     slack)."""
@@ -170,7 +170,7 @@ def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: 
     return rows.shape[1] * lo + q * step + slack
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _boxes(rows, cols):  # pragma: no cover - compiled
     """Per angle a: (min row, max row, min col, max col) of the points' cells."""
     bb = np.empty((rows.shape[0], 4), dtype=np.int64)
@@ -204,7 +204,7 @@ def top_bounds(prob, levels, starts, rows, cols, box, d_top, quant):  # pragma: 
     return top, argsort_stable(-top)  # np.argsort(-top, kind="mergesort")
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _defer(buf, n, a, x, y, d, bound):  # pragma: no cover - compiled
     """Append the node (a, x, y, level d, bound) to the (capacity, 5) buffer holding n rows (doubled when full)."""
     if n == buf.shape[0]:

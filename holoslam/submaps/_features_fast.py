@@ -19,7 +19,7 @@ import math
 import numba as nb
 import numpy as np
 
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 from holoslam.submaps._fast import split_pieces
 
 
@@ -48,7 +48,7 @@ def _fit(x, y, a, b):  # pragma: no cover - compiled
     return nx, ny, d, cx + t0 * ux, cy + t0 * uy, cx + t1 * ux, cy + t1 * uy
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _ordered(px, py, gap, gap_per_m):  # pragma: no cover - compiled
     """The points, a full-circle scan whose last beam continues its first started at its widest gap instead."""
     n = px.size
@@ -98,7 +98,7 @@ def _extent(x, y, a, b):  # pragma: no cover - compiled
     return math.hypot(x1 - x0, y1 - y0)
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _segments(x, y, starts, ends, is_line, split_tol, min_points, min_length, cos_merge):  # pragma: no cover
     """Segments (S, 4) and lines (S, 3) of the runs marked ``is_line``: their split pieces of ``min_points`` or
     more, adjacent collinear ones merged (``features._merged_pieces``), those ``min_length`` long or more."""
@@ -150,7 +150,7 @@ def _segments(x, y, starts, ends, is_line, split_tol, min_points, min_length, co
     return segs[:ns], lines[:ns]
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _beyond(s, px, py):  # pragma: no cover - compiled
     """How far (px, py) lies outside segment s along its direction (``features._beyond``)."""
     dx, dy = s[2] - s[0], s[3] - s[1]
@@ -159,7 +159,7 @@ def _beyond(s, px, py):  # pragma: no cover - compiled
     return max(max(-u, u - L), 0.0)
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _corners_and_crossings(S, Ln, corner_gap, gap_per_m, sin_min, extend):  # pragma: no cover - compiled
     """``features._corners_and_crossings``: corners (C, 2) and crossings (X, 2) of the pairs i < j in order."""
     ns = S.shape[0]
@@ -227,7 +227,7 @@ def scan_features(px, py, gap, gap_per_m, split_tol, min_points, min_length, cos
     return segs, lines, corners, cross, blobs[:nb_]
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _moved(P, c, s, tx, ty):  # pragma: no cover - compiled
     """Points (N, 2) in place: R(theta) p + t (``geometry.transform_points``'s arithmetic)."""
     for i in range(P.shape[0]):
@@ -236,7 +236,7 @@ def _moved(P, c, s, tx, ty):  # pragma: no cover - compiled
         P[i, 1] = ty + s * x + c * y
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _put(buf, n, rows):  # pragma: no cover - compiled
     """``rows`` appended to the first ``n`` rows of ``buf`` (a new buffer of twice the size when full)."""
     k, w = rows.shape[0], buf.shape[1]

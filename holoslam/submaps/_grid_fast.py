@@ -16,7 +16,7 @@ import math
 import numba as nb
 import numpy as np
 
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 
 
 @nb.njit(**JIT)
@@ -142,7 +142,7 @@ def angular_step(px, py, res, quantile):  # pragma: no cover
     return math.acos(max(-1.0, 1.0 - res ** 2 / (2.0 * d * d)))
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _cubic(p0, p1, p2, p3, t):  # pragma: no cover
     """Catmull-Rom cubic through p1 (t = 0) and p2 (t = 1): value and derivative in t."""
     a = -p0 + 3.0 * p1 - 3.0 * p2 + p3

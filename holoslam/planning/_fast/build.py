@@ -10,7 +10,7 @@ import numba as nb
 import numpy as np
 
 from holoslam._common_fast import csr_group
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 
 
 @nb.njit(**JIT)
@@ -62,7 +62,7 @@ def block_edges(blocks, labels):
     return out[:m].copy()
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _grow_rectangle(S, h, w, r0, c0, r1, c1, step, active):
     """Grow the half-open rectangle (r0, c0, r1, c1) round robin up (row1), right (col1), down (row0), left
     (col0), a direction's step doubling while the strip it adds is free (O(1) from the integral image
@@ -110,7 +110,7 @@ def _grow_rectangle(S, h, w, r0, c0, r1, c1, step, active):
     return r0, c0, r1, c1
 
 
-@nb.njit(**JIT)
+@nb.njit(**JIT_INNER)
 def _claim_blocks(blocks, labels, rob, region, r0, c0, r1, c1):
     """Give ``region`` every block without a region (``rob`` -1) lying wholly inside the rectangle (r0, c0,
     r1, c1): read off the label image row by row, jumping over each block met."""
