@@ -292,6 +292,11 @@ def _walk_scans(
     lost = np.diag([cfg.lost_sigma_m ** 2] * 2 + [np.radians(cfg.lost_sigma_deg) ** 2])
     every = max(1, -(-len(run.scans) // 50))
     last_search: tuple[int, float, float] | None = None  # the node count, odometer and heading at the last search
+    # dead reckoning's disagreement with the estimate: the compass's bound on the windows, or without one the
+    # disagreement window's floor on a slow laser (``LoopConfig.disagreement_window_max_hz``)
+    widen = (cfg.loops.disagreement_window > 0
+             and scan_rate_hz(np.array([sc.stamp_ns for sc in run.scans], np.int64))
+             <= cfg.loops.disagreement_window_max_hz)
     for k, scan in enumerate(run.scans):
         if progress is not None and k % every == 0:
             progress(k, len(run.scans))
@@ -335,7 +340,7 @@ def _walk_scans(
                                  graph.relative_covariances(node.submap), np.array(graph.travel),
                                  partial(slam.bundle, node, cfg.loops.global_bundle_m),
                                  graph.dead_reckoning_disagreement(node.submap)
-                                 if run.have_h or cfg.loops.disagreement_window > 0 else None, run.have_h)
+                                 if run.have_h or widen else None, run.have_h)
             for c in found:
                 graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
             if found and graph.disagree(found, cfg.loops.resolve_min_d2):

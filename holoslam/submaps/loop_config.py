@@ -62,15 +62,21 @@ class LoopConfig:
     # 0: off
     agreement_factor: float = 2.0
     # Without a compass (where the bound above is not used), a window is at least the base plus this many times
-    # dead reckoning's disagreement with the estimate, up to max_window_xy: where the scans shorten a corridor the
-    # odometry measures right, the estimate drifts more than window_rate allows. The shared aces log with its
-    # ranges cut at 5 m (a cheap laser): 48 windowed searches from its pass at 800-870 s into its first minute,
-    # 2.8-3.9 m windows, the right pose 6.2-6.7 m from their seeds (scoring up to 0.68 there): no closure, 0.0698 m
-    # mean relation error (2.1 m max); at 1.0: 0.0501 (0.53 max). Off by default: the windows then reach the cap
-    # wherever the odometry's heading has drifted, and the loop search costs 2-3x its CPU on the shared full-rate
-    # logs (intel 41 -> 114 s, fr079 40 -> 89 s; fr079's wall time 57 s against Cartographer's 62 s) for the same
-    # error (intel 0.0187, aces 0.0355, fr079 0.0427 m at the laser; sparse and kidnapped alike or better). 0: off
-    disagreement_window: float = 0.0
+    # dead reckoning's disagreement with the estimate, up to max_window_xy, on a laser of at most
+    # ``disagreement_window_max_hz``: where the scans shorten a corridor the odometry measures right, the estimate
+    # drifts more than window_rate allows. The shared aces log with its ranges cut at 5 m (a cheap laser): 48
+    # windowed searches from its pass at 800-870 s into its first minute, 2.8-3.9 m windows, the right pose 6.2-6.7
+    # m from their seeds (scoring up to 0.68 there): no closure, 0.0698 m mean relation error (2.1 m max); at 1.0:
+    # 0.0501 (0.53 max). The simulated 350 m building without its compass (1.4 Hz; ``bench_building_slam.py
+    # --no-compass --wobble 0.995 1 1.005``, 9 runs): runs whose revisits are over 1 m off 3 -> 1 (worst 4.9 ->
+    # 3.2 m), median revisits 0.158 -> 0.143 m, anchors 0.514 -> 0.334 m, for 7 % more CPU. 0: off
+    disagreement_window: float = 1.0
+    # Hz: the disagreement window only on a laser this slow or slower (its median scan rate). At 4.6-5.4 Hz (the
+    # shared full-rate logs) the windows reach the cap wherever the odometry's heading drifted and the loop
+    # search costs 2-3x its CPU for the same error (intel 0.0187, aces 0.0355, fr079 0.0427 m at the laser; run
+    # 34 -> 75 s, 24 -> 27 s, 40 -> 50 s wall): nodes come 3-4x as often as at 1.4 Hz, where the building pays 7 %.
+    # The decimated shared logs (1.4 Hz) map as well either way. inf: always
+    disagreement_window_max_hz: float = 2.0
     min_score: float = 0.55
     min_score_wide: float = 0.6
     # > 0: on a laser sparser than the thresholds' reference (``score_reference``: the score scale below 1), a

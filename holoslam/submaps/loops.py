@@ -66,6 +66,9 @@ class LoopSearch:
             raise ValueError(f"LoopConfig.ambiguity must be 'reject', 'span' or 'off', got {cfg.ambiguity!r}")
         if not (math.isfinite(cfg.disagreement_window) and cfg.disagreement_window >= 0):
             raise ValueError(f"LoopConfig.disagreement_window must be a finite number >= 0, got {cfg.disagreement_window!r}")
+        if not (cfg.disagreement_window_max_hz >= 0):  # inf allowed: always
+            raise ValueError("LoopConfig.disagreement_window_max_hz must be a number >= 0 (inf: always), got "
+                             f"{cfg.disagreement_window_max_hz!r}")
         self.cfg = cfg
         # the refinement against an old map starts from the branch-and-bound pose; its window (for the score
         # surface, hence the covariance) is wide enough to show a corridor's ambiguity along its length; Gauss-Newton's
