@@ -108,6 +108,7 @@ def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[
     from holoslam.optimise import map_log_keyframes
     from holoslam.submaps import loops as loops_mod
     from holoslam.submaps.frontend import FrontEndConfig
+    from holoslam.submaps.odometer import odometer_bias
     from holoslam.trajectory import run_trajectory
 
     log, _ = read_log(path)
@@ -143,8 +144,6 @@ def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[
     scan_ns = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
     rels = building_relations(scan_ns, truth_at(scan_ns, gs, gp))
     scored = {k: relation_errors(traj.stamps_ns, traj.wTb, r) for k, r in rels.items()}
-    from holoslam.submaps.odometer import odometer_bias
-
     check = odometer_bias(traj.key_stamps_ns, traj.wTk, *log.odometry_arrays())
     return {"rmse": err.rmse_m, "max": err.max_m, "heading": err.heading_rmse_deg, "dr": dr.rmse_m,
             "closures": len(closures), "wrong": wrong, "cpu": cpu, "anchors": len(truth),

@@ -39,6 +39,14 @@ def test_types_round_trip():
     assert warmup._decode(warmup._encode(typeof(ro))) == typeof(ro)
 
 
+def _in_child(code: str, cache) -> list[str]:
+    """``code`` run by a fresh interpreter with numba's cache in the empty folder ``cache``: its printed words."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout.split()
+
+
 def test_compiling_a_signature_fills_the_cache(tmp_path):
     # in a child process with an empty numba cache: the kernel is pending, compiled, then cached
     code = (
@@ -48,10 +56,7 @@ def test_compiling_a_signature_fills_the_cache(tmp_path):
         "done = warmup.warm_up([sig], workers=1)\n"
         "print(before, len(done), repr(done[0][3]), len(warmup.pending([sig])))\n"
     )
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(REPO)}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr[-2000:]
-    assert out.stdout.split() == ["1", "1", "''", "0"]
+    assert _in_child(code, tmp_path) == ["1", "1", "''", "0"]
     assert any(tmp_path.rglob("*.nbi"))
 
 
@@ -101,9 +106,6 @@ def test_the_pool_forks_a_single_threaded_process_on_linux_and_compiles_there(tm
         "done = warmup.warm_up(sigs, workers=2)\n"
         "print(alone, beside, len(sigs), sum(not d[3] for d in done), len(warmup.pending(sigs)))\n"
     )
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(REPO)}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stderr[-2000:]
-    alone, beside, n, compiled, left = out.stdout.split()
+    alone, beside, n, compiled, left = _in_child(code, tmp_path)
     assert (alone, beside) == ("fork" if sys.platform.startswith("linux") else "spawn", "spawn")
     assert int(n) >= 2 and int(compiled) == int(n) and left == "0"
