@@ -3,6 +3,7 @@ kernels of a run, and the front end's re-estimate of the anchors after loop clos
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -12,9 +13,10 @@ if TYPE_CHECKING:
     from holoslam.graph.build import BuildOptions
     from holoslam.graph.nodes import KeyframeSolve
     from holoslam.solve import SolveOptions
+    from holoslam.submaps.odometer import OdometerCorrection
 
 __all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes", "keyframe_anchors", "map_log",
-           "map_log_keyframes"]
+           "map_log_keyframes", "odometer_pass"]
 
 
 def solve_options(cfg: SolverConfig) -> SolveOptions:
@@ -101,13 +103,42 @@ def map_log(log: Any, frontend: Any = None, covariances: bool = True) -> tuple[A
 
 def map_log_keyframes(log: Any, frontend: Any = None, covariances: bool = True) -> tuple[Any, Any, Any]:
     """:func:`map_log`, and the keyframe solve (``KeyframeSolve`` or None) that places every scan of the run's
-    trajectory (``trajectory.run_trajectory(log, fe, sol, nodes)``)."""
+    trajectory (``trajectory.run_trajectory(frontend.corrected_log(log, fe), fe, sol, nodes)``); a second pass on
+    corrected odometry when the first calls for one (``odometer_pass``), as a run makes."""
+    import dataclasses
+
     from holoslam.solve import CovarianceScope, SolveOptions, solve
     from holoslam.submaps.frontend import FrontEndConfig, build_problem
+    from holoslam.trajectory import run_trajectory
 
     cfg = frontend or FrontEndConfig()
-    fe = build_problem(log, config=cfg, optimize=reestimate_anchors)
     scope = CovarianceScope.ANCHORS if covariances else CovarianceScope.NONE
-    sol = solve(fe.problem, SolveOptions(covariances=scope, build=run_build_options()))
-    nodes = revisit_nodes(fe, sol, cfg)
+
+    def one_pass(log: Any) -> tuple[Any, Any, Any]:
+        fe = build_problem(log, config=cfg, optimize=reestimate_anchors)
+        sol = solve(fe.problem, SolveOptions(covariances=scope, build=run_build_options()))
+        return fe, sol, revisit_nodes(fe, sol, cfg)
+
+    fe, sol, nodes = one_pass(log)
+    fix = odometer_pass(log, fe, lambda: run_trajectory(log, fe, sol, nodes), cfg)
+    if fix is not None:
+        fe, sol, nodes = one_pass(fix.apply(log))
+        fe = dataclasses.replace(fe, odometer_correction=fix)
     return fe, keyframe_anchors(sol, fe.anchor_stamps_ns, nodes), nodes
+
+
+def odometer_pass(log: Any, fe: Any, trajectory: Callable[[], Any], cfg: Any) -> OdometerCorrection | None:
+    """After a SLAM pass over ``log`` (its front end ``fe``; ``trajectory()`` its ``RunTrajectory``, asked for only
+    when needed): the odometry correction that calls for a second pass, or None
+    (``holoslam.submaps.odometer.OdometerCorrectionConfig``, ``cfg.odometer`` of the ``FrontEndConfig``): the raw
+    odometry against the solved keyframes off by more than a wheel's calibration, where the scans were blind
+    along the track often enough for the map to have followed it. A run maps again on
+    ``fix.apply(log)`` (``frontend.corrected_log``)."""
+    from holoslam.submaps.odometer import odometer_bias, odometer_correction
+
+    oc = cfg.odometer
+    if not oc.enabled or fe.blind_share < oc.blind_share or not log.odometry:
+        return None
+    traj = trajectory()
+    return odometer_correction(odometer_bias(traj.key_stamps_ns, traj.wTk, *log.odometry_arrays()), fe.blind_share,
+                               oc)

@@ -134,15 +134,14 @@ def _import_later_stages() -> None:
 
 
 def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
-    """The stages of a run from vision to the located objects (``run`` without the maps and the report)."""
+    """The stages of a run from vision to the located objects (``run`` without the maps and the report); a
+    second pass of the SLAM stages on corrected odometry when the first finds the odometer off where the scans
+    cannot see motion (``holoslam.optimise.odometer_pass``)."""
+    import dataclasses
     from concurrent.futures import ThreadPoolExecutor
 
-    from holoslam.objects import located_objects
-    from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
-    from holoslam.sightings import see_objects, triangulate_objects
-    from holoslam.solve import solve
-    from holoslam.submaps.frontend import build_problem
-    from holoslam.trajectory import run_trajectory
+    from holoslam.optimise import odometer_pass
+    from holoslam.sightings import see_objects
 
     # the vision stages read only the log (images, tag messages): they run in a thread while the front end does,
     # which needs their observations only once its local SLAM is done (OpenCV, zxing-cpp and the front end's
@@ -150,10 +149,28 @@ def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-vision") as pool:
         sightings = pool.submit(see_objects, log, cfg.vision, clock.background())
         pool.submit(_import_later_stages)  # after the vision stage, while the front end runs
-        with clock.stage(FRONT_END):
-            fe = build_problem(log, lambda: sightings.result().observations, cfg.frontend,
-                               clock.progress_of(FRONT_END), optimize=reestimate_anchors)
-        seen = sightings.result()
+        st = _slam_pass(log, cfg, clock, sightings.result)
+    fix = odometer_pass(log, st.fe, lambda: st.traj, cfg.frontend)
+    if fix is None:
+        return st
+    st = _slam_pass(fix.apply(log), cfg, clock, sightings.result)
+    return dataclasses.replace(st, fe=dataclasses.replace(st.fe, odometer_correction=fix))
+
+
+def _slam_pass(log: Any, cfg: RunConfig, clock: StageClock, seen_of: Any) -> SlamStages:
+    """``slam_stages``' SLAM stages on ``log``: the front end (the sightings ``seen_of()`` once its local SLAM is
+    done), the solve, the objects triangulated, the keyframes, the trajectory and the located objects."""
+    from holoslam.objects import located_objects
+    from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
+    from holoslam.sightings import triangulate_objects
+    from holoslam.solve import solve
+    from holoslam.submaps.frontend import build_problem
+    from holoslam.trajectory import run_trajectory
+
+    with clock.stage(FRONT_END):
+        fe = build_problem(log, lambda: seen_of().observations, cfg.frontend, clock.progress_of(FRONT_END),
+                           optimize=reestimate_anchors)
+    seen = seen_of()
     with clock.stage("optimise"):
         options = solve_options(cfg.solver)
         sol = solve(fe.problem, options)

@@ -70,16 +70,19 @@ def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None, odometer
     )
 
 
-def odometer_check(log: Any, trajectory: Any) -> dict[str, Any] | None:
-    """The odometer check of a run: its raw odometry against the scan-matched keyframes
-    (``holoslam.submaps.odometer``); None when the run drove too few straight stretches."""
+def odometer_check(log: Any, trajectory: Any, fe: Any = None) -> dict[str, Any] | None:
+    """The odometer check of a run: its raw odometry (``log``'s) against the scan-matched keyframes
+    (``holoslam.submaps.odometer``), with the correction the front end ``fe`` mapped with under ``corrected``
+    (when it made one); None when the run drove too few straight stretches and made no correction."""
     from holoslam.submaps.odometer import odometer_bias
 
+    corr = getattr(fe, "odometer_correction", None)
+    extra = {} if corr is None else {"corrected": corr.to_dict()}
     if not log.odometry:
         return None
     odom_stamps, odomTb = log.odometry_arrays()
     m = odometer_bias(trajectory.key_stamps_ns, trajectory.wTk, odom_stamps, odomTb)
-    return None if m is None else m.to_dict()
+    return (extra or None) if m is None else {**m.to_dict(), **extra}
 
 
 def laser_mounting(log: Any, fe: Any, trajectory: Any) -> dict[str, Any] | None:
@@ -184,7 +187,7 @@ def build_report(*, log: Any, ingest_report: Any, sightings: Any, fe: Any, sol: 
         inputs_absent=absent_inputs(log),
         ingest=report_to_dict(ingest_report),
         vision=sightings.report,
-        submaps=submap_summary(fe, revisits, laser_mounting(log, fe, trajectory), odometer_check(log, trajectory)),
+        submaps=submap_summary(fe, revisits, laser_mounting(log, fe, trajectory), odometer_check(log, trajectory, fe)),
         factors=factor_counts(fe.problem),
         solver=solver_summary(sol),
         objects=object_summary(objects, sol, maps.holographic, located_by),

@@ -49,6 +49,7 @@ from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interp
 from holoslam.submaps.features import FeatureConfig, scans_features
 from holoslam.submaps.local_slam import ActiveSubmap, Break, LocalSlam, LocalSlamConfig
 from holoslam.submaps.loops import LoopConfig, LoopSearch
+from holoslam.submaps.odometer import OdometerCorrection, OdometerCorrectionConfig, is_blind
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
 from holoslam.submaps.probgrid import ProbGrid
 from holoslam.submaps.revisits import RevisitConfig
@@ -59,7 +60,7 @@ if TYPE_CHECKING:
     from holoslam.graph.problem import SlamProblem
 
 
-__all__ = ["FrontEndConfig", "FrontEnd", "build_problem", "base_to_laser", "landmark_in_anchor"]
+__all__ = ["FrontEndConfig", "FrontEnd", "build_problem", "corrected_log", "base_to_laser", "landmark_in_anchor"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,6 +85,9 @@ class FrontEndConfig:
     # and 10 m / 57 deg are solved). The loop search does not rely on it: a window across a break covers everything
     lost_sigma_m: float = 10.0
     lost_sigma_deg: float = 57.3
+    # a second pass on corrected odometry when the first finds the odometer off where the scans cannot see motion
+    # (``holoslam.optimise.odometer_pass``)
+    odometer: OdometerCorrectionConfig = field(default_factory=OdometerCorrectionConfig)
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,6 +114,11 @@ class FrontEnd:
     # fitting the map (``LocalSlamConfig.lost_after_misses``)
     breaks: int = 0
     score_scale: float = 1.0  # the loop search's threshold scale at the end (``LoopConfig.score_reference``)
+    # the share of local SLAM's matched nodes whose match was blind along the track (``odometer.is_blind``)
+    blind_share: float = 0.0
+    # the odometer's bias a first pass found, taken off the odometry this front end mapped with (None: the raw
+    # odometry; ``holoslam.optimise.odometer_pass``); the run's later stages use ``corrected_log``
+    odometer_correction: OdometerCorrection | None = None
 
 
 def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "") -> np.ndarray:
@@ -181,7 +190,8 @@ def build_problem(
     thread)."""
     cfg = config or FrontEndConfig()
     run = _dead_reckoning(log, cfg)  # step 1
-    closed, graph, loops = _local_slam(run, cfg, progress, optimize)  # steps 2-3
+    blind = [0, 0]  # local SLAM's matched nodes, and those blind along the track
+    closed, graph, loops = _local_slam(run, cfg, progress, optimize, blind)  # steps 2-3
     anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
     if callable(observations):  # still being made (the vision stage in a thread): needed from step 4 on
         observations = observations()
@@ -191,7 +201,14 @@ def build_problem(
                     len(graph.loop_groups()), len(graph.dead_reckoning_slips()),
                     {**dict(sorted(loops.counts.items())),
                      **{f"{k} search ms": int(1000 * v) for k, v in loops.seconds.items()}},
-                    sum(k == "lost" for k in graph.kind), loops.scale)
+                    sum(k == "lost" for k in graph.kind), loops.scale, blind[1] / max(blind[0], 1))
+
+
+def corrected_log(log: LogData, fe: FrontEnd) -> LogData:
+    """The log as the front end mapped it: its odometry corrected when the front end found the odometer off
+    (``FrontEnd.odometer_correction``), else ``log`` itself. The trajectory between nodes, the objects' dead
+    reckoning and the maps' poses follow the odometry the anchors were solved with."""
+    return log if fe.odometer_correction is None else fe.odometer_correction.apply(log)
 
 
 @dataclass(frozen=True, eq=False)
@@ -253,10 +270,11 @@ def _dead_reckoning(log: LogData, cfg: FrontEndConfig) -> _Run:
 
 def _local_slam(
     run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
-    optimize: Callable[[object], np.ndarray] | None,
+    optimize: Callable[[object], np.ndarray] | None, blind: list[int],
 ) -> tuple[list[Submap], AnchorGraph, LoopSearch]:
     """Steps 2-3: local SLAM over the scans and the revisit search; returns the finished submaps (by index), the
-    relative-pose graph between their anchors and the loop search (its counts)."""
+    relative-pose graph between their anchors and the loop search (its counts); ``blind`` counts the matched nodes
+    and those blind along the track (``odometer.is_blind``)."""
     grid = cfg.local.grid.for_rate(scan_rate_hz(np.array([s.stamp_ns for s in run.scans], np.int64)))
     slam = LocalSlam(replace(cfg.local, grid=grid), run.bTs)
     loops = LoopSearch(cfg.loops, cfg.local.match)
@@ -274,7 +292,7 @@ def _local_slam(
                 if isinstance(grid, ProbGrid):  # None without build_grids
                     loops.add_submap(sm.index, grid)
 
-        _walk_scans(run, cfg, progress, optimize, slam, loops, graph, finish)
+        _walk_scans(run, cfg, progress, optimize, slam, loops, graph, finish, blind)
         slam.close()
         finish(slam.pop_finished())
     return sorted((r.result() for r in records), key=lambda sm: sm.index), graph, loops
@@ -283,7 +301,7 @@ def _local_slam(
 def _walk_scans(
     run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
     optimize: Callable[[object], np.ndarray] | None, slam: LocalSlam, loops: LoopSearch, graph: AnchorGraph,
-    finish: Callable[[list[ActiveSubmap]], None],
+    finish: Callable[[list[ActiveSubmap]], None], blind: list[int],
 ) -> None:
     """``_local_slam``'s walk over the scans: each node to local SLAM, new anchors into the graph, finished
     submaps to ``finish``, and the loop search of every ``every_nodes``-th node (``_search_due``)."""
@@ -314,6 +332,9 @@ def _walk_scans(
                         scan.points(), np.where(scan.valid, scan.ranges, np.inf).astype(np.float64),
                         scan.angles, float(travelled[k]))
         last_t, n_nodes = t, n_nodes + 1
+        if slam.last_match_cov is not None:  # a matched node
+            blind[0] += 1
+            blind[1] += is_blind(slam.last_match_cov, cfg.odometer.blind_ratio)
         new = sorted([(n, m, mTn, cov, None) for m, n, mTn, cov in slam.arrivals[n_arrivals:]]
                      + [(b.new, b.last, None, None, b) for b in slam.breaks[n_breaks:]], key=lambda e: e[0])
         for n, m, mTn, cov_mTn, brk in new:

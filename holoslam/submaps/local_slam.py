@@ -193,6 +193,9 @@ class LocalSlam:
         # the nodes whose matches failed in a row (``lost_after_misses``): index in ``nodes``, odometry pose, ranges,
         # angles, odometer; left out of the map until a match succeeds (forgotten) or a break re-homes them
         self._missed: list[tuple[int, np.ndarray, np.ndarray, np.ndarray, float]] = []
+        # the last node's match covariance (its score surface's, before the submap's drift is added); None when
+        # the last node was not matched
+        self.last_match_cov: np.ndarray | None = None
 
     def wants(self, stamp: int, odo: np.ndarray) -> bool:
         """The motion filter: is a scan at ``stamp`` with odometry pose ``odo`` a new node?"""
@@ -208,6 +211,7 @@ class LocalSlam:
         insert it. ``odo`` is the odometry pose at the stamp and ``cov_odo_step`` the covariance of the odometry
         increment since the last node, asked for only when the match is not trusted."""
         b_pts = g.transform_points(self.bTs, s_points)
+        self.last_match_cov = None
         if self.active and self.nodes and stamp - self._last_stamp > self.cfg.lost_gap_s * 1e9:
             self._lose()
         if not self.active:
@@ -223,6 +227,7 @@ class LocalSlam:
             drift = self._drift(travelled - host.travelled0)
             if m is not None and m.ok:
                 self._missed.clear()
+                self.last_match_cov = m.cov_aTb
                 node = Node(int(stamp), host.index, self._polish(host, b_pts, m.aTb), m.cov_aTb + drift, b_pts,
                             m.score, True)
                 self._fix(host, stamp, node.aTb)
