@@ -3,6 +3,7 @@ anchors' error against the simulator's truth, dead reckoning's, and the loop clo
 
     .venv/bin/python benchmarks/bench_building_slam.py [--seeds 26 27 28] [--duration 4800] [--out DIR]
                                                        [--loops '{"agreement_factor": 0}'] [--no-compass]
+                                                       [--correction '{"enabled": false}']
                                                        [--odometer 1.05 0.5] [--wobble 0.995 1 1.005] [--jobs 2]
 
 Each seed's log is ``holoslam simulate --building --seed S --duration D`` (simulated once into ``--out``, reused
@@ -16,7 +17,8 @@ relations from the simulator's truth (``REL_GROUPS``: 1-5 s apart along the path
 scans more than ten minutes apart within 2 m and 45 deg of each other; up to 2,000 of each: a drive has fewer
 revisits, counted in the last column) and the trajectory at every scan is scored on them: columns rel (mean
 translational error, m, per group; rotational error over all, deg). ``--loops`` overrides ``LoopConfig`` settings
-(JSON) to compare against the defaults in the same process. ``--odometer SCALE DEG_PER_M`` biases the log's
+(JSON) to compare against the defaults in the same process; ``--correction`` the odometer correction's
+(``OdometerCorrectionConfig``: ``'{"enabled": false}'`` maps in one pass, as before session 9). ``--odometer SCALE DEG_PER_M`` biases the log's
 odometer (``holoslam.derive.bias_odometry``; the shared real logs' odometers are off by up to 3.4 % and 3.5 deg/m,
 ``holoslam.submaps.odometer``). ``--wobble`` runs each seed again with its odometer scaled by a hair (0.995,
 1.005): without the compass this building's map has been a lottery over changes that small (one seed's revisits
@@ -98,10 +100,12 @@ def _revisit_partners(t: np.ndarray, wTb: np.ndarray, i: np.ndarray, min_gap_s: 
     return out
 
 
-def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[float, float] | None = None) -> dict:
+def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[float, float] | None = None,
+                 correction: dict | None = None) -> dict:
     """One seed: map_log_keyframes with the closures recorded; the errors against the truth. ``compass`` False: the log's
     headings left out (a robot with wheel odometry and a laser only, as the held-out hospital log's). ``odometer``
-    (scale, deg per metre): the log's odometry biased so (``holoslam.derive.bias_odometry``)."""
+    (scale, deg per metre): the log's odometry biased so (``holoslam.derive.bias_odometry``). ``correction``:
+    ``OdometerCorrectionConfig`` settings (the second pass on corrected odometry)."""
     from holoslam import geometry as g
     from holoslam.evaluate import relation_errors, trajectory_errors, truth_at
     from holoslam.io.mcap import read_log
@@ -134,7 +138,7 @@ def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[
         return dead_reckoning(*args, **kwargs)
 
     cfg = FrontEndConfig()
-    cfg = replace(cfg, loops=replace(cfg.loops, **loops))
+    cfg = replace(cfg, loops=replace(cfg.loops, **loops), odometer=replace(cfg.odometer, **(correction or {})))
     loops_mod.LoopSearch.search = recording  # type: ignore[method-assign]
     frontend_mod._dead_reckoning = afresh  # type: ignore[assignment]
     try:
@@ -167,10 +171,11 @@ def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[
 def _one(job: tuple) -> tuple[int, float, dict]:
     """One (seed, wobble) run of ``main``'s list: the seed's log mapped with its odometer scaled by ``wobble``
     on top of ``--odometer``."""
-    seed, wobble, duration, out, loops, compass, odometer = job
+    seed, wobble, duration, out, loops, compass, odometer, correction = job
     scale, deg = odometer if odometer is not None else (1.0, 0.0)
     odo = None if (scale * wobble, deg) == (1.0, 0.0) else (scale * wobble, deg)
-    return seed, wobble, map_building(building_log(seed, duration, out), loops, compass=compass, odometer=odo)
+    return seed, wobble, map_building(building_log(seed, duration, out), loops, compass=compass, odometer=odo,
+                                      correction=correction)
 
 
 def main() -> int:
@@ -179,6 +184,8 @@ def main() -> int:
     ap.add_argument("--duration", type=float, default=4800.0, help="s of each drive (default: 80 min)")
     ap.add_argument("--out", type=Path, default=Path("/tmp/holoslam-bench-building"), help="the simulated logs")
     ap.add_argument("--loops", default="{}", help="LoopConfig settings as JSON")
+    ap.add_argument("--correction", default="{}",
+                    help='OdometerCorrectionConfig settings as JSON (e.g. \'{"enabled": false}\': one pass only)')
     ap.add_argument("--odometer", type=float, nargs=2, metavar=("SCALE", "DEG_PER_M"),
                     help="bias the odometry: 1.05 0.5 is 5 %% long, turning 0.5 deg per metre (derive.bias_odometry)")
     ap.add_argument("--wobble", type=float, nargs="+", default=[1.0], metavar="SCALE",
@@ -193,7 +200,8 @@ def main() -> int:
     for seed in args.seeds:  # simulated once, before any parallel run reads it
         building_log(seed, args.duration, args.out)
     jobs = [(seed, w, args.duration, args.out, loops, not args.no_compass,
-             None if args.odometer is None else tuple(args.odometer)) for seed in args.seeds for w in args.wobble]
+             None if args.odometer is None else tuple(args.odometer), json.loads(args.correction))
+            for seed in args.seeds for w in args.wobble]
     rows = []
     rel_cols = [f"rel {name}" for name, _, _ in REL_GROUPS]
     print(f"{'seed':>5}{'wobble':>8}{'anchors':>9}{'RMSE m':>9}{'max m':>8}{'head deg':>10}{'DR RMSE m':>11}"
