@@ -162,10 +162,10 @@ class OdometerCorrectionConfig:
     the solved keyframes, closed into loops, read it. Why the scale only: a corridor's walls fix the heading (the
     scans see a heading drift), not the position along it; once a pass is called for the drift is corrected with
     the scale. Why 3 %: on the simulated 350 m building without its compass (``bench_building_slam.py``, seeds 26
-    / 27 / 28) a first pass reading +2.1 % mapped worse for the correction in 3 of 3 runs (revisits 0.156 /
-    3.22 / 0.119 m -> 0.068 / 5.66 / 0.281, anchors 0.571 / 0.246 -> 0.975 / 0.626), one reading +3.8-3.9 % better
-    (relations 5-30 s apart 0.108-0.149 -> 0.067-0.076 m, runs with revisits over 1 m off 2 -> 1 of 3), and one
-    reading +5.9-6.2 % much better (0.130-0.160 -> 0.064-0.067 m). Why the gate: where the scans see motion every
+    / 27 / 28) a first pass reading +2.1 % mapped no better corrected (revisits 0.156 / 3.22 / 0.119 m -> 0.068 /
+    5.66 / 0.281, anchors of 26 and 28 0.571 / 0.246 -> 0.975 / 0.626 m, relations 5-30 s apart 0.069-0.074 ->
+    0.071-0.080 m), one reading +3.8-3.9 % better (relations 5-30 s apart 0.108-0.149 -> 0.067-0.076 m, runs with
+    revisits over 1 m off 2 -> 1 of 3), and one reading +5.9-6.2 % much better (0.137-0.160 -> 0.064-0.067 m). Why the gate: where the scans see motion every
     way the odometer is only the matcher's prior: on the shared real logs correcting it (intel +3.1 % and
     -3.4 deg/m) moves their error within what a 0.2 % change of the odometer moves it anyway (intel 0.0186 m at
     the laser; corrected 0.0207; scaled 1.002 / 0.998: 0.0205 / 0.0192); there 0-1.7 % of the matches are
