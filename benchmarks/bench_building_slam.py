@@ -165,7 +165,8 @@ def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[
             "revisits": int(scored["revisit"].n_matched),
             "odometer": "-" if check is None else f"{100 * (check.scale - 1):+.1f}% {check.yaw_deg_per_m:+.2f}/m",
             "corrected": f"- ({100 * fe.blind_share:.0f}% blind)" if (c := fe.odometer_correction) is None else
-            f"{100 * (c.bias.scale - 1):+.1f}% {c.bias.yaw_deg_per_m:+.2f}/m ({100 * c.blind_share:.0f}% blind)"}
+            f"{100 * (c.bias.scale - 1):+.1f}% {c.bias.yaw_deg_per_m:+.2f}/m @{c.nodes or 'end'} "
+            f"({100 * c.blind_share:.0f}% blind)"}
 
 
 def _one(job: tuple) -> tuple[int, float, dict]:
@@ -206,7 +207,7 @@ def main() -> int:
     rel_cols = [f"rel {name}" for name, _, _ in REL_GROUPS]
     print(f"{'seed':>5}{'wobble':>8}{'anchors':>9}{'RMSE m':>9}{'max m':>8}{'head deg':>10}{'DR RMSE m':>11}"
           f"{'closures':>10}{'wrong':>7}{'cpu s':>8}" + "".join(f"{c + ' m':>15}" for c in rel_cols)
-          + f"{'rel deg':>9}{'revisits':>10}{'odometer check':>18}{'corrected (nodes blind)':>30}", flush=True)
+          + f"{'rel deg':>9}{'revisits':>10}{'odometer check':>18}{'corrected @nodes (blind)':>36}", flush=True)
     from concurrent.futures import ProcessPoolExecutor
 
     with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
@@ -215,7 +216,7 @@ def main() -> int:
             print(f"{seed:>5}{w:>8.3f}{r['anchors']:>9}{r['rmse']:>9.3f}{r['max']:>8.2f}{r['heading']:>10.2f}"
                   f"{r['dr']:>11.3f}{r['closures']:>10}{r['wrong']:>7}{r['cpu']:>8.1f}"
                   + "".join(f"{r[c]:>15.3f}" for c in rel_cols)
-                  + f"{r['rel deg']:>9.3f}{r['revisits']:>10}{r['odometer']:>18}{r['corrected']:>30}", flush=True)
+                  + f"{r['rel deg']:>9.3f}{r['revisits']:>10}{r['odometer']:>18}{r['corrected']:>36}", flush=True)
     med = {k: float(np.median([r[k] for r in rows])) for k in ("rmse", "dr", "cpu", *rel_cols)}
     print(f"median RMSE {med['rmse']:.3f} m against dead reckoning {med['dr']:.3f} m "
           f"({med['rmse'] / med['dr']:.2f}x), {med['cpu']:.0f} s CPU; loops {loops or 'defaults'}"

@@ -16,7 +16,7 @@ if TYPE_CHECKING:
     from holoslam.submaps.odometer import OdometerCorrection
 
 __all__ = ["solve_options", "run_build_options", "reestimate_anchors", "revisit_nodes", "keyframe_anchors", "map_log",
-           "map_log_keyframes", "odometer_pass"]
+           "map_log_keyframes", "odometer_pass", "single_pass"]
 
 
 def solve_options(cfg: SolverConfig) -> SolveOptions:
@@ -119,9 +119,10 @@ def map_log_keyframes(log: Any, frontend: Any = None, covariances: bool = True) 
         sol = solve(fe.problem, SolveOptions(covariances=scope, build=run_build_options()))
         return fe, sol, revisit_nodes(fe, sol, cfg)
 
-    fe, sol, nodes = one_pass(log)
+    fe, sol, nodes = one_pass(log)  # corrected by local SLAM's check of the odometer when it found it off
     fix = odometer_pass(log, fe, lambda: run_trajectory(log, fe, sol, nodes), cfg)
     if fix is not None:
+        cfg = single_pass(cfg)
         fe, sol, nodes = one_pass(fix.apply(log))
         fe = dataclasses.replace(fe, odometer_correction=fix)
     return fe, keyframe_anchors(sol, fe.anchor_stamps_ns, nodes), nodes
@@ -137,8 +138,15 @@ def odometer_pass(log: Any, fe: Any, trajectory: Callable[[], Any], cfg: Any) ->
     from holoslam.submaps.odometer import odometer_bias, odometer_correction
 
     oc = cfg.odometer
-    if not oc.enabled or fe.blind_share < oc.blind_share or not log.odometry:
-        return None
+    if not oc.enabled or fe.odometer_correction is not None or fe.blind_share < oc.blind_share or not log.odometry:
+        return None  # off, corrected already (local SLAM's check), or no ground for it
     traj = trajectory()
     return odometer_correction(odometer_bias(traj.key_stamps_ns, traj.wTk, *log.odometry_arrays()), fe.blind_share,
                                oc)
+
+
+def single_pass(frontend: Any) -> Any:
+    """The ``FrontEndConfig`` of a second pass: the odometer checked no more (it is corrected already)."""
+    import dataclasses
+
+    return dataclasses.replace(frontend, odometer=dataclasses.replace(frontend.odometer, enabled=False))

@@ -140,7 +140,7 @@ def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     import dataclasses
     from concurrent.futures import ThreadPoolExecutor
 
-    from holoslam.optimise import odometer_pass
+    from holoslam.optimise import odometer_pass, single_pass
     from holoslam.sightings import see_objects
 
     # the vision stages read only the log (images, tag messages): they run in a thread while the front end does,
@@ -153,7 +153,8 @@ def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     fix = odometer_pass(log, st.fe, lambda: st.traj, cfg.frontend)
     if fix is None:
         return st
-    st = _slam_pass(fix.apply(log), cfg, clock, sightings.result)
+    st = _slam_pass(fix.apply(log), dataclasses.replace(cfg, frontend=single_pass(cfg.frontend)), clock,
+                    sightings.result)
     return dataclasses.replace(st, fe=dataclasses.replace(st.fe, odometer_correction=fix))
 
 
@@ -164,12 +165,13 @@ def _slam_pass(log: Any, cfg: RunConfig, clock: StageClock, seen_of: Any) -> Sla
     from holoslam.optimise import keyframe_anchors, reestimate_anchors, revisit_nodes, solve_options
     from holoslam.sightings import triangulate_objects
     from holoslam.solve import solve
-    from holoslam.submaps.frontend import build_problem
+    from holoslam.submaps.frontend import build_problem, corrected_log
     from holoslam.trajectory import run_trajectory
 
     with clock.stage(FRONT_END):
         fe = build_problem(log, lambda: seen_of().observations, cfg.frontend, clock.progress_of(FRONT_END),
                            optimize=reestimate_anchors)
+    log = corrected_log(log, fe)  # the odometry the front end mapped with (corrected when it found it off)
     seen = seen_of()
     with clock.stage("optimise"):
         options = solve_options(cfg.solver)

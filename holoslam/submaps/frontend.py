@@ -49,7 +49,7 @@ from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interp
 from holoslam.submaps.features import FeatureConfig, scans_features
 from holoslam.submaps.local_slam import ActiveSubmap, Break, LocalSlam, LocalSlamConfig
 from holoslam.submaps.loops import LoopConfig, LoopSearch
-from holoslam.submaps.odometer import OdometerCorrection, OdometerCorrectionConfig, is_blind
+from holoslam.submaps.odometer import OdometerCorrection, OdometerCorrectionConfig, OdometerWatch, is_blind
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
 from holoslam.submaps.probgrid import ProbGrid
 from holoslam.submaps.revisits import RevisitConfig
@@ -116,8 +116,9 @@ class FrontEnd:
     score_scale: float = 1.0  # the loop search's threshold scale at the end (``LoopConfig.score_reference``)
     # the share of local SLAM's matched nodes whose match was blind along the track (``odometer.is_blind``)
     blind_share: float = 0.0
-    # the odometer's bias a first pass found, taken off the odometry this front end mapped with (None: the raw
-    # odometry; ``holoslam.optimise.odometer_pass``); the run's later stages use ``corrected_log``
+    # the odometer's bias found (by local SLAM's check, ``OdometerWatch``, or after a first pass,
+    # ``holoslam.optimise.odometer_pass``), taken off the odometry this front end mapped with (None: the raw
+    # odometry); the run's later stages use ``corrected_log``
     odometer_correction: OdometerCorrection | None = None
 
 
@@ -190,8 +191,15 @@ def build_problem(
     thread)."""
     cfg = config or FrontEndConfig()
     run = _dead_reckoning(log, cfg)  # step 1
-    blind = [0, 0]  # local SLAM's matched nodes, and those blind along the track
-    closed, graph, loops = _local_slam(run, cfg, progress, optimize, blind)  # steps 2-3
+    watch = OdometerWatch(cfg.odometer, run.ost, run.opose)  # the odometer checked as local SLAM goes
+    correction = None
+    try:
+        closed, graph, loops = _local_slam(run, cfg, progress, optimize, watch)  # steps 2-3
+    except _OdometerOff as off:  # found off while mapping: start again on the corrected odometry
+        correction = off.correction
+        run = _dead_reckoning(correction.apply(log), cfg)
+        watch = OdometerWatch(replace(cfg.odometer, enabled=False), run.ost, run.opose)
+        closed, graph, loops = _local_slam(run, cfg, progress, optimize, watch)
     anchors = np.array([sm.anchor_stamp_ns for sm in closed], dtype=np.int64)
     if callable(observations):  # still being made (the vision stage in a thread): needed from step 4 on
         observations = observations()
@@ -201,7 +209,7 @@ def build_problem(
                     len(graph.loop_groups()), len(graph.dead_reckoning_slips()),
                     {**dict(sorted(loops.counts.items())),
                      **{f"{k} search ms": int(1000 * v) for k, v in loops.seconds.items()}},
-                    sum(k == "lost" for k in graph.kind), loops.scale, blind[1] / max(blind[0], 1))
+                    sum(k == "lost" for k in graph.kind), loops.scale, watch.blind_share, correction)
 
 
 def corrected_log(log: LogData, fe: FrontEnd) -> LogData:
@@ -209,6 +217,14 @@ def corrected_log(log: LogData, fe: FrontEnd) -> LogData:
     (``FrontEnd.odometer_correction``), else ``log`` itself. The trajectory between nodes, the objects' dead
     reckoning and the maps' poses follow the odometry the anchors were solved with."""
     return log if fe.odometer_correction is None else fe.odometer_correction.apply(log)
+
+
+class _OdometerOff(Exception):
+    """Local SLAM's check found the odometer off (``OdometerWatch``): the front end starts again."""
+
+    def __init__(self, correction: OdometerCorrection) -> None:
+        super().__init__(f"the odometer is off: {correction.to_dict()}")
+        self.correction = correction
 
 
 @dataclass(frozen=True, eq=False)
@@ -270,11 +286,11 @@ def _dead_reckoning(log: LogData, cfg: FrontEndConfig) -> _Run:
 
 def _local_slam(
     run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
-    optimize: Callable[[object], np.ndarray] | None, blind: list[int],
+    optimize: Callable[[object], np.ndarray] | None, watch: OdometerWatch,
 ) -> tuple[list[Submap], AnchorGraph, LoopSearch]:
     """Steps 2-3: local SLAM over the scans and the revisit search; returns the finished submaps (by index), the
-    relative-pose graph between their anchors and the loop search (its counts); ``blind`` counts the matched nodes
-    and those blind along the track (``odometer.is_blind``)."""
+    relative-pose graph between their anchors and the loop search (its counts). ``watch`` checks the odometer on
+    the matched nodes (raises ``_OdometerOff`` when it finds it off)."""
     grid = cfg.local.grid.for_rate(scan_rate_hz(np.array([s.stamp_ns for s in run.scans], np.int64)))
     slam = LocalSlam(replace(cfg.local, grid=grid), run.bTs)
     loops = LoopSearch(cfg.loops, cfg.local.match)
@@ -292,7 +308,7 @@ def _local_slam(
                 if isinstance(grid, ProbGrid):  # None without build_grids
                     loops.add_submap(sm.index, grid)
 
-        _walk_scans(run, cfg, progress, optimize, slam, loops, graph, finish, blind)
+        _walk_scans(run, cfg, progress, optimize, slam, loops, graph, finish, watch)
         slam.close()
         finish(slam.pop_finished())
     return sorted((r.result() for r in records), key=lambda sm: sm.index), graph, loops
@@ -301,7 +317,7 @@ def _local_slam(
 def _walk_scans(
     run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
     optimize: Callable[[object], np.ndarray] | None, slam: LocalSlam, loops: LoopSearch, graph: AnchorGraph,
-    finish: Callable[[list[ActiveSubmap]], None], blind: list[int],
+    finish: Callable[[list[ActiveSubmap]], None], watch: OdometerWatch,
 ) -> None:
     """``_local_slam``'s walk over the scans: each node to local SLAM, new anchors into the graph, finished
     submaps to ``finish``, and the loop search of every ``every_nodes``-th node (``_search_due``)."""
@@ -332,9 +348,6 @@ def _walk_scans(
                         scan.points(), np.where(scan.valid, scan.ranges, np.inf).astype(np.float64),
                         scan.angles, float(travelled[k]))
         last_t, n_nodes = t, n_nodes + 1
-        if slam.last_match_cov is not None:  # a matched node
-            blind[0] += 1
-            blind[1] += is_blind(slam.last_match_cov, cfg.odometer.blind_ratio)
         new = sorted([(n, m, mTn, cov, None) for m, n, mTn, cov in slam.arrivals[n_arrivals:]]
                      + [(b.new, b.last, None, None, b) for b in slam.breaks[n_breaks:]], key=lambda e: e[0])
         for n, m, mTn, cov_mTn, brk in new:
@@ -350,6 +363,11 @@ def _walk_scans(
                 graph.add(m, n, est_mTn, cov_mTn, "scan_match")
             graph.add_anchor(m, est_mTn, dr.end, float(travelled[k]), brk is not None)
         n_arrivals, n_breaks = len(slam.arrivals), len(slam.breaks)
+        if slam.last_match_cov is not None and watch.add(  # a matched node, and the odometer's check due
+                t, node.submap, node.aTb, is_blind(slam.last_match_cov, cfg.odometer.blind_ratio)):
+            fix = watch.check(np.array(graph.est))
+            if fix is not None:
+                raise _OdometerOff(fix)
         finish(slam.pop_finished())
         here = (n_nodes, float(travelled[k]), float(run.odo_at_scans[k][2]))
         if loops.grids and _search_due(cfg.loops, here, last_search):

@@ -28,7 +28,7 @@ import numpy as np
 from holoslam.geometry import interpolate_poses, wrap
 
 __all__ = ["OdometerBias", "odometer_bias", "odometer_text", "OdometerCorrectionConfig", "OdometerCorrection",
-           "odometer_correction", "is_blind", "STRETCH_M", "STRAIGHT_DEG", "CHORD_SHARE", "MAX_STEP_M",
+           "odometer_correction", "is_blind", "OdometerWatch", "STRETCH_M", "STRAIGHT_DEG", "CHORD_SHARE", "MAX_STEP_M",
            "MIN_STRETCHES", "WARN_SCALE", "WARN_DEG_PER_M"]
 
 # m of the scans' path per stretch: long enough that a keyframe's centimetre of error is ~0.5 % of it, short
@@ -139,7 +139,9 @@ def odometer_text(m: Mapping[str, Any]) -> list[str]:
                          "cannot see motion (a long bare corridor) the map follows the odometer")
     c = m.get("corrected")
     if c:
-        lines.append(f"    corrected: a first pass found it {_measures(c)} on {c['stretches']} straight stretches, with "
+        who = (f"local SLAM's check at matched node {c['nodes']} found it" if c.get("nodes")
+               else "a first pass found it")
+        lines.append(f"    corrected: {who} {_measures(c)} on {c['stretches']} straight stretches, with "
                      f"{100 * c['blind_share']:.0f} % of its scan matches blind along the track (there the map "
                      "follows the odometer); the run mapped again with the odometry corrected by as much")
     return lines
@@ -169,7 +171,8 @@ class OdometerCorrectionConfig:
     way the odometer is only the matcher's prior: on the shared real logs correcting it (intel +3.1 % and
     -3.4 deg/m) moves their error within what a 0.2 % change of the odometer moves it anyway (intel 0.0186 m at
     the laser; corrected 0.0207; scaled 1.002 / 0.998: 0.0205 / 0.0192); there 0-1.7 % of the matches are
-    ridges (aces decimated to 1.4 Hz with half its beams: 4.8 %), in the building 9-13 %."""
+    ridges (aces decimated to 1.4 Hz with half its beams: 4.8-5.3 %, its odometer within 1 %), in the building
+    9-18 %."""
 
     enabled: bool = True
     # straight stretches (``STRETCH_M``) of the first pass: with 20 the medians' standard errors are ~0.3 % and
@@ -178,14 +181,19 @@ class OdometerCorrectionConfig:
     # the distance scale's error (fraction) that calls for a second pass, beside three standard errors
     min_scale_error: float = 0.03
     blind_ratio: float = 5.0  # a match is blind along the track when its sd along one direction is this x across
-    blind_share: float = 0.05  # the share of matched nodes that must be blind (the shared real logs: <= 4.8 %)
+    # matched nodes between the checks local SLAM makes while it runs (``OdometerWatch``): on the building the
+    # check reads the scale a pass reads at its end from a tenth of the log on (1.061 at 10 %, 1.059 at the end)
+    check_every_nodes: int = 500
+    blind_share: float = 0.05  # the share of matched nodes that must be blind (the shared real logs: 0-5.3 %)
 
     def __post_init__(self) -> None:
         if self.min_stretches < MIN_STRETCHES:
             raise ValueError(f"odometer.min_stretches must be >= {MIN_STRETCHES}, got {self.min_stretches}")
-        if not (self.blind_ratio > 1.0 and 0.0 <= self.blind_share <= 1.0 and self.min_scale_error >= 0.0):
-            raise ValueError("odometer: blind_ratio must be > 1, blind_share in [0, 1] and min_scale_error >= 0; got "
-                             f"{self.blind_ratio}, {self.blind_share}, {self.min_scale_error}")
+        if not (self.blind_ratio > 1.0 and 0.0 <= self.blind_share <= 1.0 and self.min_scale_error >= 0.0
+                and self.check_every_nodes >= 1):
+            raise ValueError("odometer: blind_ratio must be > 1, blind_share in [0, 1], min_scale_error >= 0 and "
+                             f"check_every_nodes >= 1; got {self.blind_ratio}, {self.blind_share}, "
+                             f"{self.min_scale_error}, {self.check_every_nodes}")
 
 
 def is_blind(cov_aTb: np.ndarray, ratio: float) -> bool:
@@ -202,6 +210,7 @@ class OdometerCorrection:
 
     bias: OdometerBias
     blind_share: float
+    nodes: int = 0  # local SLAM's matched nodes when its check found it (``OdometerWatch``); 0: after a whole pass
 
     def apply(self, log: Any) -> Any:
         """``log`` with its odometry corrected: each step's distance divided by the scale, the drift per metre
@@ -211,11 +220,11 @@ class OdometerCorrection:
         return bias_odometry(log, 1.0 / self.bias.scale, -self.bias.yaw_deg_per_m)
 
     def to_dict(self) -> dict[str, Any]:
-        return {**self.bias.to_dict(), "blind_share": round(self.blind_share, 3)}
+        return {**self.bias.to_dict(), "blind_share": round(self.blind_share, 3), "nodes": self.nodes}
 
 
-def odometer_correction(bias: OdometerBias | None, blind_share: float,
-                        cfg: OdometerCorrectionConfig) -> OdometerCorrection | None:
+def odometer_correction(bias: OdometerBias | None, blind_share: float, cfg: OdometerCorrectionConfig,
+                        nodes: int = 0) -> OdometerCorrection | None:
     """The correction a first pass calls for (``OdometerCorrectionConfig``), or None: the distance scale off by
     more than ``min_scale_error`` and three standard errors. A heading drift alone calls for none: a corridor's walls
     fix the heading (the scans see it), not the position along it; once a pass is called for, the drift is
@@ -223,4 +232,50 @@ def odometer_correction(bias: OdometerBias | None, blind_share: float,
     if not cfg.enabled or bias is None or bias.stretches < cfg.min_stretches or blind_share < cfg.blind_share:
         return None
     off = abs(bias.scale - 1.0)
-    return OdometerCorrection(bias, blind_share) if off > cfg.min_scale_error and off > 3 * bias.scale_std else None
+    if off > cfg.min_scale_error and off > 3 * bias.scale_std:
+        return OdometerCorrection(bias, blind_share, nodes)
+    return None
+
+
+class OdometerWatch:
+    """The check while the first pass runs, so that a run need not finish it to find the odometer off: local
+    SLAM's matched nodes (stamp, submap, pose in it, blind or not), placed every ``check_every_nodes`` by the
+    anchors' current estimate (the loop closures so far in) and checked against the raw odometry
+    (``odom_stamps_ns``, ``odomTb``); ``check`` returns the correction once one is called for
+    (``odometer_correction``) and the front end starts again on corrected odometry. Where the loops come late the
+    estimate still follows the odometer, the check reads it as right, and the run's end decides
+    (``holoslam.optimise.odometer_pass``)."""
+
+    def __init__(self, cfg: OdometerCorrectionConfig, odom_stamps_ns: np.ndarray, odomTb: np.ndarray) -> None:
+        self.cfg = cfg
+        self._odo = (np.asarray(odom_stamps_ns, np.int64), np.asarray(odomTb, np.float64))
+        self._stamps: list[int] = []
+        self._submaps: list[int] = []
+        self._aTb: list[np.ndarray] = []
+        self.nodes = 0
+        self.blind = 0
+
+    @property
+    def blind_share(self) -> float:
+        return self.blind / max(self.nodes, 1)
+
+    def add(self, stamp_ns: int, submap: int, aTb: np.ndarray, blind: bool) -> bool:
+        """One matched node; True when a check is due."""
+        self._stamps.append(int(stamp_ns))
+        self._submaps.append(int(submap))
+        self._aTb.append(np.asarray(aTb, np.float64))
+        self.nodes += 1
+        self.blind += bool(blind)
+        return self.cfg.enabled and self.nodes % self.cfg.check_every_nodes == 0
+
+    def check(self, est_wTa: np.ndarray) -> OdometerCorrection | None:
+        """The correction the nodes so far call for, placed by the anchors' estimate ``est_wTa`` (N, 3)."""
+        if self.blind_share < self.cfg.blind_share:
+            return None
+        from holoslam.geometry import compose
+
+        sub = np.array(self._submaps, np.int64)
+        known = sub < len(est_wTa)  # a node of a submap whose anchor is not in the graph yet waits
+        wTb = compose(np.asarray(est_wTa, np.float64)[sub[known]], np.array(self._aTb)[known])
+        bias = odometer_bias(np.array(self._stamps, np.int64)[known], wTb, *self._odo)
+        return odometer_correction(bias, self.blind_share, self.cfg, self.nodes)

@@ -15,6 +15,7 @@ from holoslam.submaps.odometer import (
     MIN_STRETCHES,
     OdometerBias,
     OdometerCorrectionConfig,
+    OdometerWatch,
     is_blind,
     odometer_correction,
     odometer_text,
@@ -72,6 +73,25 @@ def test_a_biased_real_odometer_is_found_and_the_run_maps_again_on_it_corrected(
 
 
 @pytest.mark.slow
+def test_local_slams_own_check_finds_it_while_mapping_and_starts_again(biased_cut):
+    # checked every 25 matched nodes (the default 500 is more than this 90 s cut's ~190; its 8 straight stretches
+    # are in by node 125): the front end finds the odometer off while it maps and starts again on the corrected
+    # odometry, without finishing a first pass
+    from holoslam.submaps.frontend import FrontEndConfig, build_problem
+
+    cfg = FrontEndConfig()
+    fe = build_problem(biased_cut[0], config=replace(cfg, odometer=replace(
+        cfg.odometer, blind_share=0.0, min_stretches=MIN_STRETCHES, check_every_nodes=25)))
+    fix = fe.odometer_correction
+    assert fix is not None and abs(fix.bias.scale - SCALE * 0.993) < 0.01
+    assert fix.nodes % 25 == 0 and 100 <= fix.nodes <= 175  # its 8th straight stretch came at node 125
+    again = build_problem(fix.apply(biased_cut[0]), config=replace(cfg, odometer=replace(cfg.odometer,
+                                                                                         enabled=False)))
+    assert again.odometer_correction is None and len(again.submaps) == len(fe.submaps)
+    assert np.abs(again.problem.initial_wTa - fe.problem.initial_wTa).max() < 1e-6
+
+
+@pytest.mark.slow
 def test_where_the_scans_see_motion_every_way_the_odometry_is_left_alone(biased_cut):
     from holoslam.optimise import map_log
 
@@ -114,7 +134,10 @@ def test_the_report_says_the_run_mapped_with_the_odometry_corrected():
                        "distance_m": 220.0, "off": True, "blind_share": 0.093}}
     text = "\n".join(odometer_text(m))
     assert "raw odometry measures 5.2 % long" in text and "wheel radii" in text
-    assert "found it 4.9 % long" in text and "110 straight stretches" in text and "9 % of its scan matches" in text
+    assert "a first pass found it 4.9 % long" in text and "110 straight stretches" in text
+    assert "9 % of its scan matches" in text
+    online = {**m, "corrected": {**m["corrected"], "nodes": 2500}}
+    assert "local SLAM's check at matched node 2500 found it 4.9 % long" in "\n".join(odometer_text(online))
 
 
 def test_the_correction_settings_refuse_what_cannot_work():
@@ -122,3 +145,26 @@ def test_the_correction_settings_refuse_what_cannot_work():
         OdometerCorrectionConfig(min_stretches=3)
     with pytest.raises(ValueError, match="blind_ratio"):
         OdometerCorrectionConfig(blind_ratio=1.0)
+
+
+def test_the_watch_checks_local_slams_nodes_as_the_anchors_place_them_now():
+    # a robot driving 60 m straight at 0.2 m a node, every 10th match blind, with an odometer 4 % long; its nodes
+    # in two submaps whose anchors the estimate places 30 m apart (submap 1 starts at node 150)
+    n = 300
+    x = np.arange(n) * 0.2
+    odo = np.column_stack([1.04 * x, np.zeros(n), np.zeros(n)])
+    stamps = np.arange(n, dtype=np.int64) * 200_000_000
+    watch = OdometerWatch(OdometerCorrectionConfig(check_every_nodes=50), stamps, odo)
+    est = np.array([[0.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
+    found = []
+    for k in range(n):
+        sub = int(k >= 150)
+        if watch.add(int(stamps[k]), sub, np.array([x[k] - 30.0 * sub, 0.0, 0.0]), k % 10 == 0):
+            found.append((k + 1, watch.check(est)))
+    assert [k for k, _ in found] == [50, 100, 150, 200, 250, 300]
+    hits = [(k, f) for k, f in found if f is not None]
+    # 20 straight 2 m stretches take 40 m: from the check at node 250 on (200 nodes span 39.8 m)
+    assert hits and hits[0][0] == 250 and hits[0][1].bias.scale == pytest.approx(1.04, abs=1e-6)
+    assert watch.blind_share == pytest.approx(0.1)
+    # a submap whose anchor is not in the estimate yet: its nodes wait (no stretch through them)
+    assert watch.check(est[:1]) is None
