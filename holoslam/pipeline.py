@@ -153,6 +153,7 @@ def slam_stages(log: Any, cfg: RunConfig, clock: StageClock) -> SlamStages:
     fix = odometer_pass(log, st.fe, lambda: st.traj, cfg.frontend)
     if fix is None:
         return st
+    clock.progress(fix.notice())
     st = _slam_pass(fix.apply(log), dataclasses.replace(cfg, frontend=single_pass(cfg.frontend)), clock,
                     sightings.result)
     return dataclasses.replace(st, fe=dataclasses.replace(st.fe, odometer_correction=fix))
@@ -171,6 +172,8 @@ def _slam_pass(log: Any, cfg: RunConfig, clock: StageClock, seen_of: Any) -> Sla
     with clock.stage(FRONT_END):
         fe = build_problem(log, lambda: seen_of().observations, cfg.frontend, clock.progress_of(FRONT_END),
                            optimize=reestimate_anchors)
+    if fe.odometer_correction is not None:  # local SLAM's check found the odometer off, and it started again
+        clock.progress(fe.odometer_correction.notice())
     log = corrected_log(log, fe)  # the odometry the front end mapped with (corrected when it found it off)
     seen = seen_of()
     with clock.stage("optimise"):

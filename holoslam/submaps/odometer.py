@@ -222,6 +222,13 @@ class OdometerCorrection:
     def to_dict(self) -> dict[str, Any]:
         return {**self.bias.to_dict(), "blind_share": round(self.blind_share, 3), "nodes": self.nodes}
 
+    def notice(self) -> str:
+        """One line for the run's progress: why the front end maps again."""
+        b = self.bias
+        return (f"the odometer measures {100 * (b.scale - 1):+.1f} % and {b.yaw_deg_per_m:+.2f} deg/m against the "
+                f"scans, {100 * self.blind_share:.0f} % of them blind along the track: mapping again on the "
+                "corrected odometry")
+
 
 def odometer_correction(bias: OdometerBias | None, blind_share: float, cfg: OdometerCorrectionConfig,
                         nodes: int = 0) -> OdometerCorrection | None:

@@ -50,12 +50,14 @@ def _config(**odometer):
 
 @pytest.mark.slow
 def test_a_biased_real_odometer_is_found_and_the_run_maps_again_on_it_corrected(biased_cut):
-    from holoslam.pipeline import run_data
+    from holoslam.pipeline import FRONT_END, run_data
 
     log, report = biased_cut
     # the gate open: fr079's scans are blind along the track at < 1 % of its nodes (the default gate, 5 %, keeps
     # its odometry), and a 90 s cut's straight stretches are enough
-    result = run_data(log, report, _config(blind_share=0.0, min_stretches=MIN_STRETCHES))
+    said = []
+    result = run_data(log, report, _config(blind_share=0.0, min_stretches=MIN_STRETCHES),
+                      progress=lambda stage, *_a: said.append(stage))
     fix = result.frontend.odometer_correction
     assert fix is not None and fix.bias.off and fix.bias.stretches >= MIN_STRETCHES
     # the bias put on (5 % long, 0.5 deg/m) on fr079's own (0.7 % short, -0.92 deg/m): 1.0427 and about -0.42
@@ -70,6 +72,10 @@ def test_a_biased_real_odometer_is_found_and_the_run_maps_again_on_it_corrected(
     assert m["corrected"]["scale"] == pytest.approx(fix.bias.scale, abs=1e-4)
     assert abs(m["scale"] - fix.bias.scale) < 0.01  # the raw odometry against the corrected run's keyframes
     assert "the run mapped again with the odometry corrected" in result.report.text()
+    # and the user saw why the SLAM stages ran twice
+    notice = [s for s in said if s.startswith(f"the odometer measures {100 * (fix.bias.scale - 1):+.1f} %")]
+    assert len(notice) == 1 and "mapping again on the corrected odometry" in notice[0]
+    assert said.index(notice[0]) < len(said) - 1 - said[::-1].index(FRONT_END)
 
 
 @pytest.mark.slow
