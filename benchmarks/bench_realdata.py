@@ -15,7 +15,9 @@ also holds a pose at every odometry stamp, which would match every relation; bet
 and the relations of a 1.4 Hz log are at its scans); ``sparse_kidnap`` both, the kidnap at the sparse log's middle
 scan (the held-out hospital log's case: a sparse laser, and a drift only a global search spans), scored as sparse
 with the kidnap row's columns. ``kidnap@F`` / ``sparse_kidnap@F``: the kidnap at the fraction F of the scans
-instead of the middle (e.g. ``sparse_kidnap@0.67``). ``drift`` / ``sparse_drift``: the odometer biased
+instead of the middle (e.g. ``sparse_kidnap@0.67``). ``drift@S`` / ``sparse_drift@S``: the odometer scaled by S
+alone, a wobble no calibration would notice (``drift@1.002 drift@0.998``: how far a log's figure moves with it;
+intel 0.0186 m at the laser moves to 0.0205 / 0.0192). ``drift`` / ``sparse_drift``: the odometer biased
 (``holoslam.derive.bias_odometry``: 5 % long, turning 0.5 deg per metre, a wheel 0.35 % smaller than its twin on a
 0.4 m axle), scored as full / sparse. A variant runs in the child on the log
 in memory (``holoslam.pipeline.run_data``) and writes the trajectory and the report; the independent scorer
@@ -142,21 +144,33 @@ def variant_log(data, variant: str):
         return derive.drop_beams(derive.decimate_scans(data, SPARSE_HZ), SPARSE_KEEP_EVERY), None
     if base == "sparse_kidnap":
         return variant_log(variant_log(data, "sparse")[0], "kidnap" + variant[len(base):])
-    if base == "drift":
-        return derive.bias_odometry(data, DRIFT_SCALE, DRIFT_YAW_DEG_PER_M), None
+    if base == "drift":  # drift@S: the odometer scaled by S alone (a wobble: how far the log's figure moves)
+        scale, yaw = (float(where), 0.0) if where else (DRIFT_SCALE, DRIFT_YAW_DEG_PER_M)
+        return derive.bias_odometry(data, scale, yaw), None
     if base == "sparse_drift":
-        return variant_log(variant_log(data, "sparse")[0], "drift")
+        return variant_log(variant_log(data, "sparse")[0], "drift" + variant[len(base):])
     return data, None
 
 
 def variant_name(text: str) -> str:
-    """``--variants``' type: one of VARIANTS, a kidnapped one with ``@F`` (0 < F < 1) allowed."""
+    """``--variants``' type: one of VARIANTS, a kidnapped one with ``@F`` (0 < F < 1) allowed, a drift one with
+    ``@S`` (0.5 < S < 1.5: the odometer scaled by S alone)."""
     base, at, where = text.partition("@")
-    ok = base in VARIANTS and (not at or ("kidnap" in base and _fraction(where)))
+    ok = base in VARIANTS and (not at or ("kidnap" in base and _fraction(where))
+                               or ("drift" in base and _number(where) and 0.5 < float(where) < 1.5))
     if not ok:
         raise argparse.ArgumentTypeError(f"{text!r}: one of {', '.join(VARIANTS)}; a kidnapped one may end in @F, "
-                                         "F the fraction of the log's scans where the kidnap happens (0 < F < 1)")
+                                         "F the fraction of the log's scans where the kidnap happens (0 < F < 1); "
+                                         "a drift one in @S, the odometer scaled by S alone (0.5 < S < 1.5)")
     return text
+
+
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _fraction(text: str) -> bool:

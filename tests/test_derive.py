@@ -66,3 +66,29 @@ def test_a_biased_odometer_drives_its_steps_longer_and_turns_with_the_distance()
     assert biased.scans == log.scans and biased.ground_truth == log.ground_truth
     with pytest.raises(ValueError, match="scale must be"):
         derive.bias_odometry(log, 0.0, 0.0)
+
+
+def test_the_real_log_benchmarks_wobble_scales_the_odometer_alone():
+    """benchmarks/bench_realdata.py's ``drift@S``: the odometer scaled by S, no heading drift (how far a log's
+    figure moves with a change no calibration would notice); names outside 0.5 < S < 1.5 are refused."""
+    import argparse
+
+    from repo_paths import REPO, benchmark_module
+
+    from holoslam.io.mcap import read_log
+
+    bench = benchmark_module("bench_realdata")
+    log, _ = read_log(REPO / "datasets" / "household_small.mcap", require=["odometry", "scan"])
+    wobbled, at = bench.variant_log(log, "drift@1.002")
+    assert at is None
+
+    def path(lg):
+        _st, P = lg.odometry_arrays()
+        return float(np.hypot(*np.diff(P[:, :2], axis=0).T).sum()), P[-1, 2] - P[0, 2]
+
+    (d0, h0), (d1, h1) = path(log), path(wobbled)
+    assert d1 / d0 == pytest.approx(1.002, abs=1e-9) and h1 == pytest.approx(h0, abs=1e-9)
+    assert bench.variant_name("sparse_drift@0.998") == "sparse_drift@0.998"
+    for bad in ("drift@3", "drift@x", "full@1.002"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            bench.variant_name(bad)
