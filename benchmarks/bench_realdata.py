@@ -156,8 +156,8 @@ def variant_name(text: str) -> str:
     """``--variants``' type: one of VARIANTS, a kidnapped one with ``@F`` (0 < F < 1) allowed, a drift one with
     ``@S`` (0.5 < S < 1.5: the odometer scaled by S alone)."""
     base, at, where = text.partition("@")
-    ok = base in VARIANTS and (not at or ("kidnap" in base and _fraction(where))
-                               or ("drift" in base and _number(where) and 0.5 < float(where) < 1.5))
+    ok = base in VARIANTS and (not at or ("kidnap" in base and _within(where, 0.0, 1.0))
+                               or ("drift" in base and _within(where, 0.5, 1.5)))
     if not ok:
         raise argparse.ArgumentTypeError(f"{text!r}: one of {', '.join(VARIANTS)}; a kidnapped one may end in @F, "
                                          "F the fraction of the log's scans where the kidnap happens (0 < F < 1); "
@@ -165,17 +165,10 @@ def variant_name(text: str) -> str:
     return text
 
 
-def _number(text: str) -> bool:
+def _within(text: str, lo: float, hi: float) -> bool:
+    """``text`` is a number strictly between ``lo`` and ``hi``."""
     try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _fraction(text: str) -> bool:
-    try:
-        return 0.0 < float(text) < 1.0
+        return lo < float(text) < hi
     except ValueError:
         return False
 

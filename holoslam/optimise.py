@@ -138,7 +138,7 @@ def odometer_pass(log: Any, fe: Any, trajectory: Callable[[], Any], cfg: Any) ->
     from holoslam.submaps.odometer import odometer_bias, odometer_correction
 
     oc = cfg.odometer
-    if not oc.enabled or fe.odometer_correction is not None or fe.blind_share < oc.blind_share or not log.odometry:
+    if not oc.open_for(fe.blind_share) or fe.odometer_correction is not None or not log.odometry:
         return None  # off, corrected already (local SLAM's check), or no ground for it
     traj = trajectory()
     return odometer_correction(odometer_bias(traj.key_stamps_ns, traj.wTk, *log.odometry_arrays()), fe.blind_share,

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from holoslam.geometry import interpolate_poses, wrap
+from holoslam.geometry import compose, interpolate_poses, wrap
 
 __all__ = ["OdometerBias", "odometer_bias", "odometer_text", "OdometerCorrectionConfig", "OdometerCorrection",
            "odometer_correction", "is_blind", "OdometerWatch", "STRETCH_M", "STRAIGHT_DEG", "CHORD_SHARE", "MAX_STEP_M",
@@ -186,6 +186,10 @@ class OdometerCorrectionConfig:
     check_every_nodes: int = 500
     blind_share: float = 0.05  # the share of matched nodes that must be blind (the shared real logs: 0-5.3 %)
 
+    def open_for(self, blind_share: float) -> bool:
+        """Whether a run whose matches were blind along the track at ``blind_share`` may be corrected at all."""
+        return self.enabled and blind_share >= self.blind_share
+
     def __post_init__(self) -> None:
         if self.min_stretches < MIN_STRETCHES:
             raise ValueError(f"odometer.min_stretches must be >= {MIN_STRETCHES}, got {self.min_stretches}")
@@ -236,7 +240,7 @@ def odometer_correction(bias: OdometerBias | None, blind_share: float, cfg: Odom
     more than ``min_scale_error`` and three standard errors. A heading drift alone calls for none: a corridor's walls
     fix the heading (the scans see it), not the position along it; once a pass is called for, the drift is
     corrected with the scale."""
-    if not cfg.enabled or bias is None or bias.stretches < cfg.min_stretches or blind_share < cfg.blind_share:
+    if not cfg.open_for(blind_share) or bias is None or bias.stretches < cfg.min_stretches:
         return None
     off = abs(bias.scale - 1.0)
     if off > cfg.min_scale_error and off > 3 * bias.scale_std:
@@ -277,10 +281,8 @@ class OdometerWatch:
 
     def check(self, est_wTa: np.ndarray) -> OdometerCorrection | None:
         """The correction the nodes so far call for, placed by the anchors' estimate ``est_wTa`` (N, 3)."""
-        if self.blind_share < self.cfg.blind_share:
+        if not self.cfg.open_for(self.blind_share):
             return None
-        from holoslam.geometry import compose
-
         sub = np.array(self._submaps, np.int64)
         known = sub < len(est_wTa)  # a node of a submap whose anchor is not in the graph yet waits
         wTb = compose(np.asarray(est_wTa, np.float64)[sub[known]], np.array(self._aTb)[known])
