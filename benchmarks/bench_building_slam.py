@@ -157,7 +157,7 @@ def map_building(path: Path, loops: dict, compass: bool = True, odometer: tuple[
     scan_ns = np.array([s.stamp_ns for s in log.scans], dtype=np.int64)
     rels = building_relations(scan_ns, truth_at(scan_ns, gs, gp))
     scored = {k: relation_errors(traj.stamps_ns, traj.wTb, r) for k, r in rels.items()}
-    check = odometer_bias(traj.key_stamps_ns, traj.wTk, *log.odometry_arrays())
+    check = odometer_bias(traj.key_stamps_ns, traj.wTk, *log.odometry_arrays(), blind=fe.blind_at(traj.key_stamps_ns))
     return {"rmse": err.rmse_m, "max": err.max_m, "heading": err.heading_rmse_deg, "dr": dr.rmse_m,
             "closures": len(closures), "wrong": wrong, "cpu": cpu, "anchors": len(truth),
             **{f"rel {k}": e.translation_mean_m for k, e in scored.items()},

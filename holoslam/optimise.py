@@ -141,8 +141,9 @@ def odometer_pass(log: Any, fe: Any, trajectory: Callable[[], Any], cfg: Any) ->
     if not oc.open_for(fe.blind_share) or fe.odometer_correction is not None or not log.odometry:
         return None  # off, corrected already (local SLAM's check), or no ground for it
     traj = trajectory()
-    return odometer_correction(odometer_bias(traj.key_stamps_ns, traj.wTk, *log.odometry_arrays()), fe.blind_share,
-                               oc)
+    odom_stamps_ns, odomTb = log.odometry_arrays()
+    bias = odometer_bias(traj.key_stamps_ns, traj.wTk, odom_stamps_ns, odomTb, blind=fe.blind_at(traj.key_stamps_ns))
+    return odometer_correction(bias, fe.blind_share, oc)
 
 
 def single_pass(frontend: Any) -> Any:

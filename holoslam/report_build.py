@@ -81,7 +81,9 @@ def odometer_check(log: Any, trajectory: Any, fe: Any = None) -> dict[str, Any] 
     if not log.odometry:
         return None
     odom_stamps, odomTb = log.odometry_arrays()
-    m = odometer_bias(trajectory.key_stamps_ns, trajectory.wTk, odom_stamps, odomTb)
+    blind_at = getattr(fe, "blind_at", None)  # (a front end of a stored session may predate the record)
+    blind = None if blind_at is None else blind_at(trajectory.key_stamps_ns)
+    m = odometer_bias(trajectory.key_stamps_ns, trajectory.wTk, odom_stamps, odomTb, blind=blind)
     return (extra or None) if m is None else {**m.to_dict(), **extra}
 
 

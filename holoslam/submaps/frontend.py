@@ -120,6 +120,12 @@ class FrontEnd:
     # ``holoslam.optimise.odometer_pass``), taken off the odometry this front end mapped with (None: the raw
     # odometry); the run's later stages use ``corrected_log``
     odometer_correction: OdometerCorrection | None = None
+    # the stamps of those blind matched nodes: the odometer checks leave out the stretches that hold one
+    blind_stamps_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    def blind_at(self, stamps_ns: np.ndarray) -> np.ndarray:
+        """Which of ``stamps_ns`` are nodes whose match was blind along the track (bool, same shape)."""
+        return np.isin(np.asarray(stamps_ns, np.int64), self.blind_stamps_ns)
 
 
 def base_to_laser(log: LogData, laser_frame: str, base_frame: str = "") -> np.ndarray:
@@ -209,7 +215,8 @@ def build_problem(
                     len(graph.loop_groups()), len(graph.dead_reckoning_slips()),
                     {**dict(sorted(loops.counts.items())),
                      **{f"{k} search ms": int(1000 * v) for k, v in loops.seconds.items()}},
-                    sum(k == "lost" for k in graph.kind), loops.scale, watch.blind_share, correction)
+                    sum(k == "lost" for k in graph.kind), loops.scale, watch.blind_share, correction,
+                    watch.blind_stamps_ns)
 
 
 def corrected_log(log: LogData, fe: FrontEnd) -> LogData:

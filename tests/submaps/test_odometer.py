@@ -48,6 +48,23 @@ def test_a_bias_put_on_a_real_robots_odometry_is_read_back(fr079):
     assert short is not None and abs(short.scale - 0.97) < 0.003 and abs(short.yaw_deg_per_m + 1.0) < 0.05
 
 
+def test_stretches_where_the_scans_were_blind_along_the_track_are_left_out():
+    # 120 m straight at 0.2 m a node with an odometer 4 % long. Along the first 70 m (a bare corridor: the matches
+    # blind along the track) the keyframes follow the odometer, 0.208 m a step; then they see the motion again
+    n = 600
+    t = np.arange(n, dtype=np.int64) * 200_000_000
+    odo = np.column_stack([0.208 * np.arange(n), np.zeros(n), np.zeros(n)])
+    blind = np.arange(n) < 350
+    step = np.where(blind[1:], 0.208, 0.2)
+    keys = np.column_stack([np.concatenate([[0.0], np.cumsum(step)]), np.zeros(n), np.zeros(n)])
+    diluted = odometer_bias(t, keys, t, odo)  # most stretches read the odometer as right
+    assert diluted is not None and abs(diluted.scale - 1.0) < 1e-9
+    m = odometer_bias(t, keys, t, odo, blind=blind)
+    # a stretch of 2 m holds 10 keyframes, the one across the corridor's end one blind: 24 of the last 25 kept
+    assert m is not None and m.stretches == 24 and abs(m.scale - 1.04) < 1e-9
+    assert odometer_bias(t, keys, t, odo, blind=np.ones(n, bool)) is None  # nothing left to measure on
+
+
 def test_too_few_straight_stretches_give_no_measurement():
     # a robot turning on the spot and an arc of a circle: nothing straight to measure on
     t = np.arange(200, dtype=np.int64) * 100_000_000

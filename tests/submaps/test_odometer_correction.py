@@ -103,6 +103,11 @@ def test_where_the_scans_see_motion_every_way_the_odometry_is_left_alone(biased_
 
     fe, _sol = map_log(biased_cut[0], covariances=False)
     assert fe.blind_share < 0.02 and fe.odometer_correction is None  # the default gate: 5 % of nodes blind
+    # the blind nodes' stamps, kept for the checks after the front end (their stretches are left out): few here
+    nodes = len(np.unique(np.concatenate([sm.scan_stamps_ns for sm in fe.submaps])))
+    assert len(fe.blind_stamps_ns) <= 0.02 * nodes and fe.blind_at(fe.blind_stamps_ns).all()
+    marked = replace(fe, blind_stamps_ns=fe.anchor_stamps_ns[1:3])
+    assert list(np.flatnonzero(marked.blind_at(fe.anchor_stamps_ns))) == [1, 2]
 
 
 def _bias(scale=1.05, yaw=0.5, stretches=30, std=0.003):
@@ -154,8 +159,8 @@ def test_the_correction_settings_refuse_what_cannot_work():
 
 
 def test_the_watch_checks_local_slams_nodes_as_the_anchors_place_them_now():
-    # a robot driving 60 m straight at 0.2 m a node, every 10th match blind, with an odometer 4 % long; its nodes
-    # in two submaps whose anchors the estimate places 30 m apart (submap 1 starts at node 150)
+    # a robot driving 60 m straight at 0.2 m a node, the matches of nodes 100-129 blind, with an odometer 4 % long;
+    # its nodes in two submaps whose anchors the estimate places 30 m apart (submap 1 starts at node 150)
     n = 300
     x = np.arange(n) * 0.2
     odo = np.column_stack([1.04 * x, np.zeros(n), np.zeros(n)])
@@ -165,12 +170,13 @@ def test_the_watch_checks_local_slams_nodes_as_the_anchors_place_them_now():
     found = []
     for k in range(n):
         sub = int(k >= 150)
-        if watch.add(int(stamps[k]), sub, np.array([x[k] - 30.0 * sub, 0.0, 0.0]), k % 10 == 0):
+        if watch.add(int(stamps[k]), sub, np.array([x[k] - 30.0 * sub, 0.0, 0.0]), 100 <= k < 130):
             found.append((k + 1, watch.check(est)))
     assert [k for k, _ in found] == [50, 100, 150, 200, 250, 300]
     hits = [(k, f) for k, f in found if f is not None]
     # 20 straight 2 m stretches take 40 m: from the check at node 250 on (200 nodes span 39.8 m)
     assert hits and hits[0][0] == 250 and hits[0][1].bias.scale == pytest.approx(1.04, abs=1e-6)
     assert watch.blind_share == pytest.approx(0.1)
+    assert list(watch.blind_stamps_ns) == list(stamps[100:130])  # the front end's record for the later checks
     # a submap whose anchor is not in the estimate yet: its nodes wait (no stretch through them)
     assert watch.check(est[:1]) is None
