@@ -2,7 +2,7 @@
 next to Cartographer's published figures.
 
     .venv/bin/python benchmarks/bench_realdata.py [--logs intel aces fr079] [--duration S] [--out DIR]
-                                                  [--variants full kidnap sparse sparse_kidnap drift sparse_drift]
+                                                  [--variants full kidnap sparse sparse_kidnap drift sparse_drift short]
 
 Variants (``holoslam.derive``, what a hospital's or a carried robot's log makes of the same real scans):
 ``full`` the log as it is; ``kidnap`` the odometry jumps by (30 m, 0, 90 deg) at the middle scan with the 30 s of
@@ -19,7 +19,8 @@ instead of the middle (e.g. ``sparse_kidnap@0.67``). ``drift@S`` / ``sparse_drif
 alone, a wobble no calibration would notice (``drift@1.002 drift@0.998``: how far a log's figure moves with it;
 intel 0.0186 m at the laser moves to 0.0205 / 0.0192). ``drift`` / ``sparse_drift``: the odometer biased
 (``holoslam.derive.bias_odometry``: 5 % long, turning 0.5 deg per metre, a wheel 0.35 % smaller than its twin on a
-0.4 m axle), scored as full / sparse. A variant runs in the child on the log
+0.4 m axle), scored as full / sparse. ``short`` / ``short@R``: every return beyond 8 m (R m) a no-return
+(``holoslam.derive.cap_ranges``: the cheap lasers of home robots reach 8-12 m), scored as full. A variant runs in the child on the log
 in memory (``holoslam.pipeline.run_data``) and writes the trajectory and the report; the independent scorer
 checks the full rows.
 
@@ -102,8 +103,10 @@ KIDNAP_GAP_S = 30.0
 SPARSE_HZ, SPARSE_KEEP_EVERY = 1.4, 2
 DRIFT_SCALE, DRIFT_YAW_DEG_PER_M = 1.05, 0.5  # the drift variants' odometer: 5 % long, turning 0.5 deg per m
 ACROSS_LIMIT_M = 0.2  # m: issue 25's "every relation across the kidnap within 0.2 m"
-VARIANTS = ("full", "kidnap", "sparse", "sparse_kidnap", "drift", "sparse_drift")
-MAX_DT = {"full": 0.05, "kidnap": 0.05, "sparse": 0.1, "sparse_kidnap": 0.1, "drift": 0.05, "sparse_drift": 0.1}  # s, relation stamp to the nearest pose
+VARIANTS = ("full", "kidnap", "sparse", "sparse_kidnap", "drift", "sparse_drift", "short")
+MAX_DT = {"full": 0.05, "kidnap": 0.05, "sparse": 0.1, "sparse_kidnap": 0.1, "drift": 0.05, "sparse_drift": 0.1,
+          "short": 0.05}  # s, relation stamp to the nearest pose
+SHORT_RANGE_M = 8.0  # ``short``: a cheap laser's range (the issue's 8-10 m; 2D lasers sold for home robots: 8-12 m)
 
 
 def without_gap(rel, at_ns: int):
@@ -149,6 +152,8 @@ def variant_log(data, variant: str):
         return derive.bias_odometry(data, scale, yaw), None
     if base == "sparse_drift":
         return variant_log(variant_log(data, "sparse")[0], "drift" + variant[len(base):])
+    if base == "short":  # short@R: every return beyond R m a no-return (a cheaper laser)
+        return derive.cap_ranges(data, float(where) if where else SHORT_RANGE_M), None
     return data, None
 
 
@@ -157,11 +162,13 @@ def variant_name(text: str) -> str:
     ``@S`` (0.5 < S < 1.5: the odometer scaled by S alone)."""
     base, at, where = text.partition("@")
     ok = base in VARIANTS and (not at or ("kidnap" in base and _within(where, 0.0, 1.0))
-                               or ("drift" in base and _within(where, 0.5, 1.5)))
+                               or ("drift" in base and _within(where, 0.5, 1.5))
+                               or (base == "short" and _within(where, 0.5, 100.0)))
     if not ok:
         raise argparse.ArgumentTypeError(f"{text!r}: one of {', '.join(VARIANTS)}; a kidnapped one may end in @F, "
                                          "F the fraction of the log's scans where the kidnap happens (0 < F < 1); "
-                                         "a drift one in @S, the odometer scaled by S alone (0.5 < S < 1.5)")
+                                         "a drift one in @S, the odometer scaled by S alone (0.5 < S < 1.5); a short "
+                                         "one in @R, the laser's range in m (0.5 < R < 100)")
     return text
 
 
