@@ -92,3 +92,27 @@ def test_the_real_log_benchmarks_wobble_scales_the_odometer_alone():
     for bad in ("drift@3", "drift@x", "full@1.002"):
         with pytest.raises(argparse.ArgumentTypeError):
             bench.variant_name(bad)
+
+
+def test_the_real_log_benchmarks_short_laser_cuts_the_returns_beyond_its_range():
+    """benchmarks/bench_realdata.py's ``short`` / ``short@R``: every return beyond 8 m (R m) becomes a no-return,
+    the rest of the log unchanged; ranges outside 0.5 < R < 100 are refused."""
+    import argparse
+
+    from repo_paths import REPO, benchmark_module
+
+    from holoslam.io.mcap import read_log
+
+    bench = benchmark_module("bench_realdata")
+    log, _ = read_log(REPO / "datasets" / "household_small.mcap", require=["odometry", "scan"])
+    for name, reach in (("short", bench.SHORT_RANGE_M), ("short@2.5", 2.5)):
+        short, at = bench.variant_log(log, name)
+        assert at is None and len(short.scans) == len(log.scans) and short.odometry == log.odometry
+        before = np.concatenate([s.ranges[s.valid] for s in log.scans])
+        after = np.concatenate([s.ranges[s.valid] for s in short.scans])
+        assert after.max() <= reach and after.size == np.count_nonzero(before <= reach)
+    assert (before > 2.5).any()  # the household's laser reaches beyond 2.5 m: the cut did something
+    assert bench.variant_name("short@5") == "short@5"
+    for bad in ("short@0.2", "short@x", "sparse@5"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            bench.variant_name(bad)
