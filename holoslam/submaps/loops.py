@@ -14,7 +14,9 @@ against m's grid, and is unambiguous: no pose of the window outside a small box 
 (``ambiguity_exclude_xy``, ``ambiguity_exclude_deg``) scores within ``ambiguity_margin`` of it. Along a
 corridor, or between two similar rooms, the best of the window can be an alias metres from the truth with a
 flat score surface, and the refinement's covariance (its +-0.5 m surface) does not cover the error; such a
-match is dropped (``ambiguity="reject"``) or kept with a covariance spanning the peaks (``"span"``). An
+match is dropped (``ambiguity="reject"``) or kept with a covariance spanning the peaks (``"span"``). Beyond the
+window, a corridor's periodic aliases (a room's width along it) are sought along the match's least certain axis,
+and a match with such peaks keeps their spread along it (``holoslam.submaps.periodic``). An
 accepted match gives the ``loop`` relative pose of Eq. 15, mTn = mTr ∘ (nTr)^-1, with the refined match's
 covariance. Loops enter the graph with a robust kernel (Huber in a run, ``optimise.run_build_options``) and the
 final solve's chi-square rounds, so a wrong one that passes here bends the map less. Defaults: Cartographer's
@@ -40,6 +42,7 @@ from holoslam.submaps.bnb_window import SearchWindow, spanning_covariance
 from holoslam.submaps.loop_config import LoopConfig
 from holoslam.submaps.loop_consistency import LoopConsistency
 from holoslam.submaps.loop_verify import map_agreement
+from holoslam.submaps.periodic import periodic_peaks
 from holoslam.submaps.probgrid import ProbGrid
 from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
 from holoslam.submaps.scanmatch import MatchConfig, match_scan
@@ -66,6 +69,9 @@ class LoopSearch:
             raise ValueError(f"LoopConfig.ambiguity must be 'reject', 'span' or 'off', got {cfg.ambiguity!r}")
         if not (math.isfinite(cfg.disagreement_window) and cfg.disagreement_window >= 0):
             raise ValueError(f"LoopConfig.disagreement_window must be a finite number >= 0, got {cfg.disagreement_window!r}")
+        if not (cfg.periodic_search_m >= 0 and cfg.periodic_exclude_m >= 0 and math.isfinite(cfg.periodic_search_m)):
+            raise ValueError("LoopConfig.periodic_search_m and periodic_exclude_m must be finite numbers >= 0 (search 0: "
+                             f"off), got {cfg.periodic_search_m!r}, {cfg.periodic_exclude_m!r}")
         if not (cfg.disagreement_window_max_hz >= 0):  # inf allowed: always
             raise ValueError("LoopConfig.disagreement_window_max_hz must be a number >= 0 (inf: always), got "
                              f"{cfg.disagreement_window_max_hz!r}")
@@ -372,8 +378,16 @@ class LoopSearch:
         if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * gr.resolution:
             return None
         cov_aTb = ref.cov_aTb
-        if peaks:
-            cov_aTb = spanning_covariance(ref.aTb, cov_aTb, [p.aTb for p in peaks])
+        spread = [p.aTb for p in peaks]
+        c = self.cfg
+        if c.periodic_search_m > 0:  # a corridor's periodic aliases beyond the window (``holoslam.submaps.periodic``)
+            along = periodic_peaks(gr.prob, gr.origin, gr.resolution, gr.p_min, b_pts, ref.aTb, cov_aTb,
+                                   c.ambiguity_margin * self.scale, c.periodic_search_m, c.periodic_exclude_m)
+            if along:
+                self._count("periodic along its axis, kept with the peaks' spread")
+                spread += along
+        if spread:
+            cov_aTb = spanning_covariance(ref.aTb, cov_aTb, spread)
         mTn, cov_mTn = relative_anchor_pose(ref.aTb, cov_aTb, nTr, cov_nTr)
         return LoopCandidate(m, n, mTn, cov_mTn, ref.score, window_xy)
 
