@@ -133,10 +133,10 @@ class LoopConfig:
     ambiguity_exclude_xy: float = 0.15
     ambiguity_exclude_deg: float = 2.0  # deg, half-width of the box in angle (measured with the 0.15 m above)
     ambiguity_peaks: int = 1  # second peaks sought, each outside the boxes of the ones before ("span")
-    # m: an accepted closure's scan (windowed or global) is scored along its covariance's major axis this far each way, beyond
-    # its window (``holoslam.submaps.periodic``): local maxima within ``ambiguity_margin`` of its score farther than
-    # ``periodic_exclude_m`` (the match's own peak) are a corridor's periodic aliases, and the closure keeps their
-    # spread along that axis. 10 m: the simulated building's aliases lie a room's width (4-7 m) along its
+    # m: an accepted closure's scan (windowed or global) is scored along its covariance's major axis this far each
+    # way, beyond its window (``holoslam.submaps.periodic``): local maxima within ``ambiguity_margin`` of its score
+    # farther than ``periodic_exclude_m`` (the match's own peak) are a corridor's periodic aliases, and the closure
+    # keeps their spread along that axis. 10 m: the simulated building's aliases lie a room's width (4-7 m) along its
     # corridors, intel's 7.8-9.1 m. 0: off
     periodic_search_m: float = 10.0
     periodic_exclude_m: float = 1.0

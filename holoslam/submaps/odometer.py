@@ -171,9 +171,9 @@ class OdometerCorrectionConfig:
     Why after a whole pass: along a bare corridor local SLAM follows the odometer, so its own poses read an
     odometer 6 % long as right (the simulated building: +0.8 % against +6.1 % found after the loops are closed);
     the solved keyframes, closed into loops, read it, on the stretches without a blind match (over all
-    stretches they read +6.1 %: the blind ones still follow the odometer). Why the scale only: a corridor's walls fix the heading (the
-    scans see a heading drift), not the position along it; once a pass is called for the drift is corrected with
-    the scale. Why 3 %: on the simulated 350 m building without its compass (``bench_building_slam.py``, seeds 26
+    stretches they read +6.1 %: the blind ones still follow the odometer). Why the scale only: a corridor's walls
+    fix the heading (the scans see a heading drift), not the position along it; once a pass is called for the
+    drift is corrected with the scale. Why 3 %: on the simulated 350 m building without its compass (``bench_building_slam.py``, seeds 26
     / 27 / 28) a first pass reading +2.1 % mapped no better corrected (revisits 0.156 / 3.22 / 0.119 m -> 0.068 /
     5.66 / 0.281, anchors of 26 and 28 0.571 / 0.246 -> 0.975 / 0.626 m, relations 5-30 s apart 0.069-0.074 ->
     0.071-0.080 m), one reading +3.8-3.9 % better (relations 5-30 s apart 0.108-0.149 -> 0.067-0.076 m, runs with
@@ -276,11 +276,10 @@ class OdometerWatch:
         self._aTb: list[np.ndarray] = []
         self._blind: list[bool] = []
         self.nodes = 0
-        self.blind = 0
 
     @property
     def blind_share(self) -> float:
-        return self.blind / max(self.nodes, 1)
+        return sum(self._blind) / max(self.nodes, 1)
 
     @property
     def blind_stamps_ns(self) -> np.ndarray:
@@ -294,7 +293,6 @@ class OdometerWatch:
         self._aTb.append(np.asarray(aTb, np.float64))
         self._blind.append(bool(blind))
         self.nodes += 1
-        self.blind += bool(blind)
         return self.cfg.enabled and self.nodes % self.cfg.check_every_nodes == 0
 
     def check(self, est_wTa: np.ndarray) -> OdometerCorrection | None:

@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from holoslam import geometry as g
+
 __all__ = ["periodic_peaks"]
 
 
@@ -37,12 +39,9 @@ def periodic_peaks(prob: np.ndarray, origin: tuple[float, float], resolution: fl
     u = V[:, 1]  # the least certain direction
     steps = int(math.floor(search_m / resolution))
     shifts = np.arange(-steps, steps + 1) * resolution
-    c, s = math.cos(aTb[2]), math.sin(aTb[2])
-    pts = np.asarray(b_points, np.float64)
-    px = c * pts[:, 0] - s * pts[:, 1] + aTb[0]
-    py = s * pts[:, 0] + c * pts[:, 1] + aTb[1]
-    col = np.floor((px[None, :] + shifts[:, None] * u[0] - origin[0]) / resolution).astype(np.int64)
-    row = np.floor((py[None, :] + shifts[:, None] * u[1] - origin[1]) / resolution).astype(np.int64)
+    a_pts = g.transform_points(aTb, b_points)
+    col = np.floor((a_pts[None, :, 0] + shifts[:, None] * u[0] - origin[0]) / resolution).astype(np.int64)
+    row = np.floor((a_pts[None, :, 1] + shifts[:, None] * u[1] - origin[1]) / resolution).astype(np.int64)
     H, W = prob.shape
     inside = (row >= 0) & (row < H) & (col >= 0) & (col < W)
     value = np.where(inside, prob[np.clip(row, 0, H - 1), np.clip(col, 0, W - 1)], p_min)
