@@ -20,7 +20,7 @@ from holoslam.cli_output import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK, Progress, 
 from holoslam.cli_parser import build_parser
 from holoslam.errors import HoloslamError, PlanningError
 
-__all__ = ["main", "build_parser", "Progress", "EXIT_OK", "EXIT_FAILED", "EXIT_BAD_INPUT", "_topology_config"]
+__all__ = ["main", "console", "build_parser", "Progress", "EXIT_OK", "EXIT_FAILED", "EXIT_BAD_INPUT", "_topology_config"]
 
 #: objects (allocations less frees) between two collections of the garbage collector's youngest generation;
 #: CPython's default is 700. A command is one batch job: it allocates millions of short-lived objects (decoded
@@ -52,5 +52,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_OK
 
 
+def console() -> int:
+    """The ``holoslam`` program (its console script and ``python -m holoslam.cli``): ``main``, then the process
+    ends without the interpreter's last garbage collection. That collection walks every object the libraries
+    made for the process's life (numba's compiled kernels, matplotlib, networkx): 0.3 s of the household run's
+    8 s, to free memory the operating system takes back at exit anyway. ``gc.freeze`` moves those objects out
+    of the collector's reach; an embedding program calls ``main``, which leaves the collector alone."""
+    code = main()
+    gc.freeze()
+    return code
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(console())

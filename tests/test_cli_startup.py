@@ -79,3 +79,14 @@ def test_cli_module_runs_as_a_script():
     )
     assert r.returncode == 0 and "--init" in r.stdout and "chordal" in r.stdout
     assert Path(sys.executable).exists()
+
+
+def test_the_program_returns_the_commands_code_and_skips_the_last_collection(monkeypatch):
+    import gc
+
+    import holoslam.cli as cli
+
+    frozen = []
+    monkeypatch.setattr(cli, "main", lambda argv=None: 2)
+    monkeypatch.setattr(gc, "freeze", lambda: frozen.append(True))
+    assert cli.console() == 2 and frozen == [True]

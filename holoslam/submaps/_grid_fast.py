@@ -363,6 +363,26 @@ def window_scores(prob, ox, oy, res, px, py, cx, cy, ct, nxy, angles, outside): 
 
 
 @nb.njit(**JIT)
+def line_scores(prob, ox, oy, res, ax, ay, ux, uy, shifts, outside):  # pragma: no cover
+    """Mean probability of the points (ax, ay) (grid frame, metres) moved by d (ux, uy) for every d of ``shifts``:
+    ``window_scores``' nearest-cell lookup along one line (``holoslam.submaps.periodic``). numpy's version built
+    five (shifts, points) arrays: 1.3 ms a closure, 0.7 s of the household run."""
+    rows, cols = prob.shape
+    n = ax.size
+    inv = 1.0 / max(n, 1)
+    out = np.zeros(shifts.size)
+    for k in range(shifts.size):
+        dx, dy = shifts[k] * ux - ox, shifts[k] * uy - oy
+        tot = 0.0
+        for i in range(n):
+            c = int(math.floor((ax[i] + dx) / res))
+            r = int(math.floor((ay[i] + dy) / res))
+            tot += prob[r, c] if 0 <= r < rows and 0 <= c < cols else outside
+        out[k] = tot * inv
+    return out
+
+
+@nb.njit(**JIT)
 def window_seed(S, res, angles, w_trans, w_rot, seed_margin):  # pragma: no cover
     """The seed (angle, y, x indices) of a correlative window's scores S (``window_scores``): the best score
     discounted by exp(-(w_trans d^2 + w_rot a^2)) for its offset d (m) and angle a (rad) from the window's

@@ -9,7 +9,8 @@ a run: heading within 1 deg, 4-7 m along a corridor) and on the shared intel log
 
 :func:`periodic_peaks` scores the matched scan shifted along the major axis of the match's covariance (the
 corridor's direction where the match is a ridge; any direction otherwise) up to ``search_m`` each way, by the
-cells holding its points (nearest cell; outside the grid the floor ``p_min``), and returns the shifted poses
+cells holding its points (nearest cell; outside the grid the floor ``p_min``; compiled,
+``_grid_fast.line_scores``), and returns the shifted poses
 whose score is a local maximum within ``margin`` of the match's own, farther than ``exclude_m`` from it (the
 match's own peak). A closure with such peaks keeps their spread along that axis in its covariance
 (``bnb_window.spanning_covariance``, as a second peak inside the window does): it still fixes the position across
@@ -33,6 +34,8 @@ def periodic_peaks(prob: np.ndarray, origin: tuple[float, float], resolution: fl
     """The poses (3,) along ``cov_aTb``'s major axis through ``aTb`` (within ``search_m``, beyond ``exclude_m``)
     where the scan's points ``b_points`` (N, 2, base frame) score a local maximum no more than ``margin`` below
     their score at ``aTb``, on the probability grid ``prob`` (cell (r, c) at ``origin`` + (c, r) ``resolution``)."""
+    from holoslam.submaps import _grid_fast as fast
+
     if search_m <= exclude_m or len(b_points) == 0:
         return []
     _ev, V = np.linalg.eigh(np.asarray(cov_aTb, np.float64)[:2, :2])
@@ -40,12 +43,10 @@ def periodic_peaks(prob: np.ndarray, origin: tuple[float, float], resolution: fl
     steps = int(math.floor(search_m / resolution))
     shifts = np.arange(-steps, steps + 1) * resolution
     a_pts = g.transform_points(aTb, b_points)
-    col = np.floor((a_pts[None, :, 0] + shifts[:, None] * u[0] - origin[0]) / resolution).astype(np.int64)
-    row = np.floor((a_pts[None, :, 1] + shifts[:, None] * u[1] - origin[1]) / resolution).astype(np.int64)
-    H, W = prob.shape
-    inside = (row >= 0) & (row < H) & (col >= 0) & (col < W)
-    value = np.where(inside, prob[np.clip(row, 0, H - 1), np.clip(col, 0, W - 1)], p_min)
-    score = value.mean(axis=1)
+    score = fast.line_scores(np.ascontiguousarray(prob, np.float32), float(origin[0]), float(origin[1]),
+                             float(resolution), np.ascontiguousarray(a_pts[:, 0], np.float64),
+                             np.ascontiguousarray(a_pts[:, 1], np.float64), float(u[0]), float(u[1]), shifts,
+                             float(p_min))
     at = score[steps] - margin
     k = np.arange(1, len(shifts) - 1)
     peak = ((score[k] >= score[k - 1]) & (score[k] >= score[k + 1]) & (score[k] >= at)

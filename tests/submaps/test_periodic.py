@@ -84,3 +84,20 @@ def test_the_periodic_settings_refuse_what_cannot_work():
     for bad in ({"periodic_search_m": -1.0}, {"periodic_exclude_m": -0.5}, {"periodic_search_m": float("inf")}):
         with pytest.raises(ValueError, match="periodic_search_m"):
             LoopSearch(LoopConfig(**bad), MatchConfig())
+
+
+def test_the_compiled_line_scores_are_the_mean_probability_of_the_moved_points_in_their_cells():
+    from holoslam.submaps import _grid_fast as fast
+
+    rng = np.random.default_rng(3)
+    prob = rng.uniform(0.1, 0.9, (40, 60)).astype(np.float32)
+    origin, u = (-1.0, 2.0), np.array([0.6, 0.8])
+    ax, ay = rng.uniform(-1.5, 2.5, 50), rng.uniform(1.5, 4.5, 50)  # some points leave the grid when moved
+    shifts = np.arange(-40, 41) * RES
+    got = fast.line_scores(prob, origin[0], origin[1], RES, ax, ay, u[0], u[1], shifts, P_MIN)
+    col = np.floor((ax[None] + shifts[:, None] * u[0] - origin[0]) / RES).astype(int)
+    row = np.floor((ay[None] + shifts[:, None] * u[1] - origin[1]) / RES).astype(int)
+    inside = (row >= 0) & (row < 40) & (col >= 0) & (col < 60)
+    want = np.where(inside, prob[row.clip(0, 39), col.clip(0, 59)], P_MIN).mean(axis=1)
+    assert 0 < inside.mean() < 1  # both kinds of point are scored
+    np.testing.assert_allclose(got, want, atol=1e-6)
