@@ -334,7 +334,8 @@ def _walk_scans(
     every = max(1, -(-len(run.scans) // 50))
     last_search: tuple[int, float, float] | None = None  # the node count, odometer and heading at the last search
     # dead reckoning's disagreement with the estimate: the compass's bound on the windows, or without one the
-    # disagreement window's floor on a slow laser (``LoopConfig.disagreement_window_max_hz``)
+    # disagreement window's floor on a slow laser (``LoopConfig.disagreement_window_max_hz``) or, on a faster one,
+    # once local SLAM's matches were blind often enough (``_blind_enough``)
     widen = (cfg.loops.disagreement_window > 0
              and scan_rate_hz(np.array([sc.stamp_ns for sc in run.scans], np.int64))
              <= cfg.loops.disagreement_window_max_hz)
@@ -377,6 +378,7 @@ def _walk_scans(
                 raise _OdometerOff(fix)
         finish(slam.pop_finished())
         here = (n_nodes, float(travelled[k]), float(run.odo_at_scans[k][2]))
+        widen = widen or _blind_enough(cfg.loops, watch)  # once on, on: the drift let in stays in the estimate
         if loops.grids and _search_due(cfg.loops, here, last_search):
             last_search = here
             usual = slam.usual_score()
@@ -404,6 +406,19 @@ def _across_break(run: _Run, brk: Break, m: int, dr_mn, anchor_ns: int) -> tuple
         return m, dr_mn.end, dr_mn.cov_aTb_end
     dr = dead_reckon(run.ost, run.opose, fix.stamp_ns, anchor_ns, **run.hargs)
     return fix.submap, *g.propagate_compose(fix.aTb, fix.cov_aTb, dr.end, dr.cov_aTb_end)
+
+
+#: matched nodes before local SLAM's blind share is judged for the disagreement window (the odometer check's own
+#: wait, ``OdometerCorrectionConfig``): a log's first minute is no sample of it (intel's first 100 nodes are 8 %
+#: blind, its whole log 0.9 %)
+_BLIND_SHARE_NODES = 500
+
+
+def _blind_enough(cfg: LoopConfig, watch: OdometerWatch) -> bool:
+    """Whether local SLAM's matches so far were blind along the track often enough for the disagreement window
+    (``LoopConfig.disagreement_window_blind_share``), judged from ``_BLIND_SHARE_NODES`` matched nodes on."""
+    return (cfg.disagreement_window > 0 and watch.nodes >= _BLIND_SHARE_NODES
+            and watch.blind_share >= cfg.disagreement_window_blind_share)
 
 
 def _search_due(cfg: LoopConfig, here: tuple[int, float, float], last: tuple[int, float, float] | None) -> bool:

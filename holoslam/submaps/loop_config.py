@@ -77,6 +77,15 @@ class LoopConfig:
     # 34 -> 75 s, 24 -> 27 s, 40 -> 50 s wall): nodes come 3-4x as often as at 1.4 Hz, where the building pays 7 %.
     # The decimated shared logs (1.4 Hz) map as well either way. inf: always
     disagreement_window_max_hz: float = 2.0
+    # ... and on a faster laser once this share of local SLAM's matched nodes were blind along the track
+    # (``odometer.is_blind``; judged from the 500th matched node on, ``frontend._BLIND_SHARE_NODES``, and on from
+    # then): a short laser in long corridors, whose scans shorten them as a slow laser's do. The shared logs' full
+    # laser stays below it (blind intel 0.9 %, aces 2.4 %, fr079 0 %: unchanged, to 1e-4 m), with ranges cut at
+    # 5 m (``bench_realdata.py --variants short@5``) aces 0.0698 -> 0.0501 m (max 2.14 -> 0.53 m), intel 0.0286 ->
+    # 0.0237, at 8 m intel 0.0252 -> 0.0228 (run 30 -> 51 s; before the periodic test (``periodic_search_m``) an
+    # alias 7.8-9.1 m along intel's corridor made it 0.0419). Judged from the 100th node instead, intel's full
+    # laser turns it on (8 % of its first 100 nodes blind: 34 -> 74 s for the same error). Above 1: never
+    disagreement_window_blind_share: float = 0.05
     min_score: float = 0.55
     min_score_wide: float = 0.6
     # > 0: on a laser sparser than the thresholds' reference (``score_reference``: the score scale below 1), a

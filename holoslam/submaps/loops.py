@@ -72,6 +72,9 @@ class LoopSearch:
         if not (cfg.periodic_search_m >= 0 and cfg.periodic_exclude_m >= 0 and math.isfinite(cfg.periodic_search_m)):
             raise ValueError("LoopConfig.periodic_search_m and periodic_exclude_m must be finite numbers >= 0 (search 0: "
                              f"off), got {cfg.periodic_search_m!r}, {cfg.periodic_exclude_m!r}")
+        if not (cfg.disagreement_window_blind_share >= 0):  # inf allowed: never
+            raise ValueError("LoopConfig.disagreement_window_blind_share must be a number >= 0 (above 1: never), got "
+                             f"{cfg.disagreement_window_blind_share!r}")
         if not (cfg.disagreement_window_max_hz >= 0):  # inf allowed: always
             raise ValueError("LoopConfig.disagreement_window_max_hz must be a number >= 0 (inf: always), got "
                              f"{cfg.disagreement_window_max_hz!r}")

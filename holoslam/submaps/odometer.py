@@ -276,10 +276,11 @@ class OdometerWatch:
         self._aTb: list[np.ndarray] = []
         self._blind: list[bool] = []
         self.nodes = 0
+        self._blind_nodes = 0  # sum(self._blind), kept: the front end reads the share at every node
 
     @property
     def blind_share(self) -> float:
-        return sum(self._blind) / max(self.nodes, 1)
+        return self._blind_nodes / max(self.nodes, 1)
 
     @property
     def blind_stamps_ns(self) -> np.ndarray:
@@ -293,6 +294,7 @@ class OdometerWatch:
         self._aTb.append(np.asarray(aTb, np.float64))
         self._blind.append(bool(blind))
         self.nodes += 1
+        self._blind_nodes += bool(blind)
         return self.cfg.enabled and self.nodes % self.cfg.check_every_nodes == 0
 
     def check(self, est_wTa: np.ndarray) -> OdometerCorrection | None:

@@ -449,3 +449,25 @@ def test_the_loop_search_runs_every_kth_node_once_the_robot_moved_or_turned():
     assert _search_due(cfg, (6, 0.0, math.radians(-31.0)), last)  # turned the other way
     assert _search_due(cfg, (6, 0.0, math.radians(179.0)), (3, 0.0, math.radians(-179.0))) is False  # 2 deg
     assert _search_due(LoopConfig(every_nodes=3, every_m=0.0, every_deg=0.0), (6, 0.0, 0.0), last)  # off: by count
+
+
+def test_the_disagreement_window_turns_on_once_local_slams_matches_were_blind_often_enough():
+    """``_blind_enough``: judged from the 500th matched node on, at the share ``disagreement_window_blind_share``."""
+    from holoslam.submaps.frontend import _BLIND_SHARE_NODES, _blind_enough
+    from holoslam.submaps.loop_config import LoopConfig
+    from holoslam.submaps.odometer import OdometerCorrectionConfig, OdometerWatch
+
+    watch = OdometerWatch(OdometerCorrectionConfig(), np.zeros(1, np.int64), np.zeros((1, 3)))
+    cfg = LoopConfig()  # 5 %
+    for k in range(_BLIND_SHARE_NODES - 1):
+        watch.add(k, 0, np.zeros(3), blind=k % 10 == 0)  # 10 % blind
+    assert not _blind_enough(cfg, watch)  # too soon to judge
+    watch.add(_BLIND_SHARE_NODES, 0, np.zeros(3), blind=False)
+    assert watch.blind_share == pytest.approx(0.1) and _blind_enough(cfg, watch)
+    assert not _blind_enough(LoopConfig(disagreement_window_blind_share=0.11), watch)
+    assert not _blind_enough(LoopConfig(disagreement_window=0.0), watch)  # the window off: never
+    with pytest.raises(ValueError, match="disagreement_window_blind_share"):
+        from holoslam.submaps.loops import LoopSearch
+        from holoslam.submaps.scanmatch import MatchConfig
+
+        LoopSearch(LoopConfig(disagreement_window_blind_share=float("nan")), MatchConfig())
