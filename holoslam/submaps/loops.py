@@ -75,6 +75,8 @@ class LoopSearch:
         if not (cfg.disagreement_window_blind_share >= 0):  # inf allowed: never
             raise ValueError("LoopConfig.disagreement_window_blind_share must be a number >= 0 (above 1: never), got "
                              f"{cfg.disagreement_window_blind_share!r}")
+        if not (cfg.far_from_seed > 0):  # inf allowed: never
+            raise ValueError(f"LoopConfig.far_from_seed must be a number > 0 (inf: off), got {cfg.far_from_seed!r}")
         if not (cfg.disagreement_window_max_hz >= 0):  # inf allowed: always
             raise ValueError("LoopConfig.disagreement_window_max_hz must be a number >= 0 (inf: always), got "
                              f"{cfg.disagreement_window_max_hz!r}")
@@ -302,7 +304,7 @@ class LoopSearch:
         outs = list(_threads().map(one, range(len(jobs)))) if len(jobs) > 1 else [one(0)]
         self.seconds["windowed"] += time.perf_counter() - t0
         found = []
-        for (m, *_, across), (cand, reason, hit, peaks) in zip(jobs, outs, strict=True):
+        for (m, seed, wxy, *_, across), (cand, reason, hit, peaks) in zip(jobs, outs, strict=True):
             self.tried += 1
             self._count("windowed searches")
             if peaks is not None:
@@ -313,6 +315,9 @@ class LoopSearch:
             # intel at 1.4 Hz kidnapped at two thirds took two aliases 14 m / 94-101 deg off: never joined
             if cand is not None and across and reason == "windowed: accepted":
                 reason = "windowed across a break: offered for agreement"
+            elif cand is not None and reason == "windowed: accepted" and _beyond_ellipse(hit.aTb, seed, wxy,
+                                                                                         self.cfg.far_from_seed):
+                reason = "windowed, beyond its window's ellipse: offered for agreement"
             self._count(reason)
             offer = reason.endswith("offered for agreement")
             if cand is not None and offer:
@@ -515,6 +520,14 @@ class LoopSearch:
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None  # (the process that made it, the pool)
+
+
+def _beyond_ellipse(aTb, seed, wxy, scale: float) -> bool:
+    """Whether the match at ``aTb`` lies outside the ellipse inscribed in its window (half-widths ``wxy`` about
+    ``seed``), scaled by ``scale`` (``LoopConfig.far_from_seed``; inf: never)."""
+    wx, wy = (float(w) for w in np.broadcast_to(np.asarray(wxy, np.float64), (2,)))
+    dx, dy = float(aTb[0]) - float(seed[0]), float(aTb[1]) - float(seed[1])
+    return (dx / wx) ** 2 + (dy / wy) ** 2 > scale ** 2
 
 
 def _threads() -> ThreadPoolExecutor:

@@ -51,10 +51,10 @@ def household_place():
     return segs, b.freeze(), wTm, wTn, wTr
 
 
-def _search(household_place, drift_m: float, graph_distance_m: float):
+def _search(household_place, drift_m: float, graph_distance_m: float, cfg: LoopConfig | None = None):
     """Search node r against the old submap with submap n's world estimate off by ``drift_m`` (and 10 deg)."""
     segs, grid, wTm, wTn, wTr = household_place
-    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls = LoopSearch(cfg or LoopConfig(), MatchConfig())
     ls.add_submap(0, grid)
     drift = np.array([drift_m * math.cos(1.0), drift_m * math.sin(1.0), math.radians(10.0)])
     est = np.zeros((6, 3))
@@ -104,8 +104,10 @@ def test_dead_reckoning_that_agrees_with_the_estimate_bounds_the_drift_window():
 @pytest.mark.parametrize("drift_m", [1.0, 2.5, 4.0])
 def test_a_node_is_closed_against_an_old_submap_however_far_its_estimate_drifted(household_place, drift_m):
     # the estimate of submap n is off by drift_m and 10 deg about the world origin (~3-4 m at the node); 60 m of
-    # graph path since the old submap give a 4 m / 30 deg window
-    ls, found, true_mTn = _search(household_place, drift_m, 60.0)
+    # graph path since the old submap give a 4 m / 30 deg window. At 4 m the match lies beyond the window's ellipse
+    # and waits for agreement (the test below); accepted alone here with that rule off
+    far = math.inf if drift_m >= 4.0 else LoopConfig().far_from_seed
+    ls, found, true_mTn = _search(household_place, drift_m, 60.0, LoopConfig(far_from_seed=far))
     assert ls.tried == 1 and len(found) == 1
     c = found[0]
     assert (c.old, c.new) == (0, 5) and c.window_xy == pytest.approx(4.0)
@@ -532,3 +534,51 @@ def test_a_global_search_may_turn_the_estimate_only_a_few_sigmas_of_its_heading(
     assert gates(2.0) == [pytest.approx(math.radians(k * 2.0), rel=1e-3)]
     assert gates(200.0 / k) == [pytest.approx(math.pi)]  # k sigma beyond a half turn: the drift window's every heading
     assert gates(2.0, LoopConfig(global_heading_sigmas=0.0)) == [pytest.approx(math.pi)]  # 0: off
+
+
+def test_a_match_beyond_its_windows_ellipse_waits_for_agreement(household_place):
+    """The window is the bounding square of the estimate's uncertainty ellipse: a match in its corners lies beyond
+    that bound, and is offered for agreement instead of accepted (``LoopConfig.far_from_seed``); the same match
+    found nearer the seed, or with the setting off (inf), is accepted on its own."""
+    segs, grid, wTm, wTn, wTr = household_place
+    nTr = g.between(wTn, wTr)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(7)))
+    diagonal = wTm[2] + math.pi / 4  # along the diagonal of m's grid, where the window's corners are
+
+    def search(drift_m: float, far: float):
+        ls = LoopSearch(LoopConfig(far_from_seed=far), MatchConfig())
+        ls.add_submap(0, grid)
+        est = np.zeros((6, 3))
+        est[0] = wTm
+        est[5] = g.compose(np.array([drift_m * math.cos(diagonal), drift_m * math.sin(diagonal), 0.0]), wTn)
+        found = ls.search(5, nTr, np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.full(6, 5.0), 0.0,
+                          travel=np.zeros(6))
+        return ls, found
+
+    # 5 m of graph path: a 1.25 m window; 1.4 m along the diagonal is (0.99, 0.99) m from the seed: inside the
+    # square, beyond the ellipse
+    ls, found = search(1.4, 1.0)
+    assert found == [] and ls.counts["windowed, beyond its window's ellipse: offered for agreement"] == 1
+    ls, found = search(1.4, math.inf)
+    assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    e = g.between(g.between(wTm, wTn), found[0].mTn)
+    assert math.hypot(e[0], e[1]) < 0.03
+    ls, found = search(0.7, 1.0)  # (0.49, 0.49) m: within the ellipse
+    assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    # the drifted estimate of the test above, 4 m and 10 deg off in a 4 m window, with the default: it waits
+    ls, found, _ = _search(household_place, 4.0, 60.0)
+    assert found == [] and ls.counts["windowed, beyond its window's ellipse: offered for agreement"] == 1
+
+
+def test_the_ellipse_of_a_window():
+    from holoslam.submaps.loops import _beyond_ellipse
+
+    seed = np.array([1.0, 2.0, 0.0])
+    assert not _beyond_ellipse(np.array([1.9, 2.0, 0.0]), seed, (1.0, 0.5), 1.0)  # 0.9 of the x half-width
+    assert _beyond_ellipse(np.array([1.0, 2.6, 0.0]), seed, (1.0, 0.5), 1.0)  # 1.2 of the y half-width
+    assert _beyond_ellipse(np.array([1.75, 2.35, 0.0]), seed, (1.0, 0.5), 1.0)  # a corner: 0.75^2 + 0.7^2 > 1
+    assert not _beyond_ellipse(np.array([1.75, 2.35, 0.0]), seed, (1.0, 0.5), 1.1)
+    assert not _beyond_ellipse(np.array([9.0, 9.0, 0.0]), seed, (1.0, 0.5), math.inf)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="far_from_seed"):
+            LoopSearch(LoopConfig(far_from_seed=bad), MatchConfig())
