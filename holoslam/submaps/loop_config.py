@@ -93,7 +93,8 @@ class LoopConfig:
     # moved 0.09-1.41 half-widths from their seeds (7 of 19 beyond 0.75), the right ones 2 of 58 beyond 0.75; the
     # first wrong ones let the estimate drift and the rest followed. At 1.0 the three seeds' anchors 0.558 / 1.889 /
     # 0.310 -> 0.403 / 0.539 / 0.296 m, revisits 0.155 / 3.867 / 0.123 -> 0.092 / 0.382 / 0.141 m (seed 27's wrong
-    # closures 19 -> 2); at 0.4 seed 26 failed (6.05 m: its right corrections waited), at 0.6 0.568 / 0.668 / 0.292 m.
+    # closures 19 -> 2; with its odometer scaled 0.995 / 1 / 1.005 too, runs over 1 m 2 -> 1 of 9); at 0.4 seed 26
+    # failed (6.05 m: its right corrections waited), at 0.6 0.568 / 0.668 / 0.292 m.
     # Without the compass (``--no-compass --wobble 0.995 1 1.005``, 9 runs): anchors median 0.345 -> 0.361 m,
     # revisits 0.156 -> 0.151 m, runs over 1 m 0 -> 1 (seed 27 x 1.005, 0.98 -> 7.6 m, at the edge before). The
     # shared logs, full, kidnapped, sparse: the same figures within 0.0004 m; the household: the same closures. inf: off
