@@ -334,7 +334,7 @@ def draw_trajectory(
 MARGINS_IN = (0.75, 0.5, 0.2, 0.4)
 
 
-def _tight(fig: Figure) -> None:
+def _set_margins(fig: Figure) -> None:
     """Set the figure's subplot margins to ``MARGINS_IN`` (no layout engine: ``savefig`` draws once)."""
     w, h = fig.get_size_inches()
     left, bottom, right, top = MARGINS_IN
@@ -376,7 +376,7 @@ def map_figure(
         ax.set_title(title)
     if topology is not None or holographic is not None:
         ax.legend(loc="upper right", fontsize=6)
-    _tight(fig)
+    _set_margins(fig)
     return fig
 
 
@@ -402,7 +402,7 @@ def trajectory_figure(
     ax.legend(fontsize=7)
     if title:
         ax.set_title(title)
-    _tight(fig)
+    _set_margins(fig)
     return fig
 
 
@@ -443,5 +443,5 @@ def store_figure(ex: Any, object_ids: tuple[str, ...] = (), title: str | None = 
     ax.legend(loc="upper right", fontsize=6)
     if title:
         ax.set_title(title)
-    _tight(fig)
+    _set_margins(fig)
     return fig
