@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from repo_paths import REPO
 
 from holoslam import warmup
@@ -109,3 +110,22 @@ def test_the_pool_forks_a_single_threaded_process_on_linux_and_compiles_there(tm
     alone, beside, n, compiled, left = _in_child(code, tmp_path)
     assert (alone, beside) == ("fork" if sys.platform.startswith("linux") else "spawn", "spawn")
     assert int(n) >= 2 and int(compiled) == int(n) and left == "0"
+
+
+@pytest.mark.skipif(not hasattr(os, "nice"), reason="no process priorities here")
+def test_the_first_runs_pool_compiles_at_a_lower_priority_than_the_run(tmp_path):
+    """``compile_in_background``: the workers take ``BACKGROUND_NICE`` more niceness than the run (capped at 19),
+    so the run keeps its pace; the kernels waited for are cached when it returns."""
+    code = (
+        "import os\n"
+        "from holoslam import warmup\n"
+        "sigs = [s for s in warmup.load_signatures() if s.module == 'holoslam.submaps._graph_fast']\n"
+        "pool = warmup.compile_in_background(sigs, workers=1, wait_for=('holoslam.submaps._graph_fast',))\n"
+        "left = len(warmup.pending(sigs))\n"
+        "worker = pool.submit(os.nice, 0).result()\n"
+        "pool.shutdown(wait=True)\n"
+        "print(os.nice(0), worker, left, warmup.BACKGROUND_NICE)\n"
+    )
+    run, worker, left, step = map(int, _in_child(code, tmp_path))
+    assert step > 0 and worker == min(19, run + step) and worker > run
+    assert left == 0
