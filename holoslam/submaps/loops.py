@@ -342,6 +342,8 @@ class LoopSearch:
                 return []
         accepted = self.consistency.offer(cand, est_wTa, travel)
         self._count(f"{kind}: accepted (consistent)" if accepted else f"{kind}: waiting for agreement")
+        if self.consistency.rivalled:
+            self._count(f"{kind}: waiting, a rival clique as certain")
         for a in accepted:
             if a is not cand:
                 self._count(f"{kind}: accepted later (consistent)")

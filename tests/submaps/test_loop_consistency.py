@@ -4,7 +4,7 @@ an alias does not (holoslam.submaps.loop_consistency)."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -96,3 +96,28 @@ def test_closures_too_far_apart_to_tell_a_half_turn_do_not_vouch_for_each_other(
     mid[3] = 300.0 + (cfg.max_allowance_deg - cfg.sigma_deg) / cfg.deg_rate - (TRAVEL[1] - TRAVEL[0]) - 1.0
     assert agreement(closure(0, 2, 300.0), closure(1, 3, float(mid[3])), EST, mid, cfg) < 1.0
 
+
+
+def test_a_clique_waits_while_a_rival_pair_has_as_many_certain_closures():
+    """``rival_max_sd_m``: three closures 12-16 m along a corridor agree (two of them kept with metres of spread
+    along it), but two certain ones at the truth agree with each other and not with them: the alias waits, and
+    with the rule off it is accepted. A clique of three certain closures is accepted beside the same rivals' pair
+    only when it has more certain members."""
+    wide = np.diag([2.5, 0.1, 0.01]) ** 2  # 2.5 m along the corridor (x), 0.1 m across
+    TRAV = np.array([0.0, 8.0, 300.0, 306.0])
+
+    def offers(pool: LoopConsistency) -> list:
+        pool.offer(closure(0, 2, 300.0), EST, TRAV)  # right
+        pool.offer(closure(1, 3, 306.0), EST, TRAV)  # right: two agree, not enough
+        pool.offer(closure(0, 2, 312.0, (12.0, 0.0, 0.0)), EST, TRAV)  # the alias, certain
+        pool.offer(replace(closure(1, 3, 318.0, (16.0, 0.0, 0.0)), cov_mTn=wide), EST, TRAV)
+        return pool.offer(replace(closure(0, 3, 324.0, (14.0, 0.0, 0.0)), cov_mTn=wide), EST, TRAV)
+
+    waits = LoopConsistency()
+    assert offers(waits) == [] and waits.rivalled  # the report counts it: "waiting, a rival clique as certain"
+    accepted = offers(LoopConsistency(ConsistencyConfig(rival_max_sd_m=math.inf)))
+    assert sorted(c.travelled for c in accepted) == [312.0, 318.0, 324.0]  # the alias, without the rule
+    # the right side's third arrives: three certain against the alias's one, accepted
+    pool = LoopConsistency()
+    offers(pool)
+    assert sorted(c.travelled for c in pool.offer(closure(1, 2, 330.0), EST, TRAV)) == [300.0, 306.0, 330.0]
