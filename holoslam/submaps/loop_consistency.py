@@ -130,10 +130,9 @@ class LoopConsistency:
         for p in reversed(self.pending):  # the most recent first: the estimate has drifted least since
             if agree(p, c) and all(agree(p, q) for q in group):
                 group.append(p)
-        self.rivalled = False
-        if 1 + len(group) + len(trusted) >= self.cfg.min_agreeing:
-            self.rivalled = self._rivalled(c, group, trusted, est_wTa, travel)
-        if 1 + len(group) + len(trusted) >= self.cfg.min_agreeing and not self.rivalled:
+        enough = 1 + len(group) + len(trusted) >= self.cfg.min_agreeing
+        self.rivalled = enough and self._rivalled(c, group, trusted, est_wTa, travel)
+        if enough and not self.rivalled:
             chosen = {id(p) for p in group}
             self.pending = [p for p in self.pending if id(p) not in chosen]
             out = [*group[::-1], c]
@@ -161,12 +160,13 @@ class LoopConsistency:
         against = [p for p in self.pending if id(p) not in mine
                    and cfg.gate < agreement(p, c, est_wTa, travel, cfg) < math.inf]
         ours = certain(c) + sum(map(certain, group)) + sum(map(certain, trusted))
-        for seed in against:  # the rival cliques grown from each of them, greedily
-            rivals = [seed]
-            for p in against:
-                if p is not seed and all(agreement(p, q, est_wTa, travel, cfg) <= cfg.gate for q in rivals):
-                    rivals.append(p)
-            if len(rivals) >= 2 and sum(map(certain, rivals)) >= ours:
+        agree = [[agreement(p, q, est_wTa, travel, cfg) <= cfg.gate for q in against] for p in against]
+        for i in range(len(against)):  # the rival cliques grown from each of them, greedily
+            rivals = [i]
+            for j in range(len(against)):
+                if j != i and all(agree[j][k] for k in rivals):
+                    rivals.append(j)
+            if len(rivals) >= 2 and sum(certain(against[k]) for k in rivals) >= ours:
                 return True
         return False
 

@@ -97,7 +97,6 @@ def test_closures_too_far_apart_to_tell_a_half_turn_do_not_vouch_for_each_other(
     assert agreement(closure(0, 2, 300.0), closure(1, 3, float(mid[3])), EST, mid, cfg) < 1.0
 
 
-
 def test_a_clique_waits_while_a_rival_pair_has_as_many_certain_closures():
     """``rival_max_sd_m``: three closures 12-16 m along a corridor agree (two of them kept with metres of spread
     along it), but two certain ones at the truth agree with each other and not with them: the alias waits, and
