@@ -357,7 +357,8 @@ def _quicker_flags() -> bool:
             h = hashes[kind] = hash(tuple(sorted(kind.options)))
         return h
 
-    cls.values, cls.__hash__, cls._holoslam_quick = values, __hash__, True
+    for name, method in (("values", values), ("__hash__", __hash__), ("_holoslam_quick", True)):
+        setattr(cls, name, method)
     return True
 
 

@@ -66,6 +66,16 @@ class SearchWindow:
         a = int(np.argmin(np.abs(g.wrap(c.angles - aTb[2]))))
         return a, int(round((aTb[0] - c.seed[0]) / res)), int(round((aTb[1] - c.seed[1]) / res))
 
+    def on_edge(self, match) -> bool:
+        """Whether ``match`` (a ``bnb.Match`` of this window) lies on the window's edge: its x or y on the box's
+        first or last cell, or its heading on the first or last angle of a window short of a full turn. The
+        score is then largest where the window cuts it off, not at a peak inside it."""
+        a, x, y = self.indices(match.aTb)
+        x_lo, x_hi, y_lo, y_hi = self.cand.box
+        n_a = self.cand.angles.size
+        turn = n_a > 1 and float(self.cand.angles[-1] - self.cand.angles[0]) >= 2 * math.pi - 1.5 * self.angle_step
+        return x in (x_lo, x_hi) or y in (y_lo, y_hi) or (n_a > 1 and not turn and a in (0, n_a - 1))
+
     def second_peaks(self, best, margin: float, exclude_xy: float, exclude_rad: float, count: int = 1,
                      first: bool = False) -> list:
         """Up to ``count`` candidates of the window scoring strictly above ``best.score - margin`` outside

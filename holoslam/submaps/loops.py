@@ -363,6 +363,8 @@ class LoopSearch:
         hit = win.best(weak_floor if weak_floor > 0 else min_score, margin if c.ambiguity != "off" else -1.0)
         if hit is None:
             return None, "windowed: no match above the score", None, None
+        if c.reject_on_edge and win.on_edge(hit):
+            return None, "windowed: best on the window's edge", hit, None
         weak = hit.score <= min_score  # above the agreement floor only: accepted only with others that agree
         if weak:
             min_score = weak_floor

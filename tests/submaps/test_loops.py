@@ -207,6 +207,44 @@ def test_no_weak_match_is_sought_across_a_break_of_local_slam(household_place):
     assert not any(k.startswith("windowed weak") or "weak, offered" in k for k in ls.counts), ls.counts
 
 
+# --- a match on its window's edge ---
+
+
+def test_a_best_on_the_windows_edge_is_no_peak_and_is_rejected(household_place):
+    """The true pose 0.3 m beyond the window (x): the window's best stops on the box's outer cells
+    (``SearchWindow.on_edge``), a pose 0.3 m off or more, and a window holding the truth finds it inside; the loop
+    search rejects a best on the edge ("best on the window's edge") before any other test."""
+    from holoslam.submaps import bnb
+    from holoslam.submaps.bnb_window import SearchWindow
+
+    segs, grid, wTm, wTn, wTr = household_place
+    mTr = g.between(wTm, wTr)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(11)))
+    pre = bnb.precompute(grid.prob, 7, origin=grid.origin, res=grid.resolution)
+    for beyond, edge in ((0.3, True), (-0.4, False)):
+        seed = mTr + np.array([1.0 + beyond, 0.0, 0.0])  # the window is +-1 m: the truth 1 + beyond m from the seed
+        win = SearchWindow(pre, b_pts, seed, 1.0, math.radians(10.0))
+        hit = win.best(0.3)
+        assert win.on_edge(hit) is edge
+        off = math.hypot(*(hit.aTb[:2] - mTr[:2]))
+        assert off > 0.25 if edge else off < 0.08  # on the edge: not the truth (0.3 m beyond at least)
+    # the loop search: the estimate of n 1.3 m off along the old submap's x, the window 1 m (graph distance 0)
+    for on in (True, False):
+        # a floor low enough for the slope's best (0.35-0.48 here) to count as a match
+        ls = LoopSearch(LoopConfig(base_window_xy=1.0, min_score=0.3, min_score_wide=0.3, reject_on_edge=on),
+                        MatchConfig())
+        ls.add_submap(0, grid)
+        est = np.zeros((6, 3))
+        est[0] = wTm
+        est[5] = g.compose(g.compose(wTm, np.array([1.3, 0.0, 0.0])), g.between(wTm, wTn))
+        found = ls.search(5, g.between(wTn, wTr), np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.zeros(6))
+        assert ls.counts.get("windowed: best on the window's edge", 0) == (1 if on else 0), ls.counts
+        if on:
+            assert found == []
+        else:  # the same best goes on to the other tests (here: in the window's corner, so offered for agreement)
+            assert "windowed: no match above the score" not in ls.counts and len(ls.counts) == 2, ls.counts
+
+
 # --- ambiguity: a second peak in the window ---
 
 
