@@ -66,15 +66,20 @@ class SearchWindow:
         a = int(np.argmin(np.abs(g.wrap(c.angles - aTb[2]))))
         return a, int(round((aTb[0] - c.seed[0]) / res)), int(round((aTb[1] - c.seed[1]) / res))
 
-    def on_edge(self, match) -> bool:
-        """Whether ``match`` (a ``bnb.Match`` of this window) lies on the window's edge: its x or y on the box's
-        first or last cell, or its heading on the first or last angle of a window short of a full turn. The
-        score is then largest where the window cuts it off, not at a peak inside it."""
+    def on_edge(self, match, exclude_xy: float = 0.0, exclude_rad: float = 0.0) -> bool:
+        """Whether the box of +-``exclude_xy`` m and +-``exclude_rad`` around ``match`` (a ``bnb.Match`` of this
+        window; the match's own peak, as ``second_peaks`` cuts it out) reaches the window's edge: its x or y within
+        that many cells of the box's outer cells, or its heading within that many angles of the outer ones of a
+        window short of a full turn. The window then does not hold the peak's neighbourhood: the match may be the
+        flank of a better place just beyond it (0, 0: the outer cells and angles only)."""
         a, x, y = self.indices(match.aTb)
+        ex = int(math.floor(exclude_xy / self.pre.res + 1e-9))
+        ea = int(math.floor(exclude_rad / self.angle_step + 1e-9))
         x_lo, x_hi, y_lo, y_hi = self.cand.box
         n_a = self.cand.angles.size
         turn = n_a > 1 and float(self.cand.angles[-1] - self.cand.angles[0]) >= 2 * math.pi - 1.5 * self.angle_step
-        return x in (x_lo, x_hi) or y in (y_lo, y_hi) or (n_a > 1 and not turn and a in (0, n_a - 1))
+        return (x - x_lo <= ex or x_hi - x <= ex or y - y_lo <= ex or y_hi - y <= ex
+                or (n_a > 1 and not turn and (a <= ea or n_a - 1 - a <= ea)))
 
     def second_peaks(self, best, margin: float, exclude_xy: float, exclude_rad: float, count: int = 1,
                      first: bool = False) -> list:

@@ -99,15 +99,22 @@ class LoopConfig:
     # revisits 0.156 -> 0.151 m, runs over 1 m 0 -> 1 (seed 27 x 1.005, 0.98 -> 7.6 m, at the edge before). The
     # shared logs, full, kidnapped, sparse: the same figures within 0.0004 m; the household: the same closures. inf: off
     far_from_seed: float = 1.0
-    # A windowed match whose pose lies on its window's edge (x or y on the box's outer cells, or the heading on
-    # its outer angles) is rejected: the score is largest where the window cuts it off, so the window does not hold
-    # the peak it climbs, and the match is either that slope or a place (a corridor's next door) that scores
-    # better than the right one inside (an optimum on the boundary of the domain searched is not a peak of the
-    # score). The simulated building (``bench_building_slam.py --seeds 26 27 28 30 31 32 33 --wobble 0.995 1
-    # 1.005``, 21 runs each way): with its compass seed 33 x 0.995 anchors 0.942 -> 0.299 m, revisits 0.385 ->
-    # 0.080 m, the other 20 identical (runs over 1 m 2 of 21 both); without it anchors median 0.346 -> 0.343 m
-    # (26 x 1: 0.558 -> 0.453, 26 x 0.995: 0.449 -> 0.496), 0 of 21 over 1 m both. The shared logs (full,
-    # kidnapped, sparse) and the household: every figure as before (no real match stopped on an edge)
+    # A windowed match on its window's edge (x or y on the box's outer cells, or the heading on its outer angles)
+    # is rejected: the score is largest where the window cuts it off (an optimum on the boundary of the domain
+    # searched is not a peak of the score), so the match is the flank of a place beyond the window or a place (a
+    # corridor's next door) scoring better than the right one inside. Where the windows are bounded by the
+    # compass's agreement (``agreement_factor``: a measured bound of the estimate's error, not a drift allowance)
+    # a match whose own peak box (``ambiguity_exclude_xy`` / ``_deg``, the box the second-peak search cuts out)
+    # reaches the edge is rejected too: its neighbourhood lies partly outside the window, and a match at the bound
+    # of the estimate's error is improbable. On the simulated building with its compass (``bench_building_slam.py
+    # --seeds 26 27 28 30 31 32 33 --wobble 0.995 1 1.005``, 21 runs) the wrong closures accepted directly lay
+    # 1-3 cells inside their windows' edges (box ratio 0.90-0.99 for 5 of 6 on seed 28 x 0.995, 9 of 12 on 31 x
+    # 0.995), the right ones there 0-2 a run: anchors over 1 m RMSE 4 -> 0 of 21 (seed 30 x 0.995 1.944 -> 0.648 m,
+    # revisits 2.659 -> 0.068 m; 28 x 0.995 1.431 -> 0.276; 31 x 0.995 1.382 -> 0.280), revisits over 1 m 2 -> 1
+    # (27 x 0.995 1.864 -> 1.710 m), median anchors 0.390 -> 0.368 m, revisits 0.092 -> 0.078 m. Without the
+    # compass the band cost (30 x 1: revisits 0.041 -> 0.409 m, 26 x 1.005: 0.159 -> 1.023; right matches near the
+    # edge of a drift allowance are as likely as wrong ones), so there the edge only: anchors median 0.346 ->
+    # 0.343 m, none over 1 m. The shared logs (no compass; full, kidnapped, sparse) and the household: as before
     reject_on_edge: bool = True
     min_score: float = 0.55
     min_score_wide: float = 0.6

@@ -275,7 +275,10 @@ class LoopSearch:
             jobs.append((m, seed, (wx, wy), wth, wide, weak, across))
             if bounded[q]:
                 self._count("windowed: window narrowed by dead reckoning's agreement")
-        found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel, travelled))
+        # the windows are bounded by the compass's agreement (a measured bound of the estimate's error, not a drift
+        # allowance): a match within its own peak's box of their edge is rejected too (``LoopConfig.reject_on_edge``)
+        band = compass and disagreement is not None and c.agreement_factor > 0
+        found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel, travelled, band))
         if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
             self.last_global_round = travelled
             g_pts = b_pts if bundle is None else adaptive_voxel_filter(
@@ -287,7 +290,7 @@ class LoopSearch:
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
     def _windowed_all(self, jobs, n: int, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel,
-                      travelled: float) -> list[LoopCandidate]:
+                      travelled: float, band: bool = False) -> list[LoopCandidate]:
         """The windowed searches (m, seed, (wx, wy), wth, wide) of one node, at most ``max_window_xy`` /
         ``max_window_deg``, each accepted on its own (``min_score_wide`` when ``wide``). They are independent:
         run in threads (the branch-and-bound and the matcher are compiled kernels that release the GIL), and
@@ -299,7 +302,8 @@ class LoopSearch:
 
         def one(q: int):
             m, seed, wxy, wth, wide, weak, _ = jobs[q]
-            return self._window_match(pres[q], m, seed, wxy, wth, wide, weak, n, nTr, cov_nTr, b_pts, search_pts)
+            return self._window_match(pres[q], m, seed, wxy, wth, wide, weak, n, nTr, cov_nTr, b_pts, search_pts,
+                                      band)
 
         outs = list(_threads().map(one, range(len(jobs)))) if len(jobs) > 1 else [one(0)]
         self.seconds["windowed"] += time.perf_counter() - t0
@@ -351,10 +355,11 @@ class LoopSearch:
         return accepted
 
     def _window_match(self, pre, m: int, seed, wxy, wth: float, wide: bool, weak_ok: bool, n: int, nTr, cov_nTr,
-                      b_pts, search_pts) -> tuple[LoopCandidate | None, str, Any, list | None]:
+                      b_pts, search_pts, band: bool = False) -> tuple[LoopCandidate | None, str, Any, list | None]:
         """One windowed search against m's precomputed grids ``pre``: (the closure or None, the outcome's
         reason, the best match, its second peaks (None when not sought)); ``weak_ok``: down to the agreement
-        floor (``agree_min_score``). Reads the search's state only."""
+        floor (``agree_min_score``); ``band``: a match whose own peak box reaches the window's edge is rejected
+        too, not only one on it (``LoopConfig.reject_on_edge``). Reads the search's state only."""
         c = self.cfg
         min_score = (c.min_score_wide if wide else c.min_score) * self.scale
         weak_floor = min(c.agree_min_score * self.scale, min_score) if weak_ok else 0.0
@@ -363,7 +368,8 @@ class LoopSearch:
         hit = win.best(weak_floor if weak_floor > 0 else min_score, margin if c.ambiguity != "off" else -1.0)
         if hit is None:
             return None, "windowed: no match above the score", None, None
-        if c.reject_on_edge and win.on_edge(hit):
+        box = (c.ambiguity_exclude_xy, math.radians(c.ambiguity_exclude_deg)) if band else (0.0, 0.0)
+        if c.reject_on_edge and win.on_edge(hit, *box):
             return None, "windowed: best on the window's edge", hit, None
         weak = hit.score <= min_score  # above the agreement floor only: accepted only with others that agree
         if weak:

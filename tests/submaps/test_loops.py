@@ -212,8 +212,10 @@ def test_no_weak_match_is_sought_across_a_break_of_local_slam(household_place):
 
 def test_a_best_on_the_windows_edge_is_no_peak_and_is_rejected(household_place):
     """The true pose 0.3 m beyond the window (x): the window's best stops on the box's outer cells
-    (``SearchWindow.on_edge``), a pose 0.3 m off or more, and a window holding the truth finds it inside; the loop
-    search rejects a best on the edge ("best on the window's edge") before any other test."""
+    (``SearchWindow.on_edge``), a pose 0.3 m off or more, and a window holding the truth finds it inside (within
+    its own peak's box of the edge when 0.1 m inside); the loop search rejects a best on the edge ("best on the
+    window's edge") before any other test, and one whose own peak box reaches the edge where the compass's
+    agreement with dead reckoning bounds the window."""
     from holoslam.submaps import bnb
     from holoslam.submaps.bnb_window import SearchWindow
 
@@ -221,11 +223,13 @@ def test_a_best_on_the_windows_edge_is_no_peak_and_is_rejected(household_place):
     mTr = g.between(wTm, wTr)
     b_pts = points(ray_scan(segs, wTr, np.random.default_rng(11)))
     pre = bnb.precompute(grid.prob, 7, origin=grid.origin, res=grid.resolution)
-    for beyond, edge in ((0.3, True), (-0.4, False)):
+    for beyond, edge, band in ((0.3, True, True), (-0.1, False, True), (-0.4, False, False)):
         seed = mTr + np.array([1.0 + beyond, 0.0, 0.0])  # the window is +-1 m: the truth 1 + beyond m from the seed
         win = SearchWindow(pre, b_pts, seed, 1.0, math.radians(10.0))
         hit = win.best(0.3)
         assert win.on_edge(hit) is edge
+        # with the match's own peak box (0.15 m): 0.1 m inside, the truth itself is within it of the edge
+        assert win.on_edge(hit, 0.15, math.radians(2.0)) is band
         off = math.hypot(*(hit.aTb[:2] - mTr[:2]))
         assert off > 0.25 if edge else off < 0.08  # on the edge: not the truth (0.3 m beyond at least)
     # the loop search: the estimate of n 1.3 m off along the old submap's x, the window 1 m (graph distance 0)
@@ -243,6 +247,20 @@ def test_a_best_on_the_windows_edge_is_no_peak_and_is_rejected(household_place):
             assert found == []
         else:  # the same best goes on to the other tests (here: in the window's corner, so offered for agreement)
             assert "windowed: no match above the score" not in ls.counts and len(ls.counts) == 2, ls.counts
+    # the truth 0.1 m inside the window: accepted, unless the window is bounded by the compass's agreement with dead
+    # reckoning (a bound of the estimate's error), where a match whose own peak box reaches the edge is rejected too
+    for compass in (False, True):
+        ls = LoopSearch(LoopConfig(base_window_xy=1.0), MatchConfig())
+        ls.add_submap(0, grid)
+        est = np.zeros((6, 3))
+        est[0] = wTm
+        est[5] = g.compose(g.compose(wTm, np.array([0.9, 0.0, 0.0])), g.between(wTm, wTn))
+        found = ls.search(5, g.between(wTn, wTr), np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.zeros(6),
+                          disagreement=(np.zeros(6), np.zeros(6)), compass=compass)
+        assert ls.counts.get("windowed: best on the window's edge", 0) == int(compass), ls.counts
+        if not compass:
+            e = g.between(g.between(wTm, wTn), found[0].mTn)
+            assert len(found) == 1 and math.hypot(e[0], e[1]) < 0.05
 
 
 # --- ambiguity: a second peak in the window ---
