@@ -66,6 +66,11 @@ class SearchWindow:
         a = int(np.argmin(np.abs(g.wrap(c.angles - aTb[2]))))
         return a, int(round((aTb[0] - c.seed[0]) / res)), int(round((aTb[1] - c.seed[1]) / res))
 
+    def _box_cells(self, exclude_xy: float, exclude_rad: float) -> tuple[int, int]:
+        """A box of +-``exclude_xy`` m and +-``exclude_rad`` around a candidate, in cells and angle steps."""
+        return (int(math.floor(exclude_xy / self.pre.res + 1e-9)),
+                int(math.floor(exclude_rad / self.angle_step + 1e-9)))
+
     def on_edge(self, match, exclude_xy: float = 0.0, exclude_rad: float = 0.0) -> bool:
         """Whether the box of +-``exclude_xy`` m and +-``exclude_rad`` around ``match`` (a ``bnb.Match`` of this
         window; the match's own peak, as ``second_peaks`` cuts it out) reaches the window's edge: its x or y within
@@ -73,8 +78,7 @@ class SearchWindow:
         window short of a full turn. The window then does not hold the peak's neighbourhood: the match may be the
         flank of a better place just beyond it (0, 0: the outer cells and angles only)."""
         a, x, y = self.indices(match.aTb)
-        ex = int(math.floor(exclude_xy / self.pre.res + 1e-9))
-        ea = int(math.floor(exclude_rad / self.angle_step + 1e-9))
+        ex, ea = self._box_cells(exclude_xy, exclude_rad)
         x_lo, x_hi, y_lo, y_hi = self.cand.box
         n_a = self.cand.angles.size
         turn = n_a > 1 and float(self.cand.angles[-1] - self.cand.angles[0]) >= 2 * math.pi - 1.5 * self.angle_step
@@ -87,8 +91,7 @@ class SearchWindow:
         boxes of +-``exclude_xy`` m (x and y) and +-``exclude_rad`` around ``best`` (a ``bnb.Match`` of this
         window) and around each other: each the exact best outside the boxes so far, or with ``first`` any
         candidate above the threshold (the first the search meets: enough to know that there is one)."""
-        ex = (int(math.floor(exclude_xy / self.pre.res + 1e-9)),
-              int(math.floor(exclude_rad / self.angle_step + 1e-9)))
+        ex = self._box_cells(exclude_xy, exclude_rad)
         centres = [self.indices(best.aTb)]
         found = []
         for k in range(max(0, int(count))):
