@@ -11,7 +11,9 @@ distance on real robots). The estimate is re-optimised after every closure. A ma
 its score (mean probability of the points) reaches ``min_score`` (``min_score_wide`` for windows beyond
 ``wide_window_xy``: a wide search has more chances of a wrong match), is refined by the continuous matcher
 against m's grid, and is unambiguous: no pose of the window outside a small box around it
-(``ambiguity_exclude_xy``, ``ambiguity_exclude_deg``) scores within ``ambiguity_margin`` of it. Along a
+(``ambiguity_exclude_xy``, ``ambiguity_exclude_deg``) scores within ``ambiguity_margin`` of it, on the window's
+lattice or, for its second peaks within ``ambiguity_lattice_slack`` more, refined like the match (the lattice
+samples each place with its own rounding of the points: a rival it scores lower may refine as well). Along a
 corridor, or between two similar rooms, the best of the window can be an alias metres from the truth with a
 flat score surface, and the refinement's covariance (its +-0.5 m surface) does not cover the error; such a
 match is dropped (``ambiguity="reject"``) or kept with a covariance spanning the peaks (``"span"``). Beyond the
@@ -80,6 +82,11 @@ class LoopSearch:
         if not (cfg.disagreement_window_max_hz >= 0):  # inf allowed: always
             raise ValueError("LoopConfig.disagreement_window_max_hz must be a number >= 0 (inf: always), got "
                              f"{cfg.disagreement_window_max_hz!r}")
+        if not (math.isfinite(cfg.ambiguity_lattice_slack) and cfg.ambiguity_lattice_slack >= 0
+                and isinstance(cfg.ambiguity_refined_peaks, int) and cfg.ambiguity_refined_peaks >= 0):
+            raise ValueError("LoopConfig.ambiguity_lattice_slack must be a finite number >= 0 (0: off) and "
+                             "ambiguity_refined_peaks an integer >= 0, got "
+                             f"{cfg.ambiguity_lattice_slack!r}, {cfg.ambiguity_refined_peaks!r}")
         self.cfg = cfg
         # the refinement against an old map starts from the branch-and-bound pose; its window (for the score
         # surface, hence the covariance) is wide enough to show a corridor's ambiguity along its length; Gauss-Newton's
@@ -365,7 +372,10 @@ class LoopSearch:
         weak_floor = min(c.agree_min_score * self.scale, min_score) if weak_ok else 0.0
         margin = c.ambiguity_margin * self.scale
         win = SearchWindow(pre, search_pts, seed, wxy, wth)
-        hit = win.best(weak_floor if weak_floor > 0 else min_score, margin if c.ambiguity != "off" else -1.0)
+        # the refined rivals' search (below) reaches ``ambiguity_lattice_slack`` further: best() keeps what it
+        # prunes within that, so both second-peak searches resume from it
+        wider = margin + c.ambiguity_lattice_slack * self.scale
+        hit = win.best(weak_floor if weak_floor > 0 else min_score, wider if c.ambiguity != "off" else -1.0)
         if hit is None:
             return None, "windowed: no match above the score", None, None
         box = (c.ambiguity_exclude_xy, math.radians(c.ambiguity_exclude_deg)) if band else (0.0, 0.0)
@@ -381,20 +391,46 @@ class LoopSearch:
                                      first=c.ambiguity == "reject")
             if peaks and c.ambiguity == "reject":
                 return None, "windowed: ambiguous (a second peak)", hit, peaks
-        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks or [], min_score, float(np.max(wxy)))
-        if cand is None:
+        ref = self._refine(m, b_pts, hit, min_score)
+        if ref is None:
             return None, "windowed: refinement failed", hit, peaks
+        if c.ambiguity == "reject" and c.ambiguity_lattice_slack > 0:
+            rivals = self._refined_rivals(win, m, b_pts, hit, ref, margin, wider)
+            if rivals:
+                return None, "windowed: ambiguous (a second peak, refined)", hit, rivals
+        cand = self._candidate(m, n, nTr, cov_nTr, b_pts, ref, peaks or [], float(np.max(wxy)))
         return cand, "windowed: weak, offered for agreement" if weak else "windowed: accepted", hit, peaks
 
-    def _refined(self, m: int, n: int, nTr, cov_nTr, b_pts, hit, peaks, min_score: float,
-                 window_xy: float) -> LoopCandidate | None:
-        """The branch-and-bound pose refined against m's grid, with the peaks' spread in its covariance."""
-        from holoslam.submaps.deadreckon import relative_anchor_pose
+    def _refined_rivals(self, win: SearchWindow, m: int, b_pts, hit, best, margin: float, wider: float) -> list:
+        """The second peaks of ``win`` that the lattice scores within ``wider`` of ``hit`` and that, refined
+        like the best (to ``best``, a ``scanmatch`` result), score within ``margin`` of it outside the best's own
+        box: a rival the lattice's sampling hid (``LoopConfig.ambiguity_lattice_slack``)."""
+        c = self.cfg
+        ex_xy, ex_rad = c.ambiguity_exclude_xy, math.radians(c.ambiguity_exclude_deg)
+        gr = self.grids[m]
+        out = []
+        for p in win.second_peaks(hit, wider, ex_xy, ex_rad, c.ambiguity_refined_peaks):
+            ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, p.aTb, self.refine_cfg)
+            off = np.abs(ref.aTb[:2] - best.aTb[:2])
+            turn = abs(g.wrap(ref.aTb[2] - best.aTb[2]))
+            if ref.score > best.score - margin and (off.max() > ex_xy or turn > ex_rad):
+                out.append(p)
+        return out
 
+    def _refine(self, m: int, b_pts, hit, min_score: float):
+        """The branch-and-bound pose ``hit`` refined against m's grid by the continuous matcher (None when it
+        scores under ``min_score`` or moves more than two cells: not the lattice's peak)."""
         gr = self.grids[m]
         ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, hit.aTb, self.refine_cfg)
         if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * gr.resolution:
             return None
+        return ref
+
+    def _candidate(self, m: int, n: int, nTr, cov_nTr, b_pts, ref, peaks, window_xy: float) -> LoopCandidate:
+        """The closure of a refined match ``ref``, with the peaks' spread in its covariance."""
+        from holoslam.submaps.deadreckon import relative_anchor_pose
+
+        gr = self.grids[m]
         cov_aTb = ref.cov_aTb
         spread = [p.aTb for p in peaks]
         c = self.cfg
@@ -523,10 +559,10 @@ class LoopSearch:
             return None, reasons + ["global: ambiguous beyond the window" if peaks else "global: beyond the window"]
         if peaks:
             reasons.append("global: ambiguous, kept with the peaks' spread")
-        cand = self._refined(m, n, nTr, cov_nTr, b_pts, hit, peaks, min_score, max(wx, wy))
-        if cand is None:
-            reasons.append("global: refinement failed")
-        return cand, reasons
+        ref = self._refine(m, b_pts, hit, min_score)
+        if ref is None:
+            return None, reasons + ["global: refinement failed"]
+        return self._candidate(m, n, nTr, cov_nTr, b_pts, ref, peaks, max(wx, wy)), reasons
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None  # (the process that made it, the pool)

@@ -518,19 +518,20 @@ def test_the_search_threads_work_in_a_process_forked_after_a_search():
         assert pool.apply_async(_abs_in_search_threads).get(timeout=30) == [1, 2, 3, 4, 5]
 
 
-def _twin_rooms() -> np.ndarray:
+def _twin_rooms(turn_deg: float = 0.0) -> np.ndarray:
     """Two identical 4 x 4 m rooms 6 m apart along x (a building's row of rooms), each with a cupboard off its
-    centre and a doorway in its south wall: (N, 4) segments."""
+    centre and a doorway in its south wall, the second turned by ``turn_deg`` about its centre: (N, 4) segments."""
     room = [[0, 0, 1.5, 0], [2.5, 0, 4, 0], [4, 0, 4, 4], [4, 4, 0, 4], [0, 4, 0, 0],  # walls, a 1 m doorway
             [2.6, 2.6, 3.4, 2.6], [3.4, 2.6, 3.4, 3.4], [3.4, 3.4, 2.6, 3.4], [2.6, 3.4, 2.6, 2.6]]  # the cupboard
     room = np.array(room, float)
-    return np.concatenate([room, room + np.array([6.0, 0.0, 6.0, 0.0])])
+    twin = g.transform_points(np.array([8.0, 2.0, math.radians(turn_deg)]), room.reshape(-1, 2) - 2.0)
+    return np.concatenate([room, twin.reshape(-1, 4)])
 
 
-def _twin_search(disagreement):
+def _twin_search(disagreement, turn_deg: float = 0.0, cfg: LoopConfig | None = None):
     """An old submap of scans in both rooms (a corridor pass looking into each), then a node r in the first room
     whose submap's estimate is right, 200 m of graph path from the old submap (drift window 11 m: both rooms)."""
-    segs = _twin_rooms()
+    segs = _twin_rooms(turn_deg)
     rng = np.random.default_rng(3)
     b = GridBuilder(GridConfig())
     wTm = np.array([1.0, 1.0, 0.0])
@@ -541,7 +542,7 @@ def _twin_search(disagreement):
         b.insert(ray_scan(segs, wTb, rng), BEAMS, g.between(wTm, wTb))
     wTr = np.array([1.3, 1.2, math.radians(70.0)])
     wTn = g.compose(wTr, np.array([-0.5, 0.1, 0.0]))
-    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls = LoopSearch(cfg or LoopConfig(), MatchConfig())
     ls.add_submap(0, b.freeze())
     est = np.zeros((6, 3))
     est[0], est[5] = wTm, wTn
@@ -563,6 +564,26 @@ def test_a_twin_room_is_told_apart_where_dead_reckoning_agrees_with_the_estimate
     e = g.between(true_mTn, found[0].mTn)
     assert math.hypot(e[0], e[1]) < 0.05 and abs(e[2]) < math.radians(0.5), e
     assert found[0].window_xy == pytest.approx(1.2)
+
+
+@pytest.mark.parametrize("turn_deg", [0.2, 0.3])
+def test_a_twin_the_lattice_samples_better_is_no_closure_when_the_truth_refines_as_well(turn_deg):
+    # the twin room turned by a fraction of the lattice's 0.5 deg step: the window's lattice scores it 0.76 and the
+    # truth (the seed itself, a lattice pose) 0.73, beyond the 0.03 margin, so the lattice alone sees one peak and
+    # accepts the twin, 6 m off (measured)
+    ls, found, true_mTn = _twin_search(None, turn_deg, LoopConfig(ambiguity_lattice_slack=0.0))
+    assert len(found) == 1 and ls.ambiguous == 0
+    e = g.between(true_mTn, found[0].mTn)
+    assert math.hypot(e[0], e[1]) > 5.0
+    (_m, _n, best, peaks), = ls.peaks
+    assert peaks == []
+    # the default: the lattice's second peak within margin + slack (the truth, 0.73) is refined like the best and
+    # scores within the margin of it: ambiguous, no closure, said so in the report
+    ls, found, _ = _twin_search(None, turn_deg)
+    assert found == [] and ls.ambiguous == 1
+    assert ls.counts["windowed: ambiguous (a second peak, refined)"] == 1
+    (_m, _n, best, peaks), = ls.peaks
+    assert len(peaks) >= 1 and best.score - peaks[0].score > LoopConfig().ambiguity_margin
 
 
 def test_a_global_search_may_turn_the_estimate_only_a_few_sigmas_of_its_heading(household_place):
@@ -638,3 +659,6 @@ def test_the_ellipse_of_a_window():
     for bad in (0.0, -1.0, float("nan")):
         with pytest.raises(ValueError, match="far_from_seed"):
             LoopSearch(LoopConfig(far_from_seed=bad), MatchConfig())
+    for slack, peaks in ((-0.01, 2), (float("nan"), 2), (math.inf, 2), (0.03, -1), (0.03, 1.5)):
+        with pytest.raises(ValueError, match="ambiguity_lattice_slack"):
+            LoopSearch(LoopConfig(ambiguity_lattice_slack=slack, ambiguity_refined_peaks=peaks), MatchConfig())
