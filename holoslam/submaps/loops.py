@@ -12,8 +12,9 @@ its score (mean probability of the points) reaches ``min_score`` (``min_score_wi
 ``wide_window_xy``: a wide search has more chances of a wrong match), is refined by the continuous matcher
 against m's grid, and is unambiguous: no pose of the window outside a small box around it
 (``ambiguity_exclude_xy``, ``ambiguity_exclude_deg``) scores within ``ambiguity_margin`` of it, on the window's
-lattice or, for its second peaks within ``ambiguity_lattice_slack`` more, refined like the match (the lattice
-samples each place with its own rounding of the points: a rival it scores lower may refine as well). Along a
+lattice or (where the compass's agreement with dead reckoning bounds the window), for its second peaks within
+``ambiguity_lattice_slack`` more, refined like the match (the lattice samples each place with its own rounding of
+the points: a rival it scores lower may refine as well). Along a
 corridor, or between two similar rooms, the best of the window can be an alias metres from the truth with a
 flat score surface, and the refinement's covariance (its +-0.5 m surface) does not cover the error; such a
 match is dropped (``ambiguity="reject"``) or kept with a covariance spanning the peaks (``"span"``). Beyond the
@@ -365,16 +366,19 @@ class LoopSearch:
                       b_pts, search_pts, band: bool = False) -> tuple[LoopCandidate | None, str, Any, list | None]:
         """One windowed search against m's precomputed grids ``pre``: (the closure or None, the outcome's
         reason, the best match, its second peaks (None when not sought)); ``weak_ok``: down to the agreement
-        floor (``agree_min_score``); ``band``: a match whose own peak box reaches the window's edge is rejected
-        too, not only one on it (``LoopConfig.reject_on_edge``). Reads the search's state only."""
+        floor (``agree_min_score``); ``band`` (the window is the compass's agreement bound): a match whose own
+        peak box reaches the window's edge is rejected too, not only one on it (``LoopConfig.reject_on_edge``),
+        and the lattice's near rivals are refined (``LoopConfig.ambiguity_lattice_slack``). Reads the search's
+        state only."""
         c = self.cfg
         min_score = (c.min_score_wide if wide else c.min_score) * self.scale
         weak_floor = min(c.agree_min_score * self.scale, min_score) if weak_ok else 0.0
         margin = c.ambiguity_margin * self.scale
         win = SearchWindow(pre, search_pts, seed, wxy, wth)
-        # the refined rivals' search (below) reaches ``ambiguity_lattice_slack`` further: best() keeps what it
-        # prunes within that, so both second-peak searches resume from it
-        wider = margin + c.ambiguity_lattice_slack * self.scale
+        # the refined rivals' search (below; in a window the compass's agreement bounds) reaches
+        # ``ambiguity_lattice_slack`` further: best() keeps what it prunes within that, so both searches resume
+        rivals_sought = band and c.ambiguity == "reject" and c.ambiguity_lattice_slack > 0
+        wider = margin + c.ambiguity_lattice_slack * self.scale if rivals_sought else margin
         hit = win.best(weak_floor if weak_floor > 0 else min_score, wider if c.ambiguity != "off" else -1.0)
         if hit is None:
             return None, "windowed: no match above the score", None, None
@@ -394,7 +398,7 @@ class LoopSearch:
         ref = self._refine(m, b_pts, hit, min_score)
         if ref is None:
             return None, "windowed: refinement failed", hit, peaks
-        if c.ambiguity == "reject" and c.ambiguity_lattice_slack > 0:
+        if rivals_sought:
             rivals = self._refined_rivals(win, m, b_pts, hit, ref, margin, wider)
             if rivals:
                 return None, "windowed: ambiguous (a second peak, refined)", hit, rivals

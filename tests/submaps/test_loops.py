@@ -568,22 +568,29 @@ def test_a_twin_room_is_told_apart_where_dead_reckoning_agrees_with_the_estimate
 
 @pytest.mark.parametrize("turn_deg", [0.2, 0.3])
 def test_a_twin_the_lattice_samples_better_is_no_closure_when_the_truth_refines_as_well(turn_deg):
-    # the twin room turned by a fraction of the lattice's 0.5 deg step: the window's lattice scores it 0.76 and the
-    # truth (the seed itself, a lattice pose) 0.73, beyond the 0.03 margin, so the lattice alone sees one peak and
-    # accepts the twin, 6 m off (measured)
-    ls, found, true_mTn = _twin_search(None, turn_deg, LoopConfig(ambiguity_lattice_slack=0.0))
+    # dead reckoning (with a compass) 3 m from the estimate: a 7 m window bounded by its agreement, both rooms in it.
+    # The twin room is turned by a fraction of the lattice's 0.5 deg step: the window's lattice scores it 0.76 and
+    # the truth (the seed itself, a lattice pose) 0.73, beyond the 0.03 margin, so the lattice alone sees one peak
+    # and accepts the twin, 6 m off (measured)
+    dis = (np.full(6, 3.0), np.full(6, math.radians(0.5)))
+    ls, found, true_mTn = _twin_search(dis, turn_deg, LoopConfig(ambiguity_lattice_slack=0.0))
     assert len(found) == 1 and ls.ambiguous == 0
+    assert ls.counts["windowed: window narrowed by dead reckoning's agreement"] == 1
     e = g.between(true_mTn, found[0].mTn)
     assert math.hypot(e[0], e[1]) > 5.0
     (_m, _n, best, peaks), = ls.peaks
     assert peaks == []
     # the default: the lattice's second peak within margin + slack (the truth, 0.73) is refined like the best and
     # scores within the margin of it: ambiguous, no closure, said so in the report
-    ls, found, _ = _twin_search(None, turn_deg)
+    ls, found, _ = _twin_search(dis, turn_deg)
     assert found == [] and ls.ambiguous == 1
     assert ls.counts["windowed: ambiguous (a second peak, refined)"] == 1
     (_m, _n, best, peaks), = ls.peaks
     assert len(peaks) >= 1 and best.score - peaks[0].score > LoopConfig().ambiguity_margin
+    # a drift window (no compass: dead reckoning does not bound the error) keeps the lattice's test alone: there
+    # the building lost right corridor closures it needed (LoopConfig.ambiguity_lattice_slack)
+    ls, found, _ = _twin_search(None, turn_deg)
+    assert len(found) == 1 and ls.ambiguous == 0
 
 
 def test_a_global_search_may_turn_the_estimate_only_a_few_sigmas_of_its_heading(household_place):
