@@ -284,7 +284,8 @@ class LoopSearch:
             if bounded[q]:
                 self._count("windowed: window narrowed by dead reckoning's agreement")
         # the windows are bounded by the compass's agreement (a measured bound of the estimate's error, not a drift
-        # allowance): a match within its own peak's box of their edge is rejected too (``LoopConfig.reject_on_edge``)
+        # allowance): a match within its own peak's box of their edge is rejected too (``LoopConfig.reject_on_edge``),
+        # and the lattice's near rivals are refined (``LoopConfig.ambiguity_lattice_slack``)
         band = compass and disagreement is not None and c.agreement_factor > 0
         found.extend(self._windowed_all(jobs, n, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel, travelled, band))
         if globals_ and travel is not None and travelled - self.last_global_round >= c.global_every_m:
@@ -411,22 +412,25 @@ class LoopSearch:
         box: a rival the lattice's sampling hid (``LoopConfig.ambiguity_lattice_slack``)."""
         c = self.cfg
         ex_xy, ex_rad = c.ambiguity_exclude_xy, math.radians(c.ambiguity_exclude_deg)
-        gr = self.grids[m]
         out = []
         for p in win.second_peaks(hit, wider, ex_xy, ex_rad, c.ambiguity_refined_peaks):
-            ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, p.aTb, self.refine_cfg)
+            ref = self._continuous(m, b_pts, p.aTb)
             off = np.abs(ref.aTb[:2] - best.aTb[:2])
             turn = abs(g.wrap(ref.aTb[2] - best.aTb[2]))
             if ref.score > best.score - margin and (off.max() > ex_xy or turn > ex_rad):
                 out.append(p)
         return out
 
+    def _continuous(self, m: int, b_pts, aTb):
+        """The continuous matcher (``refine_cfg``) of ``b_pts`` against m's grid from the pose ``aTb``."""
+        gr = self.grids[m]
+        return match_scan(gr.prob, gr.origin, gr.resolution, b_pts, aTb, self.refine_cfg)
+
     def _refine(self, m: int, b_pts, hit, min_score: float):
         """The branch-and-bound pose ``hit`` refined against m's grid by the continuous matcher (None when it
         scores under ``min_score`` or moves more than two cells: not the lattice's peak)."""
-        gr = self.grids[m]
-        ref = match_scan(gr.prob, gr.origin, gr.resolution, b_pts, hit.aTb, self.refine_cfg)
-        if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * gr.resolution:
+        ref = self._continuous(m, b_pts, hit.aTb)
+        if ref.score < min_score or np.hypot(*(ref.aTb[:2] - hit.aTb[:2])) > 2 * self.grids[m].resolution:
             return None
         return ref
 
