@@ -142,6 +142,10 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
+#: matches handed to a thread at once (``match_nodes``): ~0.1 s of matching, a few dozen runs a household log
+_CHUNK = 400
+
+
 def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: RevisitConfig | None = None,
                 match_cfg: MatchConfig | None = None,
                 progress: Callable[[int, int], None] | None = None) -> NodeMatches:
@@ -173,15 +177,21 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
         grid = by_index[k].grid
         return match_scan(grid.prob, grid.origin, grid.resolution, nodes.b_points[n], pred, mcfg)
 
-    # the matches are independent and their kernels run without the GIL: a thread per core, results in order
+    # the matches are independent and their kernels run without the GIL: a thread per core, results in order,
+    # handed to the threads in runs of ``_CHUNK`` (a future per match cost ~50 us of a 230 us match in handing
+    # over: the household's 5,748 matches took 1.6 s on one thread of a pool against 1.3 s in a plain loop)
     workers = max(1, min(cfg.threads or _cores(), len(tasks)))
+    chunks = [tasks[i:i + _CHUNK] for i in range(0, len(tasks), _CHUNK)]
     out: list[tuple[int, int, np.ndarray, np.ndarray, float]] = []
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        for done, ((k, n, pred), m) in enumerate(zip(tasks, pool.map(one, tasks), strict=True)):
-            if progress is not None and done % 400 == 0:
+        done = 0
+        for chunk, matches in zip(chunks, pool.map(lambda c: [one(t) for t in c], chunks), strict=True):
+            if progress is not None:
                 progress(done, len(tasks))
-            if m.ok and m.score >= cfg.min_score and np.hypot(*(m.aTb[:2] - pred[:2])) <= cfg.max_shift_m:
-                out.append((k, n, m.aTb, m.cov_aTb, m.score))
+            done += len(chunk)
+            for (k, n, pred), m in zip(chunk, matches, strict=True):
+                if m.ok and m.score >= cfg.min_score and np.hypot(*(m.aTb[:2] - pred[:2])) <= cfg.max_shift_m:
+                    out.append((k, n, m.aTb, m.cov_aTb, m.score))
     tried = len(tasks)
     if not out:
         return NodeMatches(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)),
