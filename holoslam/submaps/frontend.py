@@ -13,10 +13,9 @@ Steps (seed 002 §2, SPEC §4 and §8), each a named function or class:
    (Eq. 15), beside the ``dead_reckoning`` relative pose between the two anchors' stamps (Eq. 14).
 3. Revisits (``loops.LoopSearch``): every few nodes, the finished submaps near the node's current world
    estimate are searched by branch-and-bound in a window that grows with the distance travelled since the
-   last closure; a closure is a ``loop`` relative pose (robust kernel in the solver). A node's search runs in a
-   thread beside local SLAM and its closures join the graph at the next search's node (``loop_pipeline``); when
-   they disagree with the estimate the anchors are re-estimated through the ``optimize`` callback (the pipeline
-   passes the solver), so windows stay small once the map is consistent.
+   last closure; a closure is a ``loop`` relative pose (robust kernel in the solver). After each closure the
+   anchors are re-estimated through the ``optimize`` callback (the pipeline passes the solver), so windows
+   stay small once the map is consistent.
 4. Compass yaw at every anchor stamp (raw, with its bias) -> HeadingMeasurements.
 5. Landmarks (Eq. 16): an observation at stamp t is put into the anchor frame of the submap active at t, using
    the robot's pose there (nearest earlier node ∘ dead reckoning to t): a_xy = R(theta) b_xy + t, z kept; its
@@ -37,6 +36,7 @@ import math
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -48,8 +48,7 @@ from holoslam.submaps.anchor_graph import AnchorGraph
 from holoslam.submaps.deadreckon import DeadReckoningConfig, dead_reckon, interpolate_yaw
 from holoslam.submaps.features import FeatureConfig, scans_features
 from holoslam.submaps.local_slam import ActiveSubmap, Break, LocalSlam, LocalSlamConfig
-from holoslam.submaps.loop_pipeline import LoopPipeline
-from holoslam.submaps.loops import LoopCandidate, LoopConfig, LoopSearch
+from holoslam.submaps.loops import LoopConfig, LoopSearch
 from holoslam.submaps.odometer import OdometerCorrection, OdometerCorrectionConfig, OdometerWatch, is_blind
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
 from holoslam.submaps.probgrid import ProbGrid
@@ -304,9 +303,7 @@ def _local_slam(
     loops = LoopSearch(cfg.loops, cfg.local.match)
     graph = AnchorGraph(run.dr_wTb[0])
     records: list[Future[Submap]] = []
-    with (ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-submaps") as worker,
-          ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-loops") as searcher):
-        pipe = LoopPipeline(loops, searcher)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-submaps") as worker:
 
         def finish(done: list[ActiveSubmap]) -> None:
             """Finished submaps (their growing grids are dropped here: only the cropped ones are kept): the grid
@@ -316,9 +313,9 @@ def _local_slam(
                 grid = sm.grid() if cfg.build_grids else None
                 records.append(worker.submit(_submap_record, sm, cfg, "scans", grid))
                 if isinstance(grid, ProbGrid):  # None without build_grids
-                    pipe.add_submap(sm.index, grid)
+                    loops.add_submap(sm.index, grid)
 
-        _walk_scans(run, cfg, progress, optimize, slam, pipe, graph, finish, watch)
+        _walk_scans(run, cfg, progress, optimize, slam, loops, graph, finish, watch)
         slam.close()
         finish(slam.pop_finished())
     return sorted((r.result() for r in records), key=lambda sm: sm.index), graph, loops
@@ -326,13 +323,11 @@ def _local_slam(
 
 def _walk_scans(
     run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
-    optimize: Callable[[object], np.ndarray] | None, slam: LocalSlam, pipe: LoopPipeline, graph: AnchorGraph,
+    optimize: Callable[[object], np.ndarray] | None, slam: LocalSlam, loops: LoopSearch, graph: AnchorGraph,
     finish: Callable[[list[ActiveSubmap]], None], watch: OdometerWatch,
 ) -> None:
     """``_local_slam``'s walk over the scans: each node to local SLAM, new anchors into the graph, finished
-    submaps to ``finish``, and the loop search of every ``every_nodes``-th node (``_search_due``), beside local
-    SLAM: its closures join the graph at the next search's node or at the end (``loop_pipeline``)."""
-    loops = pipe.loops
+    submaps to ``finish``, and the loop search of every ``every_nodes``-th node (``_search_due``)."""
     ost, opose, travelled = run.ost, run.opose, run.travelled
     n_arrivals, n_breaks, last_t, n_nodes = 0, 0, int(run.scans[0].stamp_ns), 0
     lost = np.diag([cfg.lost_sigma_m ** 2] * 2 + [np.radians(cfg.lost_sigma_deg) ** 2])
@@ -368,7 +363,7 @@ def _walk_scans(
             if brk is not None:  # a break: odometry since the last matched node, as uncertain as the building
                 h, hTn, cov_hTn = _across_break(run, brk, m, dr, slam.anchor_stamps[n])
                 graph.add(h, n, hTn, cov_hTn + lost, "lost")
-                pipe.add_break(n)
+                loops.add_break(n)
                 est_mTn = g.between(graph.est[m], g.compose(graph.est[h], hTn))
             else:  # an arrival: its scan match in m
                 est_mTn = np.asarray(mTn)
@@ -384,28 +379,20 @@ def _walk_scans(
         finish(slam.pop_finished())
         here = (n_nodes, float(travelled[k]), float(run.odo_at_scans[k][2]))
         widen = widen or _blind_enough(cfg.loops, watch)  # once on, on: the drift let in stays in the estimate
-        due = _search_due(cfg.loops, here, last_search)
-        if due:  # the last search's closures, before this one is made
-            _join_closures(graph, pipe.collect(), cfg.loops, optimize)
-        if due and loops.grids:
+        if loops.grids and _search_due(cfg.loops, here, last_search):
             last_search = here
             usual = slam.usual_score()
             loops.scale = 1.0 if usual is None else min(1.0, usual / cfg.loops.score_reference)
-            pipe.submit(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
-                        graph.graph_distance(node.submap), float(travelled[k]),
-                        graph.relative_covariances(node.submap), np.array(graph.travel),
-                        slam.bundle(node, cfg.loops.global_bundle_m),
-                        graph.dead_reckoning_disagreement(node.submap) if run.have_h or widen else None, run.have_h)
-    _join_closures(graph, pipe.collect(), cfg.loops, optimize)
-
-
-def _join_closures(graph: AnchorGraph, found: list[LoopCandidate], cfg: LoopConfig,
-                   optimize: Callable[[object], np.ndarray] | None) -> None:
-    """A search's closures into the graph, and the anchors re-estimated when they disagree with the estimate."""
-    for c in found:
-        graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
-    if found and graph.disagree(found, cfg.resolve_min_d2):
-        graph.reoptimise(optimize)
+            found = loops.search(node.submap, node.aTb, node.cov_aTb, node.b_points, np.array(graph.est),
+                                 graph.graph_distance(node.submap), float(travelled[k]),
+                                 graph.relative_covariances(node.submap), np.array(graph.travel),
+                                 partial(slam.bundle, node, cfg.loops.global_bundle_m),
+                                 graph.dead_reckoning_disagreement(node.submap)
+                                 if run.have_h or widen else None, run.have_h)
+            for c in found:
+                graph.add(c.old, c.new, c.mTn, c.cov_mTn, "loop")
+            if found and graph.disagree(found, cfg.loops.resolve_min_d2):
+                graph.reoptimise(optimize)
 
 
 def _across_break(run: _Run, brk: Break, m: int, dr_mn, anchor_ns: int) -> tuple[int, np.ndarray, np.ndarray]:

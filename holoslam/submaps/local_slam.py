@@ -330,23 +330,18 @@ class LocalSlam:
         assert prev is not None and self._last_odo is not None  # the host started at a node; set by the first node
         return g.compose(prev, g.between(self._last_odo, odo))
 
-    def bundle(self, node, length_m: float) -> Callable[[], np.ndarray]:
-        """A function making the points of ``node`` and of the nodes of its submap within ``length_m`` of path
-        behind it, in the node's base frame (local SLAM's poses: accurate to centimetres over a few metres). It
-        holds the submap's nodes as they are now (``node`` the last): the loop search calls it later, in its own
-        thread, and only when a global round needs the points."""
+    def bundle(self, node, length_m: float) -> np.ndarray:
+        """The points of ``node`` and of the nodes of its submap within ``length_m`` of path behind it, in the
+        node's base frame (local SLAM's poses: accurate to centimetres over a few metres)."""
         host = next((sm for sm in self.active if sm.index == node.submap), None)
         if host is None or not host.aTb:
-            return lambda: node.b_points
-        poses, points = np.array(host.aTb), list(host.b_points)
-
-        def make() -> np.ndarray:
-            step = np.hypot(*np.diff(poses[::-1, :2], axis=0).T)
-            keep = int(np.searchsorted(np.cumsum(step), length_m, side="right")) + 1
-            bTa = g.inverse(node.aTb)
-            return np.vstack([g.transform_points(g.compose(bTa, poses[-1 - q]), points[-1 - q]) for q in range(keep)])
-
-        return make
+            return node.b_points
+        poses = np.array(host.aTb)
+        step = np.hypot(*np.diff(poses[::-1, :2], axis=0).T)
+        keep = int(np.searchsorted(np.cumsum(step), length_m, side="right")) + 1
+        bTa = g.inverse(node.aTb)
+        parts = [g.transform_points(g.compose(bTa, poses[-1 - q]), host.b_points[-1 - q]) for q in range(keep)]
+        return np.vstack(parts)
 
     def usual_score(self) -> float | None:
         """The median score of the last 200 trusted matches (None before 20): how full this laser fills the grids."""
