@@ -142,7 +142,7 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-#: matches handed to a thread at once (``match_nodes``): ~0.1 s of matching, a few dozen runs a household log
+#: matches handed to a thread at once at most (``match_nodes``): ~0.1 s of matching, 15 runs a household log
 _CHUNK = 400
 
 
@@ -181,7 +181,8 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
     # handed to the threads in runs of ``_CHUNK`` (a future per match cost ~50 us of a 230 us match in handing
     # over: the household's 5,748 matches took 1.6 s on one thread of a pool against 1.3 s in a plain loop)
     workers = max(1, min(cfg.threads or _cores(), len(tasks)))
-    chunks = [tasks[i:i + _CHUNK] for i in range(0, len(tasks), _CHUNK)]
+    size = max(1, min(_CHUNK, -(-len(tasks) // workers)))  # fewer tasks than workers x _CHUNK: each worker a run
+    chunks = [tasks[i:i + size] for i in range(0, len(tasks), size)]
     out: list[tuple[int, int, np.ndarray, np.ndarray, float]] = []
     with ThreadPoolExecutor(max_workers=workers) as pool:
         done = 0
