@@ -99,6 +99,24 @@ class LoopConfig:
     # revisits 0.156 -> 0.151 m, runs over 1 m 0 -> 1 (seed 27 x 1.005, 0.98 -> 7.6 m, at the edge before). The
     # shared logs, full, kidnapped, sparse: the same figures within 0.0004 m; the household: the same closures. inf: off
     far_from_seed: float = 1.0
+    # Without a compass, a window widened by dead reckoning's disagreement (``disagreement_window``) beyond the
+    # drift window (the drift since the last closure, or ``window_sigmas`` of the covariance) is searched whole,
+    # but a match beyond the drift window's ellipse (scaled by ``far_from_seed``) is offered for agreement
+    # instead of accepted on its own: only dead reckoning, whose heading is the odometry's and drifts by hundreds
+    # of metres over a long log, says the estimate may be that far off, and a floor of identical rooms puts a
+    # twin inside every widened window. On the simulated 350 m building without its compass (1.4 Hz; seed 30,
+    # odometer x1.005) the first wrong closures were rooms 5-6.5 m along a corridor from estimates 0.03-0.7 m
+    # right, in 7 m windows widened from drift windows of a metre or two; the drift they let in grew to 11-43 m
+    # and 10 more aliases followed it (anchors 12.2 m RMSE; with the rule 0.31 m, 16 wrong closures -> 1).
+    # ``bench_building_slam.py --no-compass``, 36 runs (seeds 26-35, odometer x0.995 / 1 / 1.002 / 1.005), before
+    # -> after: revisits over 1 m off 5 -> 2 (worst 11.5 -> 1.74 m), anchors over 1 m RMSE 5 -> 5 but the worst
+    # 12.2 / 5.2 / 4.2 m -> 2.2 / 1.9 / 1.6 m, wrong closures a run 8-27 -> 0-10. Seed 33 lost three runs to it
+    # (anchors 0.26-0.36 -> 1.5-1.9 m, revisits at most 0.42 m): two global aliases joined a right clique within
+    # the consistency test's drift allowance. The shared logs decimated to 1.4 Hz (``bench_realdata.py --variants
+    # sparse sparse_kidnap short``): intel 0.0297 -> 0.0293 m at the laser, aces 0.0427 -> 0.0442, fr079 0.0531,
+    # kidnaps joined as before; at full rate and with a compass the windows are never widened: unchanged.
+    # False: off
+    widened_needs_agreement: bool = True
     # A windowed match on its window's edge (x or y on the box's outer cells, or the heading on its outer angles)
     # is rejected: the score is largest where the window cuts it off (an optimum on the boundary of the domain
     # searched is not a peak of the score), so the match is the flank of a place beyond the window or a place (a

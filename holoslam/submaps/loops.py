@@ -232,7 +232,7 @@ class LoopSearch:
         olds_arr = np.array(olds)
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
-        jobs: list[tuple[int, np.ndarray, tuple[float, float], float, bool, bool, bool]] = []
+        jobs: list[tuple[int, np.ndarray, tuple[float, float], float, bool, bool, bool, tuple[float, float]]] = []
         globals_: list[tuple[int, np.ndarray, float, float, float]] = []
         searched = 0
         search_pts = (adaptive_voxel_filter(b_pts, ScanFilterConfig(c.search_voxel_m, c.search_min_points))
@@ -252,6 +252,9 @@ class LoopSearch:
         for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
                                                     strict=True)):
             seed = seeds[q].copy()
+            # the window the estimate's own uncertainty asks for (drift since the last closure, or the covariance),
+            # before dead reckoning's disagreement widened it (``LoopConfig.widened_needs_agreement``)
+            drift_xy = (min(float(loose[0][q]), c.max_window_xy), min(float(loose[1][q]), c.max_window_xy))
             # beyond the caps (by the drift since the last closure or by the covariance): the global search too,
             # within its budget. Neither window is trusted to bound the error there: on fr079 at 1.4 Hz a revisit
             # after 142 m of graph was 13 m / 20 deg off, where the drift window said 8 m and 3 sigma of the
@@ -280,7 +283,7 @@ class LoopSearch:
                     and travelled - self.last_weak.get(m, -np.inf) >= c.consistency.min_separation_m)
             if weak:
                 self.last_weak[m] = travelled
-            jobs.append((m, seed, (wx, wy), wth, wide, weak, across))
+            jobs.append((m, seed, (wx, wy), wth, wide, weak, across, drift_xy))
             if bounded[q]:
                 self._count("windowed: window narrowed by dead reckoning's agreement")
         # the windows are bounded by the compass's agreement (a measured bound of the estimate's error, not a drift
@@ -300,7 +303,7 @@ class LoopSearch:
 
     def _windowed_all(self, jobs, n: int, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel,
                       travelled: float, band: bool = False) -> list[LoopCandidate]:
-        """The windowed searches (m, seed, (wx, wy), wth, wide) of one node, at most ``max_window_xy`` /
+        """The windowed searches (m, seed, (wx, wy), wth, wide, weak, across, drift (wx, wy)) of one node, at most ``max_window_xy`` /
         ``max_window_deg``, each accepted on its own (``min_score_wide`` when ``wide``). They are independent:
         run in threads (the branch-and-bound and the matcher are compiled kernels that release the GIL), and
         counted and kept in the order given, so the result does not depend on the threads."""
@@ -310,14 +313,14 @@ class LoopSearch:
         t0 = time.perf_counter()
 
         def one(q: int):
-            m, seed, wxy, wth, wide, weak, _ = jobs[q]
+            m, seed, wxy, wth, wide, weak, *_ = jobs[q]
             return self._window_match(pres[q], m, seed, wxy, wth, wide, weak, n, nTr, cov_nTr, b_pts, search_pts,
                                       band)
 
         outs = list(_threads().map(one, range(len(jobs)))) if len(jobs) > 1 else [one(0)]
         self.seconds["windowed"] += time.perf_counter() - t0
         found = []
-        for (m, seed, wxy, *_, across), (cand, reason, hit, peaks) in zip(jobs, outs, strict=True):
+        for (m, seed, wxy, *_, across, drift_xy), (cand, reason, hit, peaks) in zip(jobs, outs, strict=True):
             self.tried += 1
             self._count("windowed searches")
             if peaks is not None:
@@ -331,12 +334,17 @@ class LoopSearch:
             elif cand is not None and reason == "windowed: accepted" and _beyond_ellipse(hit.aTb, seed, wxy,
                                                                                          self.cfg.far_from_seed):
                 reason = "windowed, beyond its window's ellipse: offered for agreement"
+            elif (cand is not None and reason == "windowed: accepted" and self.cfg.widened_needs_agreement
+                  and (wxy[0] > drift_xy[0] or wxy[1] > drift_xy[1])  # widened (never with a compass)
+                  and _beyond_ellipse(hit.aTb, seed, drift_xy, self.cfg.far_from_seed)):
+                reason = "windowed, beyond its drift window: offered for agreement"
             self._count(reason)
             offer = reason.endswith("offered for agreement")
             if cand is not None and offer:
                 if travel is not None:  # without the anchors' odometer no agreement can be judged: dropped
                     found.extend(self._agreed(replace(cand, travelled=travelled), est_wTa, travel,
-                                              "windowed across a break" if across else "windowed weak"))
+                                              "windowed across a break" if across else "windowed widened"
+                                              if "drift window" in reason else "windowed weak"))
             elif cand is not None:
                 self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
                 found.append(cand)

@@ -654,6 +654,42 @@ def test_a_match_beyond_its_windows_ellipse_waits_for_agreement(household_place)
     assert found == [] and ls.counts["windowed, beyond its window's ellipse: offered for agreement"] == 1
 
 
+def test_a_match_only_a_window_widened_by_dead_reckoning_reaches_waits_for_agreement(household_place):
+    """Without a compass, dead reckoning 5 m from the estimate widens the 1.25 m drift window (5 m of graph path)
+    to 6 m (``LoopConfig.disagreement_window``). The node's submap estimated 3 m off is found in it, but beyond the
+    drift window only dead reckoning vouches for that match: it is offered for agreement
+    (``LoopConfig.widened_needs_agreement``); with the setting off, or the estimate within its drift window, it is
+    accepted on its own."""
+    segs, grid, wTm, wTn, wTr = household_place
+    nTr = g.between(wTn, wTr)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(11)))
+    disagreement = (np.full(6, 5.0), np.full(6, math.radians(1.0)))
+
+    def search(drift_m: float, on: bool = True):
+        ls = LoopSearch(LoopConfig(widened_needs_agreement=on), MatchConfig())
+        ls.add_submap(0, grid)
+        est = np.zeros((6, 3))
+        est[0] = wTm
+        est[5] = g.compose(np.array([drift_m * math.cos(1.0), drift_m * math.sin(1.0), 0.0]), wTn)
+        found = ls.search(5, nTr, np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.full(6, 5.0), 0.0,
+                          travel=np.zeros(6), disagreement=disagreement, compass=False)
+        return ls, found
+
+    ls, found = search(3.0)
+    assert found == [] and ls.counts["windowed, beyond its drift window: offered for agreement"] == 1
+    assert ls.counts["windowed widened: waiting for agreement"] == 1  # the consistency test holds it
+    ls, found = search(3.0, on=False)
+    assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    e = g.between(g.between(wTm, wTn), found[0].mTn)
+    assert math.hypot(e[0], e[1]) < 0.03 and abs(e[2]) < math.radians(0.3)
+    ls, found = search(0.5)  # within the drift window's ellipse: accepted on its own
+    assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    # with a compass the window is bounded by dead reckoning's agreement instead, never widened: the rule is idle
+    ls = LoopSearch(LoopConfig(), MatchConfig())
+    ls.add_submap(0, grid)
+    assert ls.windows(np.array([5.0]), disagreement=(np.array([5.0]), np.array([0.02])))[0][0] <= 1.25 + 1e-9
+
+
 def test_the_ellipse_of_a_window():
     from holoslam.submaps.loops import _beyond_ellipse
 

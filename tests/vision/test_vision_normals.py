@@ -67,7 +67,9 @@ def test_the_normal_needs_no_printed_size():
     px = project_points(cam.K, cTo, label_corners_o(0.08)) + np.random.default_rng(3).normal(0, 0.3, (4, 2))
     n, sigma = label_normal(px, cam)
     est = pnp_label(px, 0.08, cam)
-    assert _deg(n, est.c_normal) < 1e-6 and sigma == pytest.approx(est.normal_sigma_rad, rel=1e-6)
+    # the same normal and sigma up to the iterative PnP's tolerance (1.2e-6 deg apart on an AMD EPYC; a size that
+    # mattered would move them by degrees)
+    assert _deg(n, est.c_normal) < 1e-3 and sigma == pytest.approx(est.normal_sigma_rad, rel=1e-3)
     assert _deg(n, cTo[:3, 2]) < 1.0
 
 
