@@ -36,7 +36,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -45,6 +45,7 @@ from holoslam.submaps.bnb_window import SearchWindow, spanning_covariance
 from holoslam.submaps.loop_config import LoopConfig
 from holoslam.submaps.loop_consistency import LoopConsistency
 from holoslam.submaps.loop_verify import map_agreement
+from holoslam.submaps.loop_windows import agreement_bound, beyond_ellipse, drift_windows, is_global
 from holoslam.submaps.periodic import periodic_peaks
 from holoslam.submaps.probgrid import ProbGrid
 from holoslam.submaps.scan_filter import ScanFilterConfig, adaptive_voxel_filter
@@ -62,6 +63,22 @@ class LoopCandidate:
     score: float
     window_xy: float
     travelled: float = math.nan  # m, the odometer at the node (closures of nearby nodes cannot vouch for each other)
+
+
+class _Job(NamedTuple):
+    """One windowed search of a node: the old submap, the seed (the node's estimate in it), the window's
+    half-widths (x m, y m; heading rad) as capped, whether it is wide, whether a weak match may be offered, whether
+    it reaches across a break of local SLAM, and the drift window's half-widths (before dead reckoning's
+    disagreement widened it, capped alike: ``LoopConfig.widened_needs_agreement``)."""
+
+    m: int
+    seed: np.ndarray
+    wxy: tuple[float, float]
+    wth: float
+    wide: bool
+    weak: bool
+    across: bool
+    drift_xy: tuple[float, float]
 
 
 class LoopSearch:
@@ -155,53 +172,10 @@ class LoopSearch:
         covariance relative to the old submap, in the submap's axes. ``disagreement`` (m (M,), rad (M,)): how far
         the estimate of the node's submap relative to each old one lies from dead reckoning's alone; the window is
         at most the base window plus ``agreement_factor`` times it (``LoopConfig``)."""
-        c = self.cfg
-        xy = c.base_window_xy + c.window_rate * graph_distance_m
-        th = np.radians(c.base_window_deg + c.window_deg_rate * graph_distance_m)
-        return self._agreement_bound(self._covariance_windows(xy, th, cov_mTr, mTr), disagreement)
-
-    def _agreement_bound(self, win: tuple[np.ndarray, np.ndarray, np.ndarray],
-                         disagreement: tuple[np.ndarray, np.ndarray] | None, compass: bool = True
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Windows (wx, wy, wth) bounded by dead reckoning's disagreement (m, rad) with the estimate: with a
-        compass at most the base plus ``agreement_factor`` times it, without one at least the base plus
-        ``disagreement_window`` times it (up to ``max_window_xy``; ``LoopConfig``); unchanged without one."""
-        c = self.cfg
-        wx, wy, wth = win
-        if disagreement is None:
-            return wx, wy, wth
-        if not compass:
-            if c.disagreement_window <= 0:
-                return wx, wy, wth
-            d = disagreement[0]
-            f = np.where(np.isfinite(d), np.minimum(c.base_window_xy + c.disagreement_window * d, c.max_window_xy), 0.0)
-            return np.maximum(wx, f), np.maximum(wy, f), wth
-        if c.agreement_factor <= 0:
-            return wx, wy, wth
-        bxy = c.base_window_xy + c.agreement_factor * disagreement[0]
-        return (np.minimum(wx, bxy), np.minimum(wy, bxy),
-                np.minimum(wth, math.radians(c.base_window_deg) + c.agreement_factor * disagreement[1]))
-
-    def _covariance_windows(self, xy: np.ndarray, th: np.ndarray, cov_mTr: np.ndarray | None,
-                            mTr: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The drift windows (xy m, th rad) widened to ``window_sigmas`` of the covariances, in the old submaps'
-        axes; the heading at most a half turn."""
-        c = self.cfg
-        if cov_mTr is None or mTr is None:
-            return xy, xy.copy(), np.minimum(th, math.pi)
-        cs, sn = np.cos(mTr[:, 2]), np.sin(mTr[:, 2])
-        a, b, d = cov_mTr[:, 0, 0], cov_mTr[:, 0, 1], cov_mTr[:, 1, 1]
-        # R S R^T of the position block, R = rot2(mTr's heading): its diagonal
-        sxx = cs * cs * a - 2.0 * cs * sn * b + sn * sn * d
-        syy = sn * sn * a + 2.0 * cs * sn * b + cs * cs * d
-        k = c.window_sigmas
-        wx = k * np.sqrt(np.maximum(sxx, 0.0))
-        wy = k * np.sqrt(np.maximum(syy, 0.0))
-        wth = np.minimum(k * np.sqrt(np.maximum(cov_mTr[:, 2, 2], 0.0)), math.pi)
-        return np.maximum(xy, wx), np.maximum(xy, wy), np.minimum(np.maximum(th, wth), math.pi)
+        return agreement_bound(self.cfg, drift_windows(self.cfg, graph_distance_m, cov_mTr, mTr), disagreement)
 
     def _is_global(self, wx: float, wy: float, wth: float) -> bool:
-        return max(wx, wy) > self.cfg.max_window_xy or wth > math.radians(self.cfg.max_window_deg) + 1e-12
+        return is_global(self.cfg, wx, wy, wth)
 
     def search(self, n: int, nTr: np.ndarray, cov_nTr: np.ndarray, b_pts: np.ndarray, est_wTa: np.ndarray,
                graph_distance: np.ndarray, travelled: float = 0.0, rel_cov: np.ndarray | None = None,
@@ -232,7 +206,7 @@ class LoopSearch:
         olds_arr = np.array(olds)
         dist = np.hypot(*(est_wTa[olds_arr, :2] - wTr[:2]).T)
         found: list[LoopCandidate] = []
-        jobs: list[tuple[int, np.ndarray, tuple[float, float], float, bool, bool, bool, tuple[float, float]]] = []
+        jobs: list[_Job] = []
         globals_: list[tuple[int, np.ndarray, float, float, float]] = []
         searched = 0
         search_pts = (adaptive_voxel_filter(b_pts, ScanFilterConfig(c.search_voxel_m, c.search_min_points))
@@ -247,14 +221,11 @@ class LoopSearch:
         # ``global_heading_sigmas`` of it (``LoopConfig``)
         sig_th = None if covs is None else np.sqrt(np.maximum(covs[:, 2, 2], 0.0))
         loose = self.windows(np.asarray(graph_distance, float)[olds_arr], covs, None if covs is None else seeds)
-        win = self._agreement_bound(loose, dis, compass)
+        win = agreement_bound(c, loose, dis, compass)
         bounded = (win[0] < loose[0]) | (win[1] < loose[1]) | (win[2] < loose[2])  # narrowed by the agreement
         for q, (m, d, wx, wy, wth) in enumerate(zip(olds_arr.tolist(), dist.tolist(), *(w.tolist() for w in win),
                                                     strict=True)):
             seed = seeds[q].copy()
-            # the window the estimate's own uncertainty asks for (drift since the last closure, or the covariance),
-            # before dead reckoning's disagreement widened it (``LoopConfig.widened_needs_agreement``)
-            drift_xy = (min(float(loose[0][q]), c.max_window_xy), min(float(loose[1][q]), c.max_window_xy))
             # beyond the caps (by the drift since the last closure or by the covariance): the global search too,
             # within its budget. Neither window is trusted to bound the error there: on fr079 at 1.4 Hz a revisit
             # after 142 m of graph was 13 m / 20 deg off, where the drift window said 8 m and 3 sigma of the
@@ -283,7 +254,8 @@ class LoopSearch:
                     and travelled - self.last_weak.get(m, -np.inf) >= c.consistency.min_separation_m)
             if weak:
                 self.last_weak[m] = travelled
-            jobs.append((m, seed, (wx, wy), wth, wide, weak, across, drift_xy))
+            drift_xy = (min(float(loose[0][q]), c.max_window_xy), min(float(loose[1][q]), c.max_window_xy))
+            jobs.append(_Job(m, seed, (wx, wy), wth, wide, weak, across, drift_xy))
             if bounded[q]:
                 self._count("windowed: window narrowed by dead reckoning's agreement")
         # the windows are bounded by the compass's agreement (a measured bound of the estimate's error, not a drift
@@ -301,54 +273,60 @@ class LoopSearch:
     def _count(self, reason: str) -> None:
         self.counts[reason] = self.counts.get(reason, 0) + 1
 
-    def _windowed_all(self, jobs, n: int, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel,
+    def _windowed_all(self, jobs: list[_Job], n: int, nTr, cov_nTr, b_pts, search_pts, est_wTa, travel,
                       travelled: float, band: bool = False) -> list[LoopCandidate]:
-        """The windowed searches (m, seed, (wx, wy), wth, wide, weak, across, drift (wx, wy)) of one node, at most ``max_window_xy`` /
-        ``max_window_deg``, each accepted on its own (``min_score_wide`` when ``wide``). They are independent:
+        """The windowed searches of one node, at most ``max_window_xy`` / ``max_window_deg``, each accepted on its
+        own (``min_score_wide`` when ``wide``) unless ``_must_agree``. They are independent:
         run in threads (the branch-and-bound and the matcher are compiled kernels that release the GIL), and
         counted and kept in the order given, so the result does not depend on the threads."""
         if not jobs:
             return []
-        pres = [self._precomputed(job[0]) for job in jobs]  # here: the cache's order is the searches' order
+        pres = [self._precomputed(job.m) for job in jobs]  # here: the cache's order is the searches' order
         t0 = time.perf_counter()
 
         def one(q: int):
-            m, seed, wxy, wth, wide, weak, *_ = jobs[q]
-            return self._window_match(pres[q], m, seed, wxy, wth, wide, weak, n, nTr, cov_nTr, b_pts, search_pts,
-                                      band)
+            j = jobs[q]
+            return self._window_match(pres[q], j.m, j.seed, j.wxy, j.wth, j.wide, j.weak, n, nTr, cov_nTr, b_pts,
+                                      search_pts, band)
 
         outs = list(_threads().map(one, range(len(jobs)))) if len(jobs) > 1 else [one(0)]
         self.seconds["windowed"] += time.perf_counter() - t0
         found = []
-        for (m, seed, wxy, *_, across, drift_xy), (cand, reason, hit, peaks) in zip(jobs, outs, strict=True):
+        for job, (cand, reason, hit, peaks) in zip(jobs, outs, strict=True):
             self.tried += 1
             self._count("windowed searches")
             if peaks is not None:
-                self.peaks.append((m, n, hit, peaks))
+                self.peaks.append((job.m, n, hit, peaks))
                 self.ambiguous += bool(peaks)
-            # across a break of local SLAM the window stands on no estimate (the robot may have been carried):
-            # a match there is a hypothesis like a global one, and needs the others' agreement. Accepted on its own,
-            # intel at 1.4 Hz kidnapped at two thirds took two aliases 14 m / 94-101 deg off: never joined
-            if cand is not None and across and reason == "windowed: accepted":
-                reason = "windowed across a break: offered for agreement"
-            elif cand is not None and reason == "windowed: accepted" and _beyond_ellipse(hit.aTb, seed, wxy,
-                                                                                         self.cfg.far_from_seed):
-                reason = "windowed, beyond its window's ellipse: offered for agreement"
-            elif (cand is not None and reason == "windowed: accepted" and self.cfg.widened_needs_agreement
-                  and (wxy[0] > drift_xy[0] or wxy[1] > drift_xy[1])  # widened (never with a compass)
-                  and _beyond_ellipse(hit.aTb, seed, drift_xy, self.cfg.far_from_seed)):
-                reason = "windowed, beyond its drift window: offered for agreement"
+            kind = None
+            if cand is not None and reason == "windowed: accepted":
+                reason, kind = self._must_agree(job, hit.aTb) or (reason, None)
+            elif cand is not None and reason.endswith("offered for agreement"):
+                kind = "windowed weak"
             self._count(reason)
-            offer = reason.endswith("offered for agreement")
-            if cand is not None and offer:
+            if cand is not None and kind is not None:
                 if travel is not None:  # without the anchors' odometer no agreement can be judged: dropped
-                    found.extend(self._agreed(replace(cand, travelled=travelled), est_wTa, travel,
-                                              "windowed across a break" if across else "windowed widened"
-                                              if "drift window" in reason else "windowed weak"))
+                    found.extend(self._agreed(replace(cand, travelled=travelled), est_wTa, travel, kind))
             elif cand is not None:
-                self.pairs[(m, n)] = self.pairs.get((m, n), 0) + 1
+                self.pairs[(job.m, n)] = self.pairs.get((job.m, n), 0) + 1
                 found.append(cand)
         return found
+
+    def _must_agree(self, job: _Job, aTb: np.ndarray) -> tuple[str, str] | None:
+        """Why a match its window accepts must be offered for agreement instead, and the kind it is counted under
+        there ((reason, kind)), or None: it stands on its own."""
+        # across a break of local SLAM the window stands on no estimate (the robot may have been carried):
+        # a match there is a hypothesis like a global one, and needs the others' agreement. Accepted on its own,
+        # intel at 1.4 Hz kidnapped at two thirds took two aliases 14 m / 94-101 deg off: never joined
+        if job.across:
+            return "windowed across a break: offered for agreement", "windowed across a break"
+        if beyond_ellipse(aTb, job.seed, job.wxy, self.cfg.far_from_seed):
+            return "windowed, beyond its window's ellipse: offered for agreement", "windowed weak"
+        widened = job.wxy[0] > job.drift_xy[0] or job.wxy[1] > job.drift_xy[1]  # never with a compass
+        if (self.cfg.widened_needs_agreement and widened
+                and beyond_ellipse(aTb, job.seed, job.drift_xy, self.cfg.far_from_seed)):
+            return "windowed, beyond its drift window: offered for agreement", "windowed widened"
+        return None
 
     def _agreed(self, cand: LoopCandidate, est_wTa, travel, kind: str) -> list[LoopCandidate]:
         """``cand`` through the map check and the consistency test: the closures accepted now (module docstring
@@ -582,14 +560,6 @@ class LoopSearch:
 
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None  # (the process that made it, the pool)
-
-
-def _beyond_ellipse(aTb, seed, wxy, scale: float) -> bool:
-    """Whether the match at ``aTb`` lies outside the ellipse inscribed in its window (half-widths ``wxy`` about
-    ``seed``), scaled by ``scale`` (``LoopConfig.far_from_seed``; inf: never)."""
-    wx, wy = (float(w) for w in np.broadcast_to(np.asarray(wxy, np.float64), (2,)))
-    dx, dy = float(aTb[0]) - float(seed[0]), float(aTb[1]) - float(seed[1])
-    return (dx / wx) ** 2 + (dy / wy) ** 2 > scale ** 2
 
 
 def _threads() -> ThreadPoolExecutor:

@@ -691,7 +691,7 @@ def test_a_match_only_a_window_widened_by_dead_reckoning_reaches_waits_for_agree
 
 
 def test_the_ellipse_of_a_window():
-    from holoslam.submaps.loops import _beyond_ellipse
+    from holoslam.submaps.loop_windows import beyond_ellipse as _beyond_ellipse
 
     seed = np.array([1.0, 2.0, 0.0])
     assert not _beyond_ellipse(np.array([1.9, 2.0, 0.0]), seed, (1.0, 0.5), 1.0)  # 0.9 of the x half-width
