@@ -117,6 +117,17 @@ class LoopConfig:
     # kidnaps joined as before; at full rate and with a compass the windows are never widened: unchanged.
     # False: off
     widened_needs_agreement: bool = True
+    # m: a windowed match that moves the node more than this from its seed (the estimate) is offered for agreement
+    # instead of accepted on its own, whatever its window: one scan that says the map is metres off is a
+    # hypothesis, and a floor of identical rooms puts a twin one door along inside any window that wide. On the
+    # shared real logs (full rate, kidnapped, cut at 8 m, at 1.4 Hz with half the beams, kidnapped and drifting so)
+    # 5,261 windowed matches were accepted alone: 7 had moved their node more than 2 m, 2 more than 3 m (the largest
+    # right one 3.6 m, aces at 1.4 Hz), 1 more than 4 m, and that one was wrong (5.7 m, 4.3 m off: intel at 1.4 Hz
+    # kidnapped). On the simulated building without its compass the wrong ones accepted alone had moved 4.2-7.0 m
+    # (a room one door along), the right ones at most 1.6 m but two corrections of 4.8 and 5.2 m. With
+    # ``ConsistencyConfig.vouch_max_sd_m`` (alone it does worse than neither; README, *A biased odometer on the
+    # simulated building*). inf: off
+    solo_max_offset_m: float = 4.0
     # A windowed match on its window's edge (x or y on the box's outer cells, or the heading on its outer angles)
     # is rejected: the score is largest where the window cuts it off (an optimum on the boundary of the domain
     # searched is not a peak of the score), so the match is the flank of a place beyond the window or a place (a

@@ -28,6 +28,13 @@ for neither): the side that gathers more certain closures is accepted. On the si
 compass, a clique of three 17-27 m along a corridor (one certain, two with 2.2-2.5 m of spread) was accepted
 beside two certain right closures, and nothing undid it (seed 27, odometer x1.005: revisits 7.6 m off; waiting,
 0.21 m; the other eight runs unchanged).
+
+For the same reason only certain closures vouch: a clique is accepted when ``min_agreeing`` of its closures (the
+offered one, the waiting ones, the accepted ones agreeing with it) are certain to ``vouch_max_sd_m``; an uncertain
+one joins a clique of enough certain ones. Without the rule (and with ``LoopConfig.solo_max_offset_m``, which
+sends more matches here), the simulated building without its compass (seed 27, odometer x0.995) accepted a
+clique of one certain closure 3.5 m off and two kept with 3.8 and 5.1 m of spread, one of them 15 m off; on seed
+30 a closure with 5.3 m of spread, 21 m off, vouched for two right ones and a wrong one 3.7 m off.
 """
 
 from __future__ import annotations
@@ -74,6 +81,13 @@ class ConsistencyConfig:
     # docstring); infinity: off. Two closures 1 m in sd are told apart 5.7 m away (the gate's 4 sigma of their
     # difference): a corridor's doors 5 m apart. A match kept with its peaks' spread is metres along
     rival_max_sd_m: float = 1.0
+    # m: only closures certain to within this (the largest sd of their position) count toward ``min_agreeing``; an
+    # uncertain one may join a clique of enough certain ones. A match kept with its peaks' spread (metres along a
+    # corridor) agrees with the right place and with its aliases alike, so it vouches for neither (the rivals'
+    # door-spacing argument above). Measured with ``LoopConfig.solo_max_offset_m``, whose waiting matches it keeps
+    # out of cliques vouched for by spread alone (module docstring; README, *A biased odometer on the simulated
+    # building*). inf: every closure counts
+    vouch_max_sd_m: float = 1.0
 
 
 def correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:
@@ -130,7 +144,8 @@ class LoopConsistency:
         for p in reversed(self.pending):  # the most recent first: the estimate has drifted least since
             if agree(p, c) and all(agree(p, q) for q in group):
                 group.append(p)
-        enough = 1 + len(group) + len(trusted) >= self.cfg.min_agreeing
+        vouch = self.cfg.vouch_max_sd_m
+        enough = sum(_largest_sd(a.cov_mTn) <= vouch for a in (c, *group, *trusted)) >= self.cfg.min_agreeing
         self.rivalled = enough and self._rivalled(c, group, trusted, est_wTa, travel)
         if enough and not self.rivalled:
             chosen = {id(p) for p in group}

@@ -97,6 +97,9 @@ class LoopSearch:
                              f"{cfg.disagreement_window_blind_share!r}")
         if not (cfg.far_from_seed > 0):  # inf allowed: never
             raise ValueError(f"LoopConfig.far_from_seed must be a number > 0 (inf: off), got {cfg.far_from_seed!r}")
+        if not (cfg.solo_max_offset_m > 0):  # inf allowed: never
+            raise ValueError("LoopConfig.solo_max_offset_m must be a number > 0 (m; inf: off), got "
+                             f"{cfg.solo_max_offset_m!r}")
         if not (cfg.disagreement_window_max_hz >= 0):  # inf allowed: always
             raise ValueError("LoopConfig.disagreement_window_max_hz must be a number >= 0 (inf: always), got "
                              f"{cfg.disagreement_window_max_hz!r}")
@@ -322,6 +325,10 @@ class LoopSearch:
             return "windowed across a break: offered for agreement", "windowed across a break"
         if beyond_ellipse(aTb, job.seed, job.wxy, self.cfg.far_from_seed):
             return "windowed, beyond its window's ellipse: offered for agreement", "windowed weak"
+        # one scan saying the map is metres off: a hypothesis (``LoopConfig.solo_max_offset_m``)
+        moved = math.hypot(float(aTb[0]) - float(job.seed[0]), float(aTb[1]) - float(job.seed[1]))
+        if moved > self.cfg.solo_max_offset_m:
+            return "windowed, far from its seed: offered for agreement", "windowed far"
         widened = job.wxy[0] > job.drift_xy[0] or job.wxy[1] > job.drift_xy[1]  # never with a compass
         if (self.cfg.widened_needs_agreement and widened
                 and beyond_ellipse(aTb, job.seed, job.drift_xy, self.cfg.far_from_seed)):

@@ -112,11 +112,36 @@ def test_a_clique_waits_while_a_rival_pair_has_as_many_certain_closures():
         pool.offer(replace(closure(1, 3, 318.0, (16.0, 0.0, 0.0)), cov_mTn=wide), EST, TRAV)
         return pool.offer(replace(closure(0, 3, 324.0, (14.0, 0.0, 0.0)), cov_mTn=wide), EST, TRAV)
 
-    waits = LoopConsistency()
+    every = ConsistencyConfig(vouch_max_sd_m=math.inf)  # the uncertain closures vouch too: the rival rule alone
+    waits = LoopConsistency(every)
     assert offers(waits) == [] and waits.rivalled  # the report counts it: "waiting, a rival clique as certain"
-    accepted = offers(LoopConsistency(ConsistencyConfig(rival_max_sd_m=math.inf)))
+    accepted = offers(LoopConsistency(replace(every, rival_max_sd_m=math.inf)))
     assert sorted(c.travelled for c in accepted) == [312.0, 318.0, 324.0]  # the alias, without the rule
     # the right side's third arrives: three certain against the alias's one, accepted
-    pool = LoopConsistency()
+    pool = LoopConsistency(every)
     offers(pool)
     assert sorted(c.travelled for c in pool.offer(closure(1, 2, 330.0), EST, TRAV)) == [300.0, 306.0, 330.0]
+
+
+def test_only_certain_closures_vouch_for_a_clique():
+    """``vouch_max_sd_m``: a closure kept with metres of spread along a corridor agrees with the right place and
+    its aliases alike. An alias 14 m along the corridor, certain, with two such closures agreeing waits (one
+    certain closure of the three ``min_agreeing``); with every closure counting it is accepted. Three certain right
+    closures are accepted, and an uncertain one agreeing with them then joins."""
+    wide = np.diag([2.5, 0.1, 0.01]) ** 2  # 2.5 m sd along the corridor (x)
+    alias = (14.0, 0.0, 0.0)
+
+    def offer_alias(pool: LoopConsistency) -> list:
+        pool.offer(closure(0, 2, 300.0, alias), EST, TRAVEL)
+        pool.offer(replace(closure(1, 3, 306.0, alias), cov_mTn=wide), EST, TRAVEL)
+        return pool.offer(replace(closure(0, 3, 312.0, alias), cov_mTn=wide), EST, TRAVEL)
+
+    pool = LoopConsistency()
+    assert offer_alias(pool) == [] and len(pool.pending) == 3
+    accepted = offer_alias(LoopConsistency(ConsistencyConfig(vouch_max_sd_m=math.inf)))
+    assert sorted(c.travelled for c in accepted) == [300.0, 306.0, 312.0]
+    right = LoopConsistency()
+    assert right.offer(closure(0, 2, 300.0), EST, TRAVEL) == []
+    assert right.offer(closure(1, 3, 306.0), EST, TRAVEL) == []
+    assert len(right.offer(closure(0, 3, 312.0), EST, TRAVEL)) == 3
+    assert len(right.offer(replace(closure(1, 2, 320.0), cov_mTn=wide), EST, TRAVEL)) == 1  # trusted ones vouch

@@ -6,6 +6,7 @@ front end closes loops on a synthetic log whose odometry drifts by metres, none 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -105,9 +106,10 @@ def test_dead_reckoning_that_agrees_with_the_estimate_bounds_the_drift_window():
 def test_a_node_is_closed_against_an_old_submap_however_far_its_estimate_drifted(household_place, drift_m):
     # the estimate of submap n is off by drift_m and 10 deg about the world origin (~3-4 m at the node); 60 m of
     # graph path since the old submap give a 4 m / 30 deg window. At 4 m the match lies beyond the window's ellipse
-    # and waits for agreement (the test below); accepted alone here with that rule off
-    far = math.inf if drift_m >= 4.0 else LoopConfig().far_from_seed
-    ls, found, true_mTn = _search(household_place, drift_m, 60.0, LoopConfig(far_from_seed=far))
+    # and over ``solo_max_offset_m`` from its seed, and waits for agreement (the tests below); accepted alone here
+    # with those rules off
+    cfg = LoopConfig(far_from_seed=math.inf, solo_max_offset_m=math.inf) if drift_m >= 4.0 else LoopConfig()
+    ls, found, true_mTn = _search(household_place, drift_m, 60.0, cfg)
     assert ls.tried == 1 and len(found) == 1
     c = found[0]
     assert (c.old, c.new) == (0, 5) and c.window_xy == pytest.approx(4.0)
@@ -573,7 +575,8 @@ def test_a_twin_the_lattice_samples_better_is_no_closure_when_the_truth_refines_
     # the truth (the seed itself, a lattice pose) 0.73, beyond the 0.03 margin, so the lattice alone sees one peak
     # and accepts the twin, 6 m off (measured)
     dis = (np.full(6, 3.0), np.full(6, math.radians(0.5)))
-    ls, found, true_mTn = _twin_search(dis, turn_deg, LoopConfig(ambiguity_lattice_slack=0.0))
+    alone = LoopConfig(solo_max_offset_m=math.inf)  # the lattice's rule alone (6 m from its seed: the test below)
+    ls, found, true_mTn = _twin_search(dis, turn_deg, replace(alone, ambiguity_lattice_slack=0.0))
     assert len(found) == 1 and ls.ambiguous == 0
     assert ls.counts["windowed: window narrowed by dead reckoning's agreement"] == 1
     e = g.between(true_mTn, found[0].mTn)
@@ -589,8 +592,11 @@ def test_a_twin_the_lattice_samples_better_is_no_closure_when_the_truth_refines_
     assert len(peaks) >= 1 and best.score - peaks[0].score > LoopConfig().ambiguity_margin
     # a drift window (no compass: dead reckoning does not bound the error) keeps the lattice's test alone: there
     # the building lost right corridor closures it needed (LoopConfig.ambiguity_lattice_slack)
-    ls, found, _ = _twin_search(None, turn_deg)
+    ls, found, _ = _twin_search(None, turn_deg, alone)
     assert len(found) == 1 and ls.ambiguous == 0
+    # there the twin, 6 m from its seed, is a hypothesis (``solo_max_offset_m``), not accepted on its own
+    ls, found, _ = _twin_search(None, turn_deg)
+    assert found == [] and ls.counts["windowed, far from its seed: offered for agreement"] == 1
 
 
 def test_a_global_search_may_turn_the_estimate_only_a_few_sigmas_of_its_heading(household_place):
@@ -688,6 +694,39 @@ def test_a_match_only_a_window_widened_by_dead_reckoning_reaches_waits_for_agree
     ls = LoopSearch(LoopConfig(), MatchConfig())
     ls.add_submap(0, grid)
     assert ls.windows(np.array([5.0]), disagreement=(np.array([5.0]), np.array([0.02])))[0][0] <= 1.25 + 1e-9
+
+
+def test_a_match_far_from_its_seed_waits_for_agreement(household_place):
+    """A windowed match that moves the node more than ``LoopConfig.solo_max_offset_m`` (4 m) from its seed is
+    offered for agreement, whatever its window: the node's submap estimated 5 m off along the window's x axis, in
+    a 7 m window (120 m of graph path), lies within the window's ellipse but is a hypothesis; the same match 3 m
+    off, or with the setting off (inf), is accepted on its own."""
+    segs, grid, wTm, wTn, wTr = household_place
+    nTr = g.between(wTn, wTr)
+    b_pts = points(ray_scan(segs, wTr, np.random.default_rng(13)))
+
+    def search(off_m: float, solo: float = LoopConfig().solo_max_offset_m):
+        ls = LoopSearch(LoopConfig(solo_max_offset_m=solo), MatchConfig())
+        ls.add_submap(0, grid)
+        est = np.zeros((6, 3))
+        est[0] = wTm
+        along = wTm[2]  # m's x axis: the window's
+        est[5] = g.compose(np.array([off_m * math.cos(along), off_m * math.sin(along), 0.0]), wTn)
+        found = ls.search(5, nTr, np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.full(6, 120.0), 0.0,
+                          travel=np.zeros(6))
+        return ls, found
+
+    ls, found = search(5.0)
+    assert found == [] and ls.counts["windowed, far from its seed: offered for agreement"] == 1
+    assert ls.counts["windowed far: waiting for agreement"] == 1  # the consistency test holds it
+    ls, found = search(5.0, math.inf)
+    assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    e = g.between(g.between(wTm, wTn), found[0].mTn)
+    assert math.hypot(e[0], e[1]) < 0.03 and abs(e[2]) < math.radians(0.3)
+    ls, found = search(3.0)  # 3 m: accepted on its own
+    assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    with pytest.raises(ValueError, match="solo_max_offset_m"):
+        LoopSearch(LoopConfig(solo_max_offset_m=0.0), MatchConfig())
 
 
 def test_the_ellipse_of_a_window():
