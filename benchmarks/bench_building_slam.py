@@ -17,7 +17,8 @@ relations from the simulator's truth (``REL_GROUPS``: 1-5 s apart along the path
 scans more than ten minutes apart within 2 m and 45 deg of each other; up to 2,000 of each: a drive has fewer
 revisits, counted in the last column) and the trajectory at every scan is scored on them: columns rel (mean
 translational error, m, per group; rotational error over all, deg). ``--loops`` overrides ``LoopConfig`` settings
-(JSON; ``"consistency": {...}`` its ``ConsistencyConfig``'s) to compare against the defaults in the same process; ``--correction`` the odometer correction's
+(JSON; ``"consistency": {...}`` its ``ConsistencyConfig``'s) to compare against the defaults in the same process;
+``--correction`` the odometer correction's
 (``OdometerCorrectionConfig``: ``'{"enabled": false}'`` maps in one pass, as before session 9). ``--odometer SCALE DEG_PER_M`` biases the log's
 odometer (``holoslam.derive.bias_odometry``; the shared real logs' odometers are off by up to 3.4 % and 3.5 deg/m,
 ``holoslam.submaps.odometer``). ``--wobble`` runs each seed again with its odometer scaled by a hair (0.995,

@@ -144,8 +144,7 @@ class LoopConsistency:
         for p in reversed(self.pending):  # the most recent first: the estimate has drifted least since
             if agree(p, c) and all(agree(p, q) for q in group):
                 group.append(p)
-        vouch = self.cfg.vouch_max_sd_m
-        enough = sum(_largest_sd(a.cov_mTn) <= vouch for a in (c, *group, *trusted)) >= self.cfg.min_agreeing
+        enough = _certain([c, *group, *trusted], self.cfg.vouch_max_sd_m) >= self.cfg.min_agreeing
         self.rivalled = enough and self._rivalled(c, group, trusted, est_wTa, travel)
         if enough and not self.rivalled:
             chosen = {id(p) for p in group}
@@ -167,23 +166,25 @@ class LoopConsistency:
         if not math.isfinite(cfg.rival_max_sd_m):
             return False
 
-        def certain(a) -> int:
-            return int(_largest_sd(a.cov_mTn) <= cfg.rival_max_sd_m)
-
         mine = {id(p) for p in group}
         # the waiting closures that can be told from c and disagree with it (a few: most are of other places)
         against = [p for p in self.pending if id(p) not in mine
                    and cfg.gate < agreement(p, c, est_wTa, travel, cfg) < math.inf]
-        ours = certain(c) + sum(map(certain, group)) + sum(map(certain, trusted))
+        ours = _certain([c, *group, *trusted], cfg.rival_max_sd_m)
         agree = [[agreement(p, q, est_wTa, travel, cfg) <= cfg.gate for q in against] for p in against]
         for i in range(len(against)):  # the rival cliques grown from each of them, greedily
             rivals = [i]
             for j in range(len(against)):
                 if j != i and all(agree[j][k] for k in rivals):
                     rivals.append(j)
-            if len(rivals) >= 2 and sum(certain(against[k]) for k in rivals) >= ours:
+            if len(rivals) >= 2 and _certain([against[k] for k in rivals], cfg.rival_max_sd_m) >= ours:
                 return True
         return False
+
+
+def _certain(closures: list, max_sd_m: float) -> int:
+    """How many of ``closures`` are certain to ``max_sd_m`` (the largest sd of their position)."""
+    return sum(_largest_sd(a.cov_mTn) <= max_sd_m for a in closures)
 
 
 def _largest_sd(cov) -> float:
