@@ -6,9 +6,11 @@ so nothing compiled before counts:
 1. ``--record``: a pipeline run of the bundled household log records the kernel signatures it compiles
    (``holoslam/_kernel_signatures.txt``, read by ``holoslam warmup`` and the first run), then a serial compile of
    them measures each one's seconds, written into the record.
-2. Per kernel: the serial compile (one process), the table of the slowest signatures and the total per module.
-3. Serial against parallel: the whole warm-up (``holoslam.warmup.warm_up``) with 1 and with N processes
-   (one kernel module per task), medians of ``--repeats``, wall seconds.
+2. Per kernel: the serial compile (one process, with the numba of the pools' workers), the table of the
+   slowest signatures and the total per module.
+3. The whole warm-up (``holoslam.warmup.warm_up``): one process with numba as it is, one with the workers'
+   numba (``holoslam._numba_worker.quicken``), and N processes (one kernel module per task), medians of
+   ``--repeats`` interleaved, wall and CPU seconds.
 
     python benchmarks/bench_jit_compile.py [--record] [--repeats 1] [--workers 2] [--top 25]
 """
@@ -36,12 +38,20 @@ sigs = record_signatures(lambda: run(bundled_household_log()))
 print(len(sigs))
 """
 
+# argv: the processes; "quick" to compile serially with the numba of the pools' workers (holoslam._numba_worker),
+# "plain" with numba as it is (a pool's workers are always quick)
 COMPILE = """
-import json, sys, time
+import json, resource, sys, time
 from holoslam.warmup import load_signatures, warm_up
+if sys.argv[2] == "quick":
+    from holoslam._numba_worker import quicken
+    quicken()
 t0 = time.perf_counter()
+c0 = time.process_time()
 done = warm_up(load_signatures(), workers=int(sys.argv[1]))
-print(json.dumps({"wall": time.perf_counter() - t0, "done": done}))
+pool = resource.getrusage(resource.RUSAGE_CHILDREN)  # the pool's workers, ended
+cpu = time.process_time() - c0 + pool.ru_utime + pool.ru_stime
+print(json.dumps({"wall": time.perf_counter() - t0, "cpu": cpu, "done": done}))
 """
 
 
@@ -64,7 +74,7 @@ def record() -> None:
 def write_seconds() -> None:
     from holoslam.warmup import SIGNATURES_FILE, load_signatures
 
-    serial = json.loads(_child(COMPILE, "1"))
+    serial = json.loads(_child(COMPILE, "1", "plain"))
     seconds: dict[tuple[str, str, str], float] = {}
     for module, function, s, _err in serial["done"]:
         seconds[(module, function)] = seconds.get((module, function), 0.0) + s
@@ -97,13 +107,17 @@ def main() -> None:
         write_seconds()
     if a.repeats < 1:
         return
-    walls: dict[int, list[float]] = {1: [], a.workers: []}
+    runs = {"1 process, numba as it is": (1, "plain"), "1 process, a worker's numba": (1, "quick"),
+            f"{a.workers} processes (workers)": (a.workers, "quick")}
+    walls: dict[str, list[float]] = {k: [] for k in runs}
+    cpus: dict[str, list[float]] = {k: [] for k in runs}
     last: dict = {}
     for _ in range(a.repeats):
-        for w in walls:  # interleaved
-            r = json.loads(_child(COMPILE, str(w)))
-            walls[w].append(r["wall"])
-            if w == 1:
+        for name, (w, kind) in runs.items():  # interleaved
+            r = json.loads(_child(COMPILE, str(w), kind))
+            walls[name].append(r["wall"])
+            cpus[name].append(r["cpu"])
+            if (w, kind) == (1, "quick"):
                 last = r
     rows = sorted(last["done"], key=lambda d: -d[2])
     per_module: dict[str, float] = {}
@@ -116,9 +130,13 @@ def main() -> None:
     print(f"\n{'module':<34} {'s':>7}")
     for module, s in sorted(per_module.items(), key=lambda kv: -kv[1]):
         print(f"{module:<34} {s:7.2f}")
-    s1, sn = statistics.median(walls[1]), statistics.median(walls[a.workers])
-    print(f"\nwhole warm-up, cold cache (median of {a.repeats}): 1 process {s1:.1f} s, "
-          f"{a.workers} processes {sn:.1f} s (x{s1 / sn:.2f})")
+    print(f"\nwhole warm-up, cold cache, medians of {a.repeats} interleaved (CPU: the process's and its "
+          "workers')")
+    ref = statistics.median(walls[next(iter(runs))])
+    print(f"{'':<34} {'wall s':>7} {'x wall':>7} {'CPU s':>7}")
+    for name in runs:
+        w = statistics.median(walls[name])
+        print(f"{name:<34} {w:7.1f} {w / ref:7.2f} {statistics.median(cpus[name]):7.1f}")
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ import importlib
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -253,6 +253,9 @@ def warm_up(
 # search and the wide search for the branch and bound's, the maps stages for theirs) instead of compiling them a
 # second time beside the pool
 FRONT_END = ("holoslam.submaps._grid_fast", "holoslam.submaps._fast", "holoslam._common_fast")
+#: after ``FRONT_END``, the kernel modules in the order a run first calls them: the scan features and the anchor
+#: graph (the front end's first finished submap), the branch and bound (its first loop search), then the maps'
+NEEDED_NEXT = (("holoslam.submaps._features_fast", "holoslam.submaps._graph_fast"), ("holoslam.submaps",))
 
 #: module -> its compile task in the first run's pool (``compile_in_background``), until the task is done
 _BACKGROUND: dict[str, Any] = {}
@@ -289,11 +292,14 @@ def compile_in_background(
     def first(module: str) -> bool:
         return module.startswith(wait_for)
 
-    # the modules waited for first (the largest first), then the loop search's (needed once a submap is finished),
-    # then the rest
-    groups = sorted(by_module.values(), key=lambda g: (not first(g[0].module),
-                                                       not g[0].module.startswith("holoslam.submaps"),
-                                                       -sum(s.seconds for s in g)))
+    # the modules waited for first, then in the order the run first calls them (``NEEDED_NEXT``), then the rest;
+    # the largest first within each
+    def rank(module: str) -> int:
+        if first(module):
+            return 0
+        return 1 + next((i for i, p in enumerate(NEEDED_NEXT) if module.startswith(p)), len(NEEDED_NEXT))
+
+    groups = sorted(by_module.values(), key=lambda g: (rank(g[0].module), -sum(s.seconds for s in g)))
     context = _pool_context()
     if context.get_start_method() == "fork":
         _set_up_compiler()
@@ -315,51 +321,15 @@ BACKGROUND_NICE = 10
 
 def _compile_worker(nice: int) -> None:
     """A compile pool's initializer: lower the worker's priority by ``nice`` (where the system allows; the
-    first run's pool: ``BACKGROUND_NICE``) and give its numba the faster flag methods (``_quicker_flags``)."""
+    first run's pool: ``BACKGROUND_NICE``) and make its numba quicker (``holoslam._numba_worker.quicken``)."""
     if nice:
         try:
             os.nice(nice)
         except (AttributeError, OSError):  # no ``nice`` (Windows) or not permitted: the run's priority
             pass
-    _quicker_flags()
+    from holoslam._numba_worker import quicken
 
-
-def _quicker_flags() -> bool:
-    """In a compile worker (never in a user's process): numba's ``TargetConfig.values`` and ``__hash__`` replaced
-    by exact equivalents. Its compiler hashes and compares the flags of the compile under way at every overload
-    it resolves (``_OverloadFunctionTemplate._get_impl``'s cache key), and both methods build a dict of all ~40
-    options through their properties each time: ~7 % of a compile's CPU (cProfile of the household's kernels).
-    ``values`` is the class's defaults updated with the options set (what each property's getter returns);
-    ``__hash__`` hashes the sorted option names, as numba's does (``sorted`` of the values' dict sorts its keys:
-    one hash per class). The household's kernels compiled serially: 19.8 -> 18.9 s CPU (medians of 6
-    alternated). False (numba left as it is) when this numba's ``TargetConfig`` lacks what they rest on."""
-    from numba.core import targetconfig
-
-    cls = targetconfig.TargetConfig
-    if getattr(cls, "_holoslam_quick", False):
-        return True
-    if not (isinstance(getattr(cls, "options", None), Mapping) and "_values" in getattr(cls, "__slots__", ())):
-        return False
-    defaults: dict[type, dict[str, Any]] = {}
-    hashes: dict[type, int] = {}
-
-    def values(self: Any) -> dict[str, Any]:
-        kind = type(self)
-        d = defaults.get(kind)
-        if d is None:
-            d = defaults[kind] = {k: o.default for k, o in kind.options.items()}
-        return {**d, **self._values}
-
-    def __hash__(self: Any) -> int:
-        kind = type(self)
-        h = hashes.get(kind)
-        if h is None:
-            h = hashes[kind] = hash(tuple(sorted(kind.options)))
-        return h
-
-    for name, method in (("values", values), ("__hash__", __hash__), ("_holoslam_quick", True)):
-        setattr(cls, name, method)
-    return True
+    quicken()
 
 
 def _set_up_compiler() -> None:

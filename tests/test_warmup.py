@@ -130,33 +130,3 @@ def test_the_first_runs_pool_compiles_at_a_lower_priority_than_the_run(tmp_path)
     assert step > 0 and worker == min(19, run + step) and worker > run
     assert left == 0
 
-
-def test_compile_workers_flags_methods_are_numbas_own_results(tmp_path):
-    """``_quicker_flags`` (a compile worker's): numba's ``Flags.values`` and ``hash`` give what numba's own
-    methods give, for the default flags and for flags with options set (to their defaults too), copies equal
-    and hashing alike; the parent process keeps numba's methods, its workers get the quick ones."""
-    code = (
-        "from numba.core.compiler import Flags\n"
-        "from numba.core import targetconfig\n"
-        "from holoslam import warmup\n"
-        "def cases():\n"
-        "    a = Flags(); b = Flags(); b.nrt = True; b.error_model = 'numpy'; b.fastmath = True\n"
-        "    c = Flags(); c.nrt = Flags.options['nrt'].default; d = b.copy(); d.fastmath = False\n"
-        "    return a, b, c, d\n"
-        "def facts():\n"
-        "    fs = cases()\n"
-        "    return [sorted(f.values().items(), key=str) for f in fs], [hash(f) for f in fs], "
-        "[[x == y for y in fs] for x in fs]\n"
-        "def quick():\n"
-        "    return targetconfig.TargetConfig.values.__qualname__.startswith('_quicker')\n"
-        "before = facts()\n"
-        "pool = warmup.compile_in_background([], workers=1, wait_for=())\n"
-        "worker = pool.submit(quick).result()\n"
-        "pool.shutdown()\n"
-        "parent = quick()\n"
-        "ok = warmup._quicker_flags()\n"
-        "after = facts()\n"
-        "print(worker, parent, ok, before == after, after[2][0][2], after[2][1][3])\n"
-    )
-    # c sets an option to its default: equal to the default flags (a), as numba's __eq__ says; d differs from b
-    assert _in_child(code, tmp_path) == ["True", "False", "True", "True", "True", "False"]

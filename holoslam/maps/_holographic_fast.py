@@ -118,17 +118,17 @@ def dijkstra_to(indptr, indices, data, source, targets):
     """(dist, pred) from ``source``, searched until every cell of ``targets`` is settled (or none is left)."""
     n = indptr.shape[0] - 1
     dist = np.full(n, np.inf)
-    pred = np.full(n, -9999, np.int32)
-    done = np.zeros(n, np.bool_)
-    want = np.zeros(n, np.bool_)
+    pred = np.full(n, -9999, dtype=np.int32)
+    done = np.zeros(n, dtype=np.bool_)
+    want = np.zeros(n, dtype=np.bool_)
     left = 0
     for t in targets:
         if not want[t]:
             want[t] = True
             left += 1
     cap = indices.shape[0] + 1
-    hd = np.empty(cap)
-    hv = np.empty(cap, np.int64)
+    hd = np.empty(cap, dtype=np.float64)
+    hv = np.empty(cap, dtype=np.int64)
     dist[source] = 0.0
     # np.int64 arguments: a literal 0 or an int32 node would compile _push once more for that type
     m = _push(hd, hv, np.int64(0), 0.0, source)

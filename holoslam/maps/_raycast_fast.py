@@ -106,8 +106,8 @@ def _walk(misses, c, r, cs, rs, x0, y0, ax, ay, h, w):
 def cast_counts(ox, oy, ex, ey, hit, h, w):
     """Hit and miss counts (flat (h * w,) int64, row-major) of beams from (ox, oy) to (ex, ey) (cell units,
     finite) on an h x w grid; ``hit`` (bool) marks beams with a return (their end cell counts a hit)."""
-    hits = np.zeros(h * w, np.int64)
-    misses = np.zeros(h * w, np.int64)
+    hits = np.zeros(h * w, dtype=np.int64)
+    misses = np.zeros(h * w, dtype=np.int64)
     cast_counts_into(ox, oy, ex, ey, hit, h, w, hits, misses)
     return hits, misses
 

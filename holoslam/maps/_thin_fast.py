@@ -31,7 +31,7 @@ from holoslam._jit import JIT, JIT_INNER
 @nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _offsets(w2):
     # p2 .. p9: north, north-east, east, south-east, south, south-west, west, north-west
-    off = np.empty(8, np.int64)
+    off = np.empty(8, dtype=np.int64)
     off[0] = -w2
     off[1] = -w2 + 1
     off[2] = 1
@@ -48,7 +48,7 @@ def _codes(a, off):
     """Neighbour code of every set cell (bit k = p(k+2) set); unset cells get 0xFF (no rule marks it). The
     grid's first and last rows and columns must be 0 (padding)."""
     n = a.shape[0]
-    code = np.full(n, 0xFF, np.uint8)
+    code = np.full(n, 0xFF, dtype=np.uint8)
     for i in range(n):
         if a[i]:
             c = 0
@@ -97,7 +97,7 @@ def _delete_marked(a, code, off, shift, marked, nm, guard, removable, touched, t
     ndel = 0
     if nm == 0:
         return 0, 0
-    cur = np.zeros(4, np.int64)
+    cur = np.zeros(4, dtype=np.int64)
     last_row = marked[nm - 1] >> shift
     t = marked[0] >> shift
     while t <= last_row + 3:
@@ -120,14 +120,14 @@ def _delete_marked(a, code, off, shift, marked, nm, guard, removable, touched, t
 @nb.njit(**JIT_INNER)
 def _by_row(l1, n1, l2, n2, shift, nrows):
     """l1[:n1] and l2[:n2] together, ordered by row (counting sort; order within a row kept)."""
-    cnt = np.zeros(nrows + 1, np.int64)
+    cnt = np.zeros(nrows + 1, dtype=np.int64)
     for j in range(n1):
         cnt[(l1[j] >> shift) + 1] += 1
     for j in range(n2):
         cnt[(l2[j] >> shift) + 1] += 1
     for r in range(nrows):
         cnt[r + 1] += cnt[r]
-    out = np.empty(n1 + n2, np.int32)
+    out = np.empty(n1 + n2, dtype=np.int32)
     for j in range(n1):
         r = l1[j] >> shift
         out[cnt[r]] = l1[j]
@@ -147,7 +147,7 @@ def _collect(a, code, boundary_only):
     for i in range(n):
         if a[i] and (not boundary_only or code[i] != 0xFF):
             m += 1
-    out = np.empty(m, np.int32)
+    out = np.empty(m, dtype=np.int32)
     m = 0
     for i in range(n):
         if a[i] and (not boundary_only or code[i] != 0xFF):
@@ -177,8 +177,8 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
     nrows = n >> shift
     off = _offsets(np.int64(1) << shift)
     code = _codes(a, off)
-    tst = np.zeros(n, np.uint8)  # stamp of the last subiteration that appended the cell to touched
-    cst = np.zeros(n, np.uint8)  # stamp of the last subiteration that looked at the cell as a candidate
+    tst = np.zeros(n, dtype=np.uint8)  # stamp of the last subiteration that appended the cell to touched
+    cst = np.zeros(n, dtype=np.uint8)  # stamp of the last subiteration that looked at the cell as a candidate
     # counts start as np.int64 and flags as np.bool_, not literals: numba compiles a kernel called with a
     # literal argument once more for each literal type (four _delete_marked, two _collect, ...)
     stamp = np.int64(0)
@@ -196,7 +196,7 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
             cand = bnd if k == 0 else _by_row(prev1, n1, bnd, bnd.shape[0], shift, nrows)
         else:
             cand = _by_row(prev1, n1, prev2, n2, shift, nrows)
-        marked = np.empty(cand.shape[0], np.int32)
+        marked = np.empty(cand.shape[0], dtype=np.int32)
         nm = np.int64(0)
         for j in range(cand.shape[0]):
             i = cand[j]
@@ -205,7 +205,7 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
                 if rule[code[i]]:
                     marked[nm] = i
                     nm += 1
-        touched = np.empty(min(8 * nm, n), np.int32)
+        touched = np.empty(min(8 * nm, n), dtype=np.int32)
         ndel, nt = _delete_marked(a, code, off, shift, marked, nm, guard, removable, touched, tst, stamp)
         prev2, n2 = prev1, n1
         prev1, n1 = touched, nt
@@ -220,7 +220,7 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
             stamp = _next_stamp(stamp, tst, cst)
             if rounds > 1:
                 cand = _by_row(cand, nc, cand, np.int64(0), shift, nrows)
-            marked = np.empty(nc, np.int32)
+            marked = np.empty(nc, dtype=np.int32)
             nm = np.int64(0)
             for j in range(nc):
                 i = cand[j]
@@ -229,7 +229,7 @@ def thin_flat(a, shift, zs1, zs2, removable, guard, one_cell):
                     if removable[code[i]]:
                         marked[nm] = i
                         nm += 1
-            touched = np.empty(min(8 * nm, n), np.int32)
+            touched = np.empty(min(8 * nm, n), dtype=np.int32)
             ndel, nt = _delete_marked(a, code, off, shift, marked, nm, np.bool_(True), removable, touched, tst,
                                       stamp)
             if ndel == 0:

@@ -35,8 +35,8 @@ def _nbr(flat, code, index, offs, i, k):
 def nodes(flat, code, index, offs, deg, is_node, tip2, clr):
     """(node_of (n,), kind code per node: 0 junction, 1 endpoint, 2 isolated, representative cell per node)."""
     n = flat.shape[0]
-    lab = np.full(n, -1, np.int64)
-    stack = np.empty(n, np.int64)
+    lab = np.full(n, -1, dtype=np.int64)
+    stack = np.empty(n, dtype=np.int64)
     for i in range(n):
         if deg[i] >= 3 and lab[i] < 0:  # smallest unlabelled junction cell: its cluster's minimum
             lab[i] = i
@@ -51,16 +51,16 @@ def nodes(flat, code, index, offs, deg, is_node, tip2, clr):
                         lab[j] = i
                         stack[top] = j
                         top += 1
-    node_of = np.full(n, -1, np.int64)
+    node_of = np.full(n, -1, dtype=np.int64)
     nn = 0
     for i in range(n):
         if is_node[i] and (lab[i] < 0 or lab[i] == i):
             node_of[i] = nn
             nn += 1
-    kind = np.empty(nn, np.int8)
-    rep = np.full(nn, -1, np.int64)
-    best_key = np.empty(nn, np.float64)
-    best_deg = np.empty(nn, np.int64)
+    kind = np.empty(nn, dtype=np.int8)
+    rep = np.full(nn, -1, dtype=np.int64)
+    best_key = np.empty(nn, dtype=np.float64)
+    best_deg = np.empty(nn, dtype=np.int64)
     for i in range(n):
         if not is_node[i]:
             continue
@@ -92,8 +92,8 @@ def node_pairs(flat, code, index, offs, is_node, node_of, n_nodes):
     """(di, dj): adjacent node cells of different nodes that join two components of the pairs kept so far."""
     parent = np.arange(n_nodes)
     n = flat.shape[0]
-    di = np.empty(n_nodes, np.int64)  # a spanning forest has fewer than n_nodes edges
-    dj = np.empty(n_nodes, np.int64)
+    di = np.empty(n_nodes, dtype=np.int64)  # a spanning forest has fewer than n_nodes edges
+    dj = np.empty(n_nodes, dtype=np.int64)
     m = 0
     for i in range(n):
         if not is_node[i]:
@@ -124,7 +124,7 @@ def _chain_neighbours(flat, code, index, offs, bit0, bit1, is_node):
     """Each chain cell's position among the chain cells (-1 at nodes), their count, and both neighbours of
     every chain cell, sorted (n, 2)."""
     n = flat.shape[0]
-    cpos = np.full(n, -1, np.int64)
+    cpos = np.full(n, -1, dtype=np.int64)
     n_chain = 0
     for i in range(n):
         if not is_node[i]:
@@ -132,7 +132,7 @@ def _chain_neighbours(flat, code, index, offs, bit0, bit1, is_node):
             n_chain += 1
     # both neighbours of every chain cell, in cell order: the index map is read row by row (a walk reading it
     # would jump a grid row per vertical step)
-    nb2 = np.empty((n, 2), np.int32)  # both in one cache line
+    nb2 = np.empty((n, 2), dtype=np.int32)  # both in one cache line
     for i in range(n):
         if not is_node[i]:
             fc = flat[i]
@@ -150,10 +150,10 @@ def _walk_chains(flat, code, index, offs, is_node, cpos, n_chain, nb2):
     (cell, direction) state is smaller than its reverse's, that state its key; returns (buf, wstart, wkey,
     walks, chain cells seen)."""
     n = flat.shape[0]
-    visited = np.zeros(n, np.bool_)
-    buf = np.empty(3 * n_chain + 2, np.int64)  # every edge has a chain cell: edges <= chain cells
-    wstart = np.empty(n_chain + 1, np.int64)
-    wkey = np.empty(n_chain + 1, np.int64)
+    visited = np.zeros(n, dtype=np.bool_)
+    buf = np.empty(3 * n_chain + 2, dtype=np.int64)  # every edge has a chain cell: edges <= chain cells
+    wstart = np.empty(n_chain + 1, dtype=np.int64)
+    wkey = np.empty(n_chain + 1, dtype=np.int64)
     nw = 0
     nb_ = 0
     n_seen = 0
@@ -206,20 +206,20 @@ def _reverse(buf, lo, hi):
 def _edges_in_key_order(buf, wstart, wkey, nw, n_chain):
     """The walks as edges (u_cell, v_cell, cells, starts), ordered by key."""
     # order by key: the keys are distinct states < 2 n_chain, so a scan of a dense table sorts them
-    slot = np.full(2 * n_chain + 2, -1, np.int64)
+    slot = np.full(2 * n_chain + 2, -1, dtype=np.int64)
     for w in range(nw):
         slot[wkey[w]] = w
-    order = np.empty(nw, np.int64)
+    order = np.empty(nw, dtype=np.int64)
     q = 0
     for x in range(slot.shape[0]):
         if slot[x] >= 0:
             order[q] = slot[x]
             q += 1
     nb_ = wstart[nw]
-    cells = np.empty(nb_, np.int64)
-    starts = np.empty(nw + 1, np.int64)
-    u_cell = np.empty(nw, np.int64)
-    v_cell = np.empty(nw, np.int64)
+    cells = np.empty(nb_, dtype=np.int64)
+    starts = np.empty(nw + 1, dtype=np.int64)
+    u_cell = np.empty(nw, dtype=np.int64)
+    v_cell = np.empty(nw, dtype=np.int64)
     p = 0
     for e in range(nw):
         w = order[e]
@@ -239,7 +239,7 @@ def lengths(rc, starts, clr_cells, resolution):
     """(length, min_clearance) per edge of the concatenated (sum K, 2) cell sequence rc."""
     m = starts.shape[0] - 1
     total = rc.shape[0]
-    cum = np.empty(total + 1, np.float64)
+    cum = np.empty(total + 1, dtype=np.float64)
     cum[0] = 0.0
     sqrt2 = np.sqrt(2.0)
     e = 0
@@ -251,8 +251,8 @@ def lengths(rc, starts, clr_cells, resolution):
             dd = abs(rc[j + 1, 0] - rc[j, 0]) + abs(rc[j + 1, 1] - rc[j, 1])
             step = sqrt2 if dd == 2 else 1.0
         cum[j + 1] = cum[j] + step
-    length = np.empty(m, np.float64)
-    min_clr = np.empty(m, np.float64)
+    length = np.empty(m, dtype=np.float64)
+    min_clr = np.empty(m, dtype=np.float64)
     for e in range(m):
         a, b = starts[e], starts[e + 1]
         length[e] = (cum[b - 1] - cum[a]) * resolution

@@ -108,8 +108,8 @@ def icp_terms(px, py, c, s, tx, ty, qx, qy, nqx, nqy, x0, y0, cell, nx, ny, star
     (j, d as :func:`grid_nearest`), and for the m matched ones in scan order the rows of the Jacobian J (m, 3)
     of the left perturbation, the residuals r along the map normals and their Huber weights w. Returns m."""
     n = px.size
-    pax = np.empty(n)
-    pay = np.empty(n)
+    pax = np.empty(n, dtype=np.float64)
+    pay = np.empty(n, dtype=np.float64)
     for i in range(n):
         pax[i] = tx + c * px[i] - s * py[i]
         pay[i] = ty + s * px[i] + c * py[i]
@@ -183,7 +183,7 @@ def split_pieces(x, y, run_start, run_end, tol):  # pragma: no cover - compiled
             else:
                 ps[n], pe[n] = a, b
                 n += 1
-    key = np.empty(n)  # the starts as float64 (exact below 2**53): the branch and bound's argsort_stable, one
+    key = np.empty(n, dtype=np.float64)  # the starts as float64 (exact below 2**53): the branch and bound's argsort_stable, one
     for i in range(n):  # specialisation of it to compile instead of two
         key[i] = ps[i]
     order = argsort_stable(key)  # np.argsort(ps[:n], kind="mergesort")

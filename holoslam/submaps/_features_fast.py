@@ -61,7 +61,7 @@ def _ordered(px, py, gap, gap_per_m):  # pragma: no cover - compiled
                 d = math.hypot(px[j] - px[i], py[j] - py[i])
                 if d > best:
                     k, best = i, d
-            x, y = np.empty(n), np.empty(n)
+            x, y = np.empty(n, dtype=np.float64), np.empty(n, dtype=np.float64)
             for i in range(n):
                 x[i], y[i] = px[(i + k + 1) % n], py[(i + k + 1) % n]
             return x, y
@@ -72,8 +72,8 @@ def _ordered(px, py, gap, gap_per_m):  # pragma: no cover - compiled
 def _runs(x, y, gap, gap_per_m):  # pragma: no cover - compiled
     """``features.split_runs``: [start, end) of the runs of close consecutive points."""
     n = x.size
-    starts = np.empty(n, np.int64)
-    ends = np.empty(n, np.int64)
+    starts = np.empty(n, dtype=np.int64)
+    ends = np.empty(n, dtype=np.int64)
     m = 0
     if n == 0:
         return starts[:0], ends[:0]
@@ -105,18 +105,18 @@ def _segments(x, y, starts, ends, is_line, split_tol, min_points, min_length, co
     nr = 0
     for r in range(starts.size):  # the marked runs (a loop: numba compiles a boolean mask's indexing slowly)
         nr += is_line[r]
-    ra, rb = np.empty(nr, np.int64), np.empty(nr, np.int64)
+    ra, rb = np.empty(nr, dtype=np.int64), np.empty(nr, dtype=np.int64)
     q = 0
     for r in range(starts.size):
         if is_line[r]:
             ra[q], rb[q] = starts[r], ends[r]
             q += 1
     ps, pe = split_pieces(x, y, ra, rb, split_tol)
-    segs = np.empty((ps.size, 4))
-    lines = np.empty((ps.size, 3))
+    segs = np.empty((ps.size, 4), dtype=np.float64)
+    lines = np.empty((ps.size, 3), dtype=np.float64)
     ns, q, big = 0, 0, 2.0 * split_tol
-    ma = np.empty(ps.size, np.int64)  # the merged pieces of one run; -1: a short piece, which ends a merge
-    mb = np.empty(ps.size, np.int64)
+    ma = np.empty(ps.size, dtype=np.int64)  # the merged pieces of one run; -1: a short piece, which ends a merge
+    mb = np.empty(ps.size, dtype=np.int64)
     for r in range(ra.size):
         nm = 0
         while q < ps.size and ps[q] < rb[r]:
@@ -164,8 +164,8 @@ def _corners_and_crossings(S, Ln, corner_gap, gap_per_m, sin_min, extend):  # pr
     """``features._corners_and_crossings``: corners (C, 2) and crossings (X, 2) of the pairs i < j in order."""
     ns = S.shape[0]
     npair = ns * (ns - 1) // 2
-    corners = np.empty((npair, 2))
-    cross = np.empty((npair, 2))
+    corners = np.empty((npair, 2), dtype=np.float64)
+    cross = np.empty((npair, 2), dtype=np.float64)
     nc = nx = 0
     for i in range(ns):
         for j in range(i + 1, ns):
@@ -206,8 +206,8 @@ def scan_features(px, py, gap, gap_per_m, split_tol, min_points, min_length, cos
     crossings (X, 2), points (P, 2), in the points' frame (``features.FeatureConfig``'s settings)."""
     x, y = _ordered(px, py, gap, gap_per_m)
     starts, ends = _runs(x, y, gap, gap_per_m)
-    is_line = np.zeros(starts.size, np.bool_)
-    blobs = np.empty((starts.size, 2))
+    is_line = np.zeros(starts.size, dtype=np.bool_)
+    blobs = np.empty((starts.size, 2), dtype=np.float64)
     nb_ = 0
     for r in range(starts.size):
         a, b = starts[r], ends[r]
@@ -222,7 +222,7 @@ def scan_features(px, py, gap, gap_per_m, split_tol, min_points, min_length, cos
             nb_ += 1
     segs, lines = _segments(x, y, starts, ends, is_line, split_tol, min_points, min_length, cos_merge)
     if segs.shape[0] < 2:
-        return segs, lines, np.zeros((0, 2)), np.zeros((0, 2)), blobs[:nb_]
+        return segs, lines, np.zeros((0, 2), dtype=np.float64), np.zeros((0, 2), dtype=np.float64), blobs[:nb_]
     corners, cross = _corners_and_crossings(segs, lines, corner_gap, gap_per_m, sin_min, extend)
     return segs, lines, corners, cross, blobs[:nb_]
 
@@ -241,7 +241,7 @@ def _put(buf, n, rows):  # pragma: no cover - compiled
     """``rows`` appended to the first ``n`` rows of ``buf`` (a new buffer of twice the size when full)."""
     k, w = rows.shape[0], buf.shape[1]
     if n + k > buf.shape[0]:  # element loops: numba's compile of 2-D slice assignment costs seconds
-        grown = np.empty((max(2 * buf.shape[0], n + k), w))
+        grown = np.empty((max(2 * buf.shape[0], n + k), w), dtype=np.float64)
         for i in range(n):
             for c in range(w):
                 grown[i, c] = buf[i, c]
@@ -257,8 +257,8 @@ def scans_features(x, y, start, poses, gap, gap_per_m, split_tol, min_points, mi
                    sin_min, extend, point_max_extent, point_min_points):  # pragma: no cover - compiled
     """:func:`scan_features` of every scan k (points [start[k], start[k + 1]) of x, y) moved into one frame by
     its pose ``poses[k]`` (``features.transform_features``), stacked in scan order."""
-    segs_all, lines_all = np.empty((64, 4)), np.empty((64, 3))
-    corners_all, cross_all, blobs_all = np.empty((64, 2)), np.empty((64, 2)), np.empty((64, 2))
+    segs_all, lines_all = np.empty((64, 4), dtype=np.float64), np.empty((64, 3), dtype=np.float64)
+    corners_all, cross_all, blobs_all = np.empty((64, 2), dtype=np.float64), np.empty((64, 2), dtype=np.float64), np.empty((64, 2), dtype=np.float64)
     ns = nl = nc = nx = nb_ = np.int64(0)  # not the literal 0: numba would compile _put once more for its type
     for k in range(poses.shape[0]):
         a, b = start[k], start[k + 1]

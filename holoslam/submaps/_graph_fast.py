@@ -23,8 +23,8 @@ def dijkstra(indptr, indices, weights, source):  # pragma: no cover - compiled
     arithmetic (the anchor graph's tens to thousands of nodes: that call's sparse-matrix set-up cost ~10x the search)."""
     n = indptr.size - 1
     dist = np.full(n, np.inf)
-    pred = np.full(n, -1, np.int64)
-    done = np.zeros(n, np.bool_)
+    pred = np.full(n, -1, dtype=np.int64)
+    done = np.zeros(n, dtype=np.bool_)
     dist[source] = 0.0
     heap = [(0.0, source)]
     while heap:

@@ -73,9 +73,9 @@ def endpoints(ranges, c, s, x, y, max_range, missing_length):  # pragma: no cove
     reaches ``missing_length`` of free space), and the box (x0, y0, x1, y1) of the end points and the sensor.
     ``probgrid.scan_endpoints``'s arithmetic; numpy's eight calls cost 10x this work at every insertion."""
     n = ranges.size
-    ex = np.empty(n)
-    ey = np.empty(n)
-    hit = np.empty(n, np.bool_)
+    ex = np.empty(n, dtype=np.float64)
+    ey = np.empty(n, dtype=np.float64)
+    hit = np.empty(n, dtype=np.bool_)
     x0, y0, x1, y1 = x, y, x, y
     for k in range(n):
         r = ranges[k]
@@ -124,7 +124,7 @@ def angular_step(px, py, res, quantile):  # pragma: no cover
     if n == 0:
         d = 1.0
     else:
-        r = np.empty(n)
+        r = np.empty(n, dtype=np.float64)
         for k in range(n):
             r[k] = math.hypot(px[k], py[k])
         v = (n - 1) * quantile  # numpy's virtual index of its linear method
@@ -279,16 +279,16 @@ def lsq_match(prob, ox, oy, res, px, py, x0, y0, t0, px_, py_, pt_, w_occ, w_tra
     s = w_occ / math.sqrt(max(n, 1))
     x, y, t = x0, y0, t0
     lam = 1e-3
-    H = np.zeros((3, 3))
-    g = np.zeros(3)
-    Hocc = np.zeros((3, 3))
+    H = np.zeros((3, 3), dtype=np.float64)
+    g = np.zeros(3, dtype=np.float64)
+    Hocc = np.zeros((3, 3), dtype=np.float64)
     cost, cost_occ = _lsq_terms(prob, ox, oy, res, px, py, s, px_, py_, pt_, w_trans, w_rot, outside, x, y, t, H, g,
                                 Hocc, True)
     # a trial step is evaluated with its gradient and Hessian (into the spare buffers): accepted, they are the
     # next iteration's; one pass over the points per iteration instead of a value pass and a gradient pass
-    H2 = np.zeros((3, 3))
-    g2 = np.zeros(3)
-    Hocc2 = np.zeros((3, 3))
+    H2 = np.zeros((3, 3), dtype=np.float64)
+    g2 = np.zeros(3, dtype=np.float64)
+    Hocc2 = np.zeros((3, 3), dtype=np.float64)
     used = 0
     for it in range(iters):
         used = it + 1
@@ -327,7 +327,7 @@ def window_scores(prob, ox, oy, res, px, py, cx, cy, ct, nxy, angles, outside): 
     rows, cols = prob.shape
     na = angles.size
     m = 2 * nxy + 1
-    out = np.zeros((na, m, m))
+    out = np.zeros((na, m, m), dtype=np.float64)
     n = px.size
     inv = 1.0 / max(n, 1)
     for a in range(na):
@@ -370,7 +370,7 @@ def line_scores(prob, ox, oy, res, ax, ay, ux, uy, shifts, outside):  # pragma: 
     rows, cols = prob.shape
     n = ax.size
     inv = 1.0 / max(n, 1)
-    out = np.zeros(shifts.size)
+    out = np.zeros(shifts.size, dtype=np.float64)
     for k in range(shifts.size):
         dx, dy = shifts[k] * ux - ox, shifts[k] * uy - oy
         tot = 0.0
@@ -433,7 +433,7 @@ def surface_covariance(S, p0, p1, p2, off, angles, a0, a1, a2, kappa, res, step)
             for i in range(m):
                 if S[a, j, i] > top:
                     top = S[a, j, i]
-    e = np.empty((na, m, m))
+    e = np.empty((na, m, m), dtype=np.float64)
     tot = 0.0
     for a in range(na):
         for j in range(m):
@@ -463,7 +463,7 @@ def surface_covariance(S, p0, p1, p2, off, angles, a0, a1, a2, kappa, res, step)
     ctt += step * step / 12.0
     # the surface is in the grid frame; the pose's covariance in its own frame: J cov J^T, J = diag(R^T, 1)
     c, s = math.cos(a2), math.sin(a2)
-    out = np.empty((3, 3))
+    out = np.empty((3, 3), dtype=np.float64)
     out[0, 0] = c * c * cxx + 2.0 * c * s * cxy + s * s * cyy
     out[1, 1] = s * s * cxx - 2.0 * c * s * cxy + c * c * cyy
     out[0, 1] = out[1, 0] = -c * s * cxx + (c * c - s * s) * cxy + c * s * cyy

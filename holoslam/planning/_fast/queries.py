@@ -189,7 +189,7 @@ def _corridor(graph, links, regions, sr, gr, su, sv, gu, gv, hw, scratch):
     cuv, port_portal, pp, pslot, rptr, rids, E, _ = links
     first = _ports_of(sr, rptr, rids, pp, pslot)
     last = _ports_of(gr, rptr, rids, pp, pslot)
-    d0 = np.empty(first.shape[0])
+    d0 = np.empty(first.shape[0], dtype=np.float64)
     for i in range(first.shape[0]):
         d0[i] = math.hypot(cuv[first[i], 0] - su, cuv[first[i], 1] - sv)
     ws, hn, hk, _ = scratch
@@ -202,7 +202,7 @@ def _corridor(graph, links, regions, sr, gr, su, sv, gu, gv, hw, scratch):
 @nb.njit(**JIT)
 def _straight(su, sv, gu, gv):
     """The two-point path start -> goal."""
-    raw = np.empty((2, 2))
+    raw = np.empty((2, 2), dtype=np.float64)
     raw[0, 0], raw[0, 1], raw[1, 0], raw[1, 1] = su, sv, gu, gv
     return raw
 
@@ -288,7 +288,7 @@ def _query(graph, links, locate, grid, su, sv, rs, gu, gv, rg, hw, eps, scratch)
     else:
         portals, regs = _corridor(graph, links, regions, sr, gr, su, sv, gu, gv, hw, scratch)
         if regs.shape[0] == 0:
-            return np.zeros((0, 2)), np.zeros(0, dtype=np.int64), 0.0, 1
+            return np.zeros((0, 2), dtype=np.float64), np.zeros(0, dtype=np.int64), 0.0, 1
         _, _, _, _, rptr, rids, E, boxes = links
         raw, regs = _corridor_polyline(su, sv, gu, gv, portals, regs, boxes, rptr, rids, E, scratch[3])
     pts, ok = _pull_and_validate(bits, tclear, gh, gw, raw, eps)

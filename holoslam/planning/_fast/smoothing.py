@@ -98,7 +98,7 @@ def refine(su, sv, gu, gv, boxes, sweeps, tol):
     coordinate updates from the box centres until no point moves more than ``tol`` or ``sweeps`` sweeps.
     Returns the (m + 2, 2) points."""
     m = boxes.shape[0]
-    P = np.empty((m + 2, 2))
+    P = np.empty((m + 2, 2), dtype=np.float64)
     P[0, 0], P[0, 1] = su, sv
     P[m + 1, 0], P[m + 1, 1] = gu, gv
     for i in range(m):
@@ -214,13 +214,13 @@ def funnel(su, sv, gu, gv, boxes):
     meets boxes i..j is covered by the regions between them, so it is collision-free. Returns (K, 2)."""
     m = boxes.shape[0]
     # boxes plus the goal as a degenerate last box
-    B = np.empty((m + 1, 4))
+    B = np.empty((m + 1, 4), dtype=np.float64)
     B[:m] = boxes
     B[m, 0] = gu
     B[m, 2] = gu
     B[m, 1] = gv
     B[m, 3] = gv
-    out = np.empty((m + 2, 2))
+    out = np.empty((m + 2, 2), dtype=np.float64)
     out[0, 0], out[0, 1] = su, sv
     n_out = 1
     ax, ay = su, sv
@@ -330,7 +330,7 @@ def string_pull(bits, tclear, h, w, pts, window, passes, eps):
             i = nxt
             keep[nk] = i
             nk += 1
-        out = np.empty((nk, 2))
+        out = np.empty((nk, 2), dtype=np.float64)
         for q in range(nk):
             out[q, 0] = cur[keep[q], 0]
             out[q, 1] = cur[keep[q], 1]
@@ -385,7 +385,7 @@ def simplify_validate(bits, tclear, h, w, pts, checked, eps, tol):
     if k > 1:
         keep[nk] = k - 1
         nk += 1
-    out = np.empty((nk, 2))
+    out = np.empty((nk, 2), dtype=np.float64)
     for q in range(nk):
         out[q, 0] = pts[keep[q], 0]
         out[q, 1] = pts[keep[q], 1]

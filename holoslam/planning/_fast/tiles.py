@@ -75,7 +75,7 @@ def block_clearance(free):
     of 4 x 4 cells, of the blocks whose cells are all free (cells outside the grid blocked): the jumps of
     :func:`seg_free_tiles`."""
     h, w = free.shape
-    f = np.zeros((-(-h // 4) * 4, -(-w // 4) * 4), dtype=bool)
+    f = np.zeros((-(-h // 4) * 4, -(-w // 4) * 4), dtype=np.bool_)
     f[:h, :w] = free
     return chessboard_clearance(f.reshape(f.shape[0] // 4, 4, f.shape[1] // 4, 4).all(axis=(1, 3)))
 

@@ -1,0 +1,160 @@
+"""A compile worker's numba, quicker by exact equivalents of three of its internals.
+
+Only the processes of :mod:`holoslam.warmup`'s compile pools call :func:`quicken` (their initializer): a user's
+process keeps numba as it is. Each replacement gives what numba's own code gives, for less CPU, and each is
+skipped (numba left as it is, the function returns False) when this numba lacks what it rests on:
+
+* :func:`quicker_flags`: ``TargetConfig.values`` and ``__hash__`` without rebuilding a dict of all ~40 options;
+* :func:`one_function_pass_manager`: the function passes run on a module's functions by one pass manager,
+  where numba builds one per function; the machine code is the same (the household's 71 cached kernels: the
+  same object code, byte for byte, as numba's own, less the 2 whose bytes differ between two runs of numba's);
+* :func:`overloads_by_inherited_flags`: an ``@overload``'s implementation (``np.empty``, ``max``...) compiled once
+  per argument types and per value of the options a compile inherits from its caller, instead of once per whole
+  set of the caller's options: the others (``nogil``, the wrappers) never reach the implementation's compile.
+
+Measured on the household's recorded kernels compiled serially (``benchmarks/bench_jit_compile.py``): see
+:func:`quicken`.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+from collections.abc import Mapping
+from typing import Any
+
+__all__ = ["quicken", "quicker_flags", "one_function_pass_manager", "overloads_by_inherited_flags"]
+
+
+def quicken() -> dict[str, bool]:
+    """Apply the three replacements in this process (a compile worker's); which ones took. The household's
+    recorded kernels compiled serially: 19.8 -> 18.9 s CPU by ``quicker_flags`` (medians of 6 alternated); the
+    other two together, on top of it, see ``benchmarks/bench_jit_compile.py``'s table."""
+    return {f.__name__: f() for f in (quicker_flags, one_function_pass_manager, overloads_by_inherited_flags)}
+
+
+def quicker_flags() -> bool:
+    """numba's ``TargetConfig.values`` and ``__hash__`` replaced by exact equivalents. Its compiler hashes and
+    compares the flags of the compile under way at every overload it resolves (``_OverloadFunctionTemplate.
+    _get_impl``'s cache key), and both methods build a dict of all ~40 options through their properties each
+    time: ~7 % of a compile's CPU (cProfile of the household's kernels). ``values`` is the class's defaults
+    updated with the options set (what each property's getter returns); ``__hash__`` hashes the sorted option
+    names, as numba's does (``sorted`` of the values' dict sorts its keys: one hash per class)."""
+    from numba.core import targetconfig
+
+    cls = targetconfig.TargetConfig
+    if getattr(cls, "_holoslam_quick", False):
+        return True
+    if not (isinstance(getattr(cls, "options", None), Mapping) and "_values" in getattr(cls, "__slots__", ())):
+        return False
+    defaults: dict[type, dict[str, Any]] = {}
+    hashes: dict[type, int] = {}
+
+    def values(self: Any) -> dict[str, Any]:
+        kind = type(self)
+        d = defaults.get(kind)
+        if d is None:
+            d = defaults[kind] = {k: o.default for k, o in kind.options.items()}
+        return {**d, **self._values}
+
+    def __hash__(self: Any) -> int:
+        kind = type(self)
+        h = hashes.get(kind)
+        if h is None:
+            h = hashes[kind] = hash(tuple(sorted(kind.options)))
+        return h
+
+    for name, method in (("values", values), ("__hash__", __hash__), ("_holoslam_quick", True)):
+        setattr(cls, name, method)
+    return True
+
+
+def one_function_pass_manager() -> bool:
+    """``CPUCodeLibrary._optimize_functions`` with one function pass manager for the module's functions (numba's
+    builds a pass builder and a manager for each, ~3,300 for the household's kernels) and no run on a mere
+    declaration (no body: a pass has nothing to do). Same passes, same options, same order."""
+    from numba.core import codegen
+
+    cls = codegen.CPUCodeLibrary
+    if getattr(cls, "_holoslam_one_fpm", False):
+        return True
+    own = getattr(cls, "_optimize_functions", None)
+    if own is None or not hasattr(codegen.CPUCodegen, "_function_pass_manager"):
+        return False
+    try:  # the replacement rests on numba's body being exactly this: a new manager per function, run on it
+        src = inspect.getsource(own)
+    except (OSError, TypeError):
+        return False
+    if "_function_pass_manager()" not in src or "fpm.run(func, pb)" not in src:
+        return False
+
+    def _optimize_functions(self: Any, ll_module: Any) -> None:
+        ll_module.data_layout = self._codegen._data_layout
+        fpm, pb = self._codegen._function_pass_manager()
+        for func in ll_module.functions:
+            if not func.is_declaration:
+                fpm.run(func, pb)
+
+    setattr(cls, "_optimize_functions", _optimize_functions)  # noqa: B010 - numba's class, typed without them
+    setattr(cls, "_holoslam_one_fpm", True)  # noqa: B010
+    return True
+
+
+def _inherited_options() -> tuple[str, ...] | None:
+    """The options a CPU compile takes from its caller's when it does not set them (``CPUTargetOptions.finalize``'s
+    ``inherit_if_not_set``), read from numba's source; None when it cannot be read."""
+    from numba.core import cpu
+
+    try:
+        src = inspect.getsource(cpu.CPUTargetOptions.finalize)
+    except (AttributeError, OSError, TypeError):
+        return None
+    names = tuple(re.findall(r"inherit_if_not_set\(\s*[\"'](\w+)[\"']", src))
+    return names or None
+
+
+def overloads_by_inherited_flags() -> bool:
+    """``_OverloadFunctionTemplate._get_impl`` keyed by the caller's inherited options (``_inherited_options``:
+    ``nrt``, ``fastmath``, ``error_model``, ``forceinline`` in numba 0.68) instead of all of its flags. numba keys
+    the implementation it builds for an ``@overload`` by the whole flags of the compile that calls it, so a call
+    of ``np.empty(n, np.int64)`` from a kernel and from a helper without a CPython wrapper (``JIT_INNER``), or
+    from one of numba's own jitted functions (no ``nogil``), compiles the same implementation again (~1 s of the
+    household's ~19 s serially): the options that differ never reach that compile, which sets its own."""
+    from numba.core import targetconfig
+    from numba.core.typing import templates
+
+    cls = getattr(templates, "_OverloadFunctionTemplate", None)
+    if cls is None:
+        return False
+    if getattr(cls, "_holoslam_by_inherited", False):
+        return True
+    from numba.core.compiler import Flags
+
+    inherited = _inherited_options()
+    if inherited is None or not hasattr(cls, "_build_impl") or not set(inherited) <= set(Flags.options):
+        return False
+    try:
+        src = inspect.getsource(cls._get_impl)
+    except (OSError, TypeError):
+        return False
+    # numba's body: the key of (context, args, kws, flags), a hit returned, else ``_build_impl(cache_key, ...)``
+    if "cache_key = self.context, tuple(args), tuple(kws.items()), flags" not in src:
+        return False
+
+    def value(v: Any) -> Any:  # an option's value as a hashable (fastmath's is a set of flags)
+        encode = getattr(v, "encode", None)
+        return encode() if callable(encode) and not isinstance(v, str) else v
+
+    def _get_impl(self: Any, args: Any, kws: Any) -> Any:
+        flags = targetconfig.ConfigStack.top_or_none()
+        key = None if flags is None else tuple(value(getattr(flags, n)) for n in inherited)
+        cache_key = self.context, tuple(args), tuple(kws.items()), key
+        try:
+            return self._impl_cache[cache_key]
+        except KeyError:
+            pass
+        return self._build_impl(cache_key, args, kws)
+
+    setattr(cls, "_get_impl", _get_impl)  # noqa: B010 - numba's class, typed without them
+    setattr(cls, "_holoslam_by_inherited", True)  # noqa: B010
+    return True

@@ -1,0 +1,129 @@
+"""holoslam._numba_worker: a compile worker's numba gives what numba's own code gives, for less work, and a user's
+process keeps numba as it is. Each case runs in a fresh interpreter (the replacements are process-wide)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from repo_paths import REPO
+
+
+def _in_child(code: str, cache, *args: str) -> list[str]:
+    """``code`` run by a fresh interpreter with numba's cache in the folder ``cache``: its printed words."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(REPO)}
+    out = subprocess.run([sys.executable, "-c", code, *args], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout.split()
+
+
+def test_compile_workers_flags_methods_are_numbas_own_results(tmp_path):
+    """``quicker_flags`` (a compile worker's): numba's ``Flags.values`` and ``hash`` give what numba's own
+    methods give, for the default flags and for flags with options set (to their defaults too), copies equal
+    and hashing alike; the parent process keeps numba's methods, its workers get the quick ones."""
+    code = (
+        "from numba.core.compiler import Flags\n"
+        "from numba.core import targetconfig\n"
+        "from holoslam import warmup, _numba_worker\n"
+        "def cases():\n"
+        "    a = Flags(); b = Flags(); b.nrt = True; b.error_model = 'numpy'; b.fastmath = True\n"
+        "    c = Flags(); c.nrt = Flags.options['nrt'].default; d = b.copy(); d.fastmath = False\n"
+        "    return a, b, c, d\n"
+        "def facts():\n"
+        "    fs = cases()\n"
+        "    return [sorted(f.values().items(), key=str) for f in fs], [hash(f) for f in fs], "
+        "[[x == y for y in fs] for x in fs]\n"
+        "def quick():\n"
+        "    return targetconfig.TargetConfig.values.__qualname__.startswith('quicker_flags')\n"
+        "before = facts()\n"
+        "pool = warmup.compile_in_background([], workers=1, wait_for=())\n"
+        "worker = pool.submit(quick).result()\n"
+        "pool.shutdown()\n"
+        "parent = quick()\n"
+        "ok = _numba_worker.quicker_flags()\n"
+        "after = facts()\n"
+        "print(worker, parent, ok, before == after, after[2][0][2], after[2][1][3])\n"
+    )
+    # c sets an option to its default: equal to the default flags (a), as numba's __eq__ says; d differs from b
+    assert _in_child(code, tmp_path) == ["True", "False", "True", "True", "True", "False"]
+
+
+def test_one_function_pass_manager_gives_numbas_machine_code(tmp_path):
+    """``one_function_pass_manager``: a kernel with inner helpers and numpy calls (the ray caster) compiles to
+    the same assembly as with numba's own function passes."""
+    code = (
+        "import hashlib, sys\n"
+        "from holoslam import _numba_worker, warmup\n"
+        "took = _numba_worker.one_function_pass_manager() if sys.argv[1] == '1' else 'off'\n"
+        "sig = next(s for s in warmup.load_signatures() if s.function == 'cast_counts_into')\n"
+        "disp = warmup._dispatcher(sig)\n"
+        "types = tuple(warmup._decode(a) for a in sig.args)\n"
+        "disp.compile(types)\n"
+        "asm = disp.inspect_asm(types)\n"
+        "print(took, len(asm) > 1000, hashlib.sha256(asm.encode()).hexdigest())\n"
+    )
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    own = _in_child(code, tmp_path / "a", "0")
+    quick = _in_child(code, tmp_path / "b", "1")
+    assert own[:2] == ["off", "True"] and quick[:2] == ["True", "True"]
+    assert quick[2] == own[2]
+
+
+_OVERLOADS = (
+    "import sys\n"
+    "import numba as nb, numpy as np\n"
+    "from numba.core.typing import templates\n"
+    "from holoslam import _numba_worker\n"
+    "took = _numba_worker.overloads_by_inherited_flags() if sys.argv[1] == '1' else 'off'\n"
+    "built = []\n"
+    "own = templates._OverloadFunctionTemplate._build_impl\n"
+    "def count(self, key, args, kws):\n"
+    "    if 'empty' in str(getattr(self, 'key', '')):\n"
+    "        built.append(str(args))\n"
+    "    return own(self, key, args, kws)\n"
+    "templates._OverloadFunctionTemplate._build_impl = count\n"
+    "def body(n):\n"
+    "    out = np.empty(n, np.int64)\n"
+    "    for i in range(n):\n"
+    "        out[i] = 2 * i\n"
+    "    return out.sum()\n"
+    "plain = nb.njit(body)\n"
+    "released = nb.njit(nogil=True)(body)\n"
+    "fast = nb.njit(fastmath=True)(body)\n"
+    "a, b = plain(5), released(5)\n"
+    "two = len(built)\n"
+    "c = fast(5)\n"
+    "print(took, a, b, c, two, len(built))\n"
+)
+
+
+def test_an_overload_is_built_once_for_callers_that_differ_only_in_options_it_does_not_inherit(tmp_path):
+    """``overloads_by_inherited_flags``: ``np.empty(n, np.int64)`` called from a kernel and from one that releases
+    the GIL is built once (numba's own key builds it twice), and again for a caller with ``fastmath`` (an option
+    its compile inherits); every caller's result is right."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    own = _in_child(_OVERLOADS, tmp_path / "a", "0")
+    quick = _in_child(_OVERLOADS, tmp_path / "b", "1")
+    assert own == ["off", "20", "20", "20", "2", "3"]
+    assert quick == ["True", "20", "20", "20", "1", "2"]
+
+
+def test_quicken_takes_on_this_numba_and_leaves_the_importing_process_alone(tmp_path):
+    """The pinned numba has what each replacement rests on (a newer one that lacks it is left as it is: then a
+    replacement says False, and this test says which); importing holoslam replaces nothing."""
+    code = (
+        "import holoslam.warmup, holoslam.pipeline\n"
+        "from numba.core import codegen\n"
+        "from numba.core.typing import templates\n"
+        "before = (getattr(codegen.CPUCodeLibrary, '_holoslam_one_fpm', False), "
+        "getattr(templates._OverloadFunctionTemplate, '_holoslam_by_inherited', False))\n"
+        "from holoslam import _numba_worker\n"
+        "took = _numba_worker.quicken()\n"
+        "print(*before, *(f'{k}={v}' for k, v in sorted(took.items())))\n"
+    )
+    assert _in_child(code, tmp_path) == [
+        "False", "False", "one_function_pass_manager=True", "overloads_by_inherited_flags=True", "quicker_flags=True"
+    ]
