@@ -86,8 +86,10 @@ class ConsistencyConfig:
     # corridor) agrees with the right place and with its aliases alike, so it vouches for neither (the rivals'
     # door-spacing argument above). Measured with ``LoopConfig.solo_max_offset_m``, whose waiting matches it keeps
     # out of cliques vouched for by spread alone (module docstring; README, *A biased odometer on the simulated
-    # building*). inf: every closure counts
-    vouch_max_sd_m: float = 1.0
+    # building*): the spreads that vouched for wrong cliques were 3.8-5.3 m. 1.6 m, not 1.0: a sparse laser's right
+    # corrections after a long corridor are certain to 0.9-1.5 m (the building without its compass, seed 37 x 1:
+    # three of them waited for ever at 1.0 and its revisits ended 4.84 m off; 0.25 m at 1.6). inf: every closure counts
+    vouch_max_sd_m: float = 1.6
 
 
 def correction(wTm: np.ndarray, mTn: np.ndarray, wTn: np.ndarray) -> np.ndarray:

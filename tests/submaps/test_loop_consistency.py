@@ -127,7 +127,7 @@ def test_only_certain_closures_vouch_for_a_clique():
     """``vouch_max_sd_m``: a closure kept with metres of spread along a corridor agrees with the right place and
     its aliases alike. An alias 14 m along the corridor, certain, with two such closures agreeing waits (one
     certain closure of the three ``min_agreeing``); with every closure counting it is accepted. Three certain right
-    closures are accepted, and an uncertain one agreeing with them then joins."""
+    closures are accepted, and an uncertain one agreeing with them then joins; closures certain to 1.5 m vouch."""
     wide = np.diag([2.5, 0.1, 0.01]) ** 2  # 2.5 m sd along the corridor (x)
     alias = (14.0, 0.0, 0.0)
 
@@ -145,3 +145,14 @@ def test_only_certain_closures_vouch_for_a_clique():
     assert right.offer(closure(1, 3, 306.0), EST, TRAVEL) == []
     assert len(right.offer(closure(0, 3, 312.0), EST, TRAVEL)) == 3
     assert len(right.offer(replace(closure(1, 2, 320.0), cov_mTn=wide), EST, TRAVEL)) == 1  # trusted ones vouch
+    # right closures certain to 1.5 m (a sparse laser's corrections after a corridor, 0.9-1.5 m on the simulated
+    # building) vouch for each other by default; at 1 m they would wait for certain ones that never come
+    corridor = np.diag([1.5, 0.1, 0.01]) ** 2
+
+    def offer_corridor(pool: LoopConsistency) -> list:
+        pool.offer(replace(closure(0, 2, 300.0), cov_mTn=corridor), EST, TRAVEL)
+        pool.offer(replace(closure(1, 3, 306.0), cov_mTn=corridor), EST, TRAVEL)
+        return pool.offer(replace(closure(0, 3, 312.0), cov_mTn=corridor), EST, TRAVEL)
+
+    assert len(offer_corridor(LoopConsistency())) == 3
+    assert offer_corridor(LoopConsistency(ConsistencyConfig(vouch_max_sd_m=1.0))) == []
