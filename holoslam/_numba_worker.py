@@ -78,13 +78,10 @@ def one_function_pass_manager() -> bool:
     cls = codegen.CPUCodeLibrary
     if getattr(cls, "_holoslam_one_fpm", False):
         return True
-    own = getattr(cls, "_optimize_functions", None)
-    if own is None or not hasattr(codegen.CPUCodegen, "_function_pass_manager"):
+    if not hasattr(codegen.CPUCodegen, "_function_pass_manager"):
         return False
-    try:  # the replacement rests on numba's body being exactly this: a new manager per function, run on it
-        src = inspect.getsource(own)
-    except (OSError, TypeError):
-        return False
+    # the replacement rests on numba's body being exactly this: a new manager per function, run on it
+    src = _source(getattr(cls, "_optimize_functions", None))
     if "_function_pass_manager()" not in src or "fpm.run(func, pb)" not in src:
         return False
 
@@ -100,15 +97,20 @@ def one_function_pass_manager() -> bool:
     return True
 
 
+def _source(obj: Any) -> str:
+    """numba's source of ``obj`` ("" when it cannot be read: the replacement resting on it is then skipped)."""
+    try:
+        return inspect.getsource(obj)
+    except (OSError, TypeError):
+        return ""
+
+
 def _inherited_options() -> tuple[str, ...] | None:
     """The options a CPU compile takes from its caller's when it does not set them (``CPUTargetOptions.finalize``'s
     ``inherit_if_not_set``), read from numba's source; None when it cannot be read."""
     from numba.core import cpu
 
-    try:
-        src = inspect.getsource(cpu.CPUTargetOptions.finalize)
-    except (AttributeError, OSError, TypeError):
-        return None
+    src = _source(getattr(getattr(cpu, "CPUTargetOptions", None), "finalize", None))
     names = tuple(re.findall(r"inherit_if_not_set\(\s*[\"'](\w+)[\"']", src))
     return names or None
 
@@ -133,12 +135,8 @@ def overloads_by_inherited_flags() -> bool:
     inherited = _inherited_options()
     if inherited is None or not hasattr(cls, "_build_impl") or not set(inherited) <= set(Flags.options):
         return False
-    try:
-        src = inspect.getsource(cls._get_impl)
-    except (OSError, TypeError):
-        return False
     # numba's body: the key of (context, args, kws, flags), a hit returned, else ``_build_impl(cache_key, ...)``
-    if "cache_key = self.context, tuple(args), tuple(kws.items()), flags" not in src:
+    if "cache_key = self.context, tuple(args), tuple(kws.items()), flags" not in _source(cls._get_impl):
         return False
 
     def value(v: Any) -> Any:  # an option's value as a hashable (fastmath's is a set of flags)

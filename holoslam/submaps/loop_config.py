@@ -126,7 +126,8 @@ class LoopConfig:
     # kidnapped). On the simulated building without its compass the wrong ones accepted alone had moved 4.2-7.0 m
     # (a room one door along), the right ones at most 1.6 m but two corrections of 4.8 and 5.2 m. With
     # ``ConsistencyConfig.vouch_max_sd_m`` (alone it does worse than neither; README, *A biased odometer on the
-    # simulated building*, also for a held-out run it failed: a needed correction over 4 m held back). inf: off
+    # simulated building*: a held-out run whose needed corrections over 4 m waited for ever at 1 m of vouching is
+    # joined at 1.6 m). inf: off
     solo_max_offset_m: float = 4.0
     # A windowed match on its window's edge (x or y on the box's outer cells, or the heading on its outer angles)
     # is rejected: the score is largest where the window cuts it off (an optimum on the boundary of the domain
