@@ -230,10 +230,10 @@ def object_hypothesis(session_xy: dict[str, np.ndarray], world_xy: dict[str, np.
 def precompute_stored(stored, cfg: RelocaliseConfig) -> tuple:
     """A stored submap's branch-and-bound grids: (full resolution, coarse or None) (``coarse_resolution_m``)."""
     from holoslam.submaps import bnb
-    from holoslam.submaps.global_search import pool_grid
+    from holoslam.submaps.global_search import pool_factor, pool_grid
 
     fine = bnb.precompute(stored.prob, cfg.depth, origin=stored.origin, res=stored.resolution)
-    f = int(round(cfg.coarse_resolution_m / float(stored.resolution))) if cfg.coarse_resolution_m > 0 else 1
+    f = pool_factor(cfg.coarse_resolution_m, float(stored.resolution))
     coarse = None if f <= 1 else bnb.precompute(pool_grid(stored.prob, f), cfg.depth, origin=stored.origin,
                                                 res=float(stored.resolution) * f)
     return fine, coarse

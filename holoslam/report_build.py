@@ -4,6 +4,7 @@ accuracy against the log's ground truth (``accuracy``)."""
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable, Sequence
 from typing import Any
 
@@ -67,6 +68,8 @@ def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None, odometer
         odometer=odometer,
         loop_search=dict(fe.loop_counts) or None,
         breaks=int(fe.breaks),
+        return_gap_m=round(float(fe.return_gap_m), 4) if math.isfinite(fe.return_gap_m) else None,
+        bridged_returns=bool(fe.bridged_returns),
     )
 
 

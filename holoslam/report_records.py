@@ -65,6 +65,10 @@ class SubmapSummary:
     # scans that stopped fitting the map: lost)
     loop_search: dict[str, int] | None = None
     breaks: int = 0
+    # m: the gap between neighbouring returns at the laser's median range; True when wider than a submap cell,
+    # so that each scan's returns on one surface were joined in the submaps (GridConfig.bridge_over_cells)
+    return_gap_m: float | None = None
+    bridged_returns: bool = False
 
 
 @dataclass(frozen=True)

@@ -78,6 +78,9 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
     lines = [
         f"  submaps: {sm.count} ({', '.join(f'{k} {n}' for k, n in sm.split_reasons.items())}); "
         f"{sm.loops_tried} revisit registrations tried"
+        + (f"; neighbouring returns {100 * sm.return_gap_m:.1f} cm apart at the median range"
+           + (" (wider than a cell: bridged in the submaps)" if sm.bridged_returns else "")
+           if sm.return_gap_m else "")
     ]
     if sm.nodes is not None:
         lines.append(

@@ -35,7 +35,7 @@ REPORT = {
                 "odometer": {"scale": 0.9926, "scale_std": 0.0013, "yaw_deg_per_m": -0.916, "yaw_std": 0.072,
                              "stretches": 62, "distance_m": 122.7, "off": True},
                 "loop_search": {"global searches": 12, "global: accepted (consistent)": 2, "windowed searches": 1585},
-                "breaks": 1},
+                "breaks": 1, "return_gap_m": 0.0817, "bridged_returns": True},
     "factors": {"relative_pose/dead_reckoning": 42, "relative_pose/loop": 497, "compass_heading": 42,
                 "object_landmark": 104},
     "solver": {"method": "batch", "iterations": 9, "rounds": 3, "initial_error": 794.4, "final_error": 101.4,

@@ -51,10 +51,10 @@ from holoslam.submaps.local_slam import ActiveSubmap, Break, LocalSlam, LocalSla
 from holoslam.submaps.loops import LoopConfig, LoopSearch
 from holoslam.submaps.odometer import OdometerCorrection, OdometerCorrectionConfig, OdometerWatch, is_blind
 from holoslam.submaps.odometry_noise import OdometryNoise, odometry_noise
-from holoslam.submaps.probgrid import ProbGrid
+from holoslam.submaps.probgrid import GridConfig, ProbGrid
 from holoslam.submaps.revisits import RevisitConfig
 from holoslam.submaps.segment import Submap, voxel_downsample
-from holoslam.types import LogData, ObjectObservation
+from holoslam.types import LogData, ObjectObservation, Scan
 
 if TYPE_CHECKING:
     from holoslam.graph.problem import SlamProblem
@@ -122,6 +122,10 @@ class FrontEnd:
     odometer_correction: OdometerCorrection | None = None
     # the stamps of those blind matched nodes: the odometer checks leave out the stretches that hold one
     blind_stamps_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    # m: the gap between two neighbouring returns at the laser's median range, and whether the submaps bridged
+    # such gaps (wider than a cell: ``local_grid_config``)
+    return_gap_m: float = math.nan
+    bridged_returns: bool = False
 
     def blind_at(self, stamps_ns: np.ndarray) -> np.ndarray:
         """Which of ``stamps_ns`` are nodes whose match was blind along the track (bool, same shape)."""
@@ -197,6 +201,8 @@ def build_problem(
     thread)."""
     cfg = config or FrontEndConfig()
     run = _dead_reckoning(log, cfg)  # step 1
+    grid, return_gap = local_grid_config(run.scans, cfg)
+    cfg = replace(cfg, local=replace(cfg.local, grid=grid))
     watch = OdometerWatch(cfg.odometer, run.ost, run.opose)  # the odometer checked as local SLAM goes
     correction = None
     try:
@@ -216,7 +222,7 @@ def build_problem(
                     {**dict(sorted(loops.counts.items())),
                      **{f"{k} search ms": int(1000 * v) for k, v in loops.seconds.items()}},
                     sum(k == "lost" for k in graph.kind), loops.scale, watch.blind_share, correction,
-                    watch.blind_stamps_ns)
+                    watch.blind_stamps_ns, return_gap, grid.bridge)
 
 
 def corrected_log(log: LogData, fe: FrontEnd) -> LogData:
@@ -291,16 +297,26 @@ def _dead_reckoning(log: LogData, cfg: FrontEndConfig) -> _Run:
                 travelled)
 
 
+def local_grid_config(scans: Sequence[Scan], cfg: FrontEndConfig) -> tuple[GridConfig, float]:
+    """The submaps' grid settings for this laser: the odds updates scaled to its scan rate (``GridConfig.for_rate``)
+    and its returns bridged where neighbouring ones lie farther apart than a cell (``GridConfig.for_beams``); and
+    that gap (m, at the median range; nan without returns)."""
+    grid = cfg.local.grid.for_rate(scan_rate_hz(np.array([s.stamp_ns for s in scans], np.int64)))
+    step, median = beam_step_and_range(scans, grid.max_range)
+    return grid.for_beams(step, median), step * median
+
+
 def _local_slam(
     run: _Run, cfg: FrontEndConfig, progress: Callable[[int, int], None] | None,
     optimize: Callable[[object], np.ndarray] | None, watch: OdometerWatch,
 ) -> tuple[list[Submap], AnchorGraph, LoopSearch]:
     """Steps 2-3: local SLAM over the scans and the revisit search; returns the finished submaps (by index), the
     relative-pose graph between their anchors and the loop search (its counts). ``watch`` checks the odometer on
-    the matched nodes (raises ``_OdometerOff`` when it finds it off)."""
-    grid = cfg.local.grid.for_rate(scan_rate_hz(np.array([s.stamp_ns for s in run.scans], np.int64)))
-    slam = LocalSlam(replace(cfg.local, grid=grid), run.bTs)
+    the matched nodes (raises ``_OdometerOff`` when it finds it off). ``cfg.local.grid`` is used as it is
+    (``build_problem`` fits it to the laser: ``local_grid_config``)."""
+    slam = LocalSlam(cfg.local, run.bTs)
     loops = LoopSearch(cfg.loops, cfg.local.match)
+    loops.bridged = cfg.local.grid.bridge
     graph = AnchorGraph(run.dr_wTb[0])
     records: list[Future[Submap]] = []
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-submaps") as worker:
@@ -469,6 +485,17 @@ def scan_rate_hz(stamps_ns: np.ndarray, span: int = 10) -> float:
         return 0.0
     period = float(np.median((t[span:] - t[:-span]).astype(np.float64))) / span / 1e9
     return 1.0 / period if period > 0 else 0.0
+
+
+def beam_step_and_range(scans: Sequence[Scan], max_range_m: float, samples: int = 500) -> tuple[float, float]:
+    """The laser's beam spacing (rad, the median ``angle_increment``) and the median range of its returns (m,
+    those within ``max_range_m``) over at most ``samples`` scans spread evenly over the log; nan without returns."""
+    if not scans:
+        return math.nan, math.nan
+    pick = [scans[i] for i in np.unique(np.linspace(0, len(scans) - 1, min(samples, len(scans))).astype(np.int64))]
+    step = float(np.median([abs(s.angle_increment) for s in pick]))
+    ranges = np.concatenate([s.ranges[s.valid & (s.ranges <= max_range_m)] for s in pick])
+    return step, float(np.median(ranges)) if ranges.size else math.nan
 
 
 def _headings(hst, hyaw, hsig, anchors):

@@ -130,6 +130,7 @@ class LoopSearch:
         self.counts: dict[str, int] = {}  # searches and their outcomes, by reason (the run report's loop section)
         self.seconds = {"windowed": 0.0, "global": 0.0}  # wall seconds spent in each kind of search
         self.scale = 1.0  # of every score threshold: the local matches' usual score / score_reference, at most 1
+        self.bridged = False  # whether the submaps' returns were bridged (``GridConfig.bridge``: the map check's)
         self.ambiguous = 0  # matches with a second peak (rejected or widened, ``LoopConfig.ambiguity``)
         # (old, new, best bnb.Match, its second peaks) of every branch-and-bound match checked, for diagnostics
         self.peaks: list[tuple[int, int, object, list]] = []
@@ -340,13 +341,13 @@ class LoopSearch:
         of ``loop_consistency``), counted under ``kind``."""
         c = self.cfg
         if c.verify.enabled:
-            verify = c.verify.scaled(self.scale)  # a sparse laser's walls agree less (``VerifyConfig``)
+            verify = c.verify.scaled(self.scale, self.bridged)  # a sparse laser's walls agree less (``VerifyConfig``)
             agree = map_agreement(self.grids, est_wTa, self._parts(len(est_wTa)), cand.old, cand.new, cand.mTn,
                                   verify)
             if agree.verdict(verify) is False:
                 self._count(f"{kind}: rejected by the map check")
                 return []
-        accepted = self.consistency.offer(cand, est_wTa, travel)
+        accepted = self.consistency.offer(cand, est_wTa, travel, self._parts(len(est_wTa)))
         self._count(f"{kind}: accepted (consistent)" if accepted else f"{kind}: waiting for agreement")
         if self.consistency.rivalled:
             self._count(f"{kind}: waiting, a rival clique as certain")
@@ -449,13 +450,13 @@ class LoopSearch:
     def _coarse(self, m: int):
         """m's grid max-pooled to ``global_resolution_m``, precomputed (cached like ``_precomputed``)."""
         from holoslam.submaps import bnb
-        from holoslam.submaps.global_search import pool_grid
+        from holoslam.submaps.global_search import pool_factor, pool_grid
 
         if m in self.pre_coarse:
             self.pre_coarse.move_to_end(m)
             return self.pre_coarse[m]
         gr = self.grids[m]
-        f = max(1, int(round(self.cfg.global_resolution_m / gr.resolution)))
+        f = pool_factor(self.cfg.global_resolution_m, gr.resolution)
         self.pre_coarse[m] = bnb.precompute(pool_grid(gr.prob, f), self.cfg.depth, origin=gr.origin,
                                             res=gr.resolution * f)
         if len(self.pre_coarse) > self.cfg.precomputed_cache:

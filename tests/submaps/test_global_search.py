@@ -10,7 +10,7 @@ import pytest
 
 from holoslam import geometry as g
 from holoslam.submaps import bnb
-from holoslam.submaps.global_search import clip_window, coarse_match, pool_grid
+from holoslam.submaps.global_search import clip_window, coarse_match, pool_factor, pool_grid
 
 
 def test_pooled_grid_is_the_block_maximum_with_the_same_origin():
@@ -22,6 +22,18 @@ def test_pooled_grid_is_the_block_maximum_with_the_same_origin():
         for c in range(2):
             assert q[r, c] == p[4 * r:4 * r + 4, 4 * c:4 * c + 4].max()
     assert pool_grid(p, 1) is p or np.array_equal(pool_grid(p, 1), p)
+
+
+def test_coarse_cells_are_never_smaller_than_asked():
+    """The coarse search's thresholds were measured on 20 cm cells: a grid whose cell does not divide that pools
+    to the next larger coarse cell, never a smaller one; 5 cm pools 4 to a side despite 0.2 / 0.05 > 4 in floats."""
+    assert pool_factor(0.2, 0.05) == 4
+    assert pool_factor(0.2, 0.0817) == 3  # 24.5 cm, not 2 (16.3 cm)
+    assert pool_factor(0.2, 0.1) == 2 and pool_factor(0.2, 0.3) == 1
+    assert pool_factor(0.0, 0.05) == 1 and pool_factor(0.2, 0.0) == 1  # off, or a degenerate grid
+    for res in np.linspace(0.02, 0.25, 47):
+        f = pool_factor(0.2, float(res))
+        assert f * res >= 0.2 - 1e-9 and (f == 1 or (f - 1) * res < 0.2 - 1e-9)
 
 
 def test_window_clipped_to_the_grid_or_none_when_it_misses():

@@ -156,3 +156,34 @@ def test_only_certain_closures_vouch_for_a_clique():
 
     assert len(offer_corridor(LoopConsistency())) == 3
     assert offer_corridor(LoopConsistency(ConsistencyConfig(vouch_max_sd_m=1.0))) == []
+
+
+def test_closures_of_two_parts_of_the_run_do_not_vouch_for_each_other():
+    """Across a break of local SLAM (the robot carried 30 m and turned 90 deg) the new part's estimate stands on
+    nothing: aliases found near it leave it where it is, as does a right closure of the part before the break,
+    so all three agree by construction. Told which part each anchor is in, the aliases wait, and three right
+    closures of the carried part join it (intel at 1.4 Hz with half its beams, kidnapped at two thirds: two aliases
+    14 and 26 m off, vouched for by a closure before the kidnap, joined the parts 8 m and 97 deg off)."""
+    truth = np.array([[0.0, 0.0, 0.0], [8.0, 0.0, 0.0], [4.0, 2.0, 0.0], [6.0, 3.0, math.pi]])
+    est = truth.copy()
+    est[3] = g.compose(np.array([30.0, 0.0, math.pi / 2]), truth[3])  # the carried part, where its odometry says
+    travel = np.array([0.0, 8.0, 300.0, 340.0])
+    parts = np.array([0, 0, 0, 1])
+
+    def as_estimated(old, new, travelled):  # a match that leaves the estimate as it is
+        return Closure(old, new, g.between(est[old], est[new]), COV, travelled)
+
+    def right(old, new, travelled):
+        return Closure(old, new, g.between(truth[old], truth[new]), COV, travelled)
+
+    before, alias_a, alias_b = right(0, 2, 300.0), as_estimated(0, 3, 340.0), as_estimated(1, 3, 346.0)
+    blind = LoopConsistency()
+    assert blind.offer(before, est, travel) == [] and blind.offer(alias_a, est, travel) == []
+    assert len(blind.offer(alias_b, est, travel)) == 3  # without the parts: the aliases join
+    told = LoopConsistency()
+    for c in (before, alias_a, alias_b):
+        assert told.offer(c, est, travel, parts) == []
+    assert told.offer(right(0, 3, 352.0), est, travel, parts) == []
+    assert told.offer(right(1, 3, 358.0), est, travel, parts) == []
+    joined = told.offer(right(0, 3, 364.0), est, travel, parts)
+    assert sorted(c.travelled for c in joined) == [352.0, 358.0, 364.0]

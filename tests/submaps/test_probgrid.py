@@ -153,3 +153,68 @@ def test_a_slower_laser_gets_stronger_odds_updates():
     assert 0.69 < slow.hit_probability < 0.70 and 0.46 < slow.miss_probability < 0.47
     off = GridConfig(reference_rate_hz=0.0)
     assert off.for_rate(1.0) is off
+
+
+def test_returns_are_bridged_only_for_a_laser_whose_returns_lie_farther_apart_than_a_cell():
+    """``GridConfig.for_beams``: a laser whose neighbouring returns lie closer than a cell at its median range is
+    not bridged; one whose returns lie farther apart is; ``bridge_over_cells`` 0 never, nor a log without returns."""
+    import math
+
+    from holoslam.submaps.probgrid import GridConfig
+
+    cfg = GridConfig()
+    one_deg = math.radians(1.0)
+    assert cfg.for_beams(one_deg, 2.3) is cfg and not cfg.bridge  # 4.0 cm gaps in 5 cm cells
+    coarse = cfg.for_beams(2 * one_deg, 2.34)  # ACES with every second beam dropped: 8.2 cm
+    assert coarse.bridge and coarse.resolution == cfg.resolution and coarse.hit_probability == cfg.hit_probability
+    assert GridConfig(bridge_over_cells=2.0).for_beams(2 * one_deg, 2.34).bridge is False  # 1.6 cells
+    assert GridConfig(bridge_over_cells=0.0).for_beams(2 * one_deg, 2.34).bridge is False
+    assert cfg.for_beams(one_deg, math.nan) is cfg
+
+
+def test_a_dotted_wall_is_made_whole_and_an_edge_is_not_bridged():
+    """``bridge_returns``: between two neighbouring returns on one surface, points of their chord a cell or less
+    apart (on the wall: the wall x = 2 m stays x = 2 m); across a depth edge (a return 1 m behind its neighbour)
+    and next to a beam without return, nothing."""
+    import numpy as np
+
+    from holoslam.submaps.probgrid import bridge_returns
+
+    a = np.radians(np.arange(-40.0, 41.0, 2.0))
+    r = 2.0 / np.cos(a)  # the wall x = 2 m, returns 7-9 cm apart
+    r[5] = np.inf  # no return
+    r[30] += 1.0  # a return 1 m behind the wall: an edge on each side
+    rb, ab = bridge_returns(r, a, 0.05, 70.0)
+    assert np.array_equal(rb[:r.size], r) and np.array_equal(ab[:a.size], a)  # the beams themselves first
+    x, y = rb[r.size:] * np.cos(ab[r.size:]), rb[r.size:] * np.sin(ab[r.size:])
+    assert np.allclose(x, 2.0, atol=1e-9)  # every bridging point on the wall
+    pts = np.sort(np.concatenate([2.0 * np.tan(np.delete(a, [5, 30])), y]))
+    gaps = np.diff(pts)
+    assert gaps.max() > 0.1  # the holes at the missing return and at the edge stay
+    assert np.sum(gaps > 0.05 + 1e-9) == 2  # where beams 5 and 30 were: nothing else wider than a cell
+    assert not np.any((y > 2.0 * np.tan(a[29])) & (y < 2.0 * np.tan(a[31])))  # nothing bridges across the edge
+    # a circle of 3 m at 2 deg: 10.5 cm chords, two points each
+    c = np.radians(np.arange(-90.0, 91.0, 2.0))
+    rc, _ = bridge_returns(np.full(c.size, 3.0), c, 0.05, 70.0)
+    assert rc.size == c.size + 2 * (c.size - 1)
+
+
+def test_beam_spacing_and_median_range_are_read_from_the_scans():
+    """``beam_step_and_range``: the median beam step and the median of the returns within the grid's range, over
+    scans spread through the log; beams without return and returns past the range are not counted."""
+    import math
+
+    import numpy as np
+
+    from holoslam.submaps.frontend import beam_step_and_range
+    from holoslam.types import Scan
+
+    def scan(k, ranges):
+        r = np.asarray(ranges, np.float32)
+        return Scan(k, "laser", -math.pi / 2, math.radians(2.0), 0.1, 40.0, r, np.isfinite(r) & (r < 40.0))
+
+    scans = [scan(k, [1.0, 2.0, np.inf, 3.0, 35.0]) for k in range(1000)]
+    step, median = beam_step_and_range(scans, 30.0)
+    assert step == pytest.approx(math.radians(2.0)) and median == pytest.approx(2.0)  # 35 m is past 30 m
+    assert all(math.isnan(v) for v in beam_step_and_range([], 30.0))
+    assert math.isnan(beam_step_and_range([scan(0, [np.inf] * 5)], 30.0)[1])
