@@ -316,7 +316,6 @@ def _local_slam(
     (``build_problem`` fits it to the laser: ``local_grid_config``)."""
     slam = LocalSlam(cfg.local, run.bTs)
     loops = LoopSearch(cfg.loops, cfg.local.match)
-    loops.bridged = cfg.local.grid.bridge
     graph = AnchorGraph(run.dr_wTb[0])
     records: list[Future[Submap]] = []
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="holoslam-submaps") as worker:

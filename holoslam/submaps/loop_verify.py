@@ -53,19 +53,11 @@ class VerifyConfig:
     # all under 0.9, and the parts were never joined (48 m off); aliases 0.29-0.80: the check alone cannot tell
     # them apart there, the consistency test's clique of closures from places metres apart does
     min_agreement: float = 0.9
-    # the fraction on submaps whose returns were bridged (``GridConfig.bridge``, a laser with coarse beams): their
-    # scans match at full-rate scores, so the scaling above no longer lowers the 0.9, but where two sides meet
-    # the walls of a laser that slow and coarse agree less than a full-rate laser's. ACES at 1.4 Hz with half its
-    # beams, kidnapped, bridged: the right global matches agreed 0.74-0.95 (0.56 for one 0.67 m off), the aliases
-    # 0.50-0.64 (unbridged: right 0.63-0.81, aliases 0.51-0.81)
-    min_agreement_bridged: float = 0.7
     min_cells: int = 30  # cells of overlap below which the check gives no verdict (a match at a map's edge)
 
-    def scaled(self, scale: float, bridged: bool = False) -> VerifyConfig:
-        """The check with ``min_agreement`` times ``scale`` (the loop search's score scale, at most 1), at most
-        ``min_agreement_bridged`` when the submaps' returns were ``bridged``."""
-        m = self.min_agreement * min(1.0, scale)
-        return replace(self, min_agreement=min(m, self.min_agreement_bridged) if bridged else m)
+    def scaled(self, scale: float) -> VerifyConfig:
+        """The check with ``min_agreement`` times ``scale`` (the loop search's score scale, at most 1)."""
+        return replace(self, min_agreement=self.min_agreement * min(1.0, scale))
 
 
 @dataclass(frozen=True, slots=True)

@@ -130,7 +130,6 @@ class LoopSearch:
         self.counts: dict[str, int] = {}  # searches and their outcomes, by reason (the run report's loop section)
         self.seconds = {"windowed": 0.0, "global": 0.0}  # wall seconds spent in each kind of search
         self.scale = 1.0  # of every score threshold: the local matches' usual score / score_reference, at most 1
-        self.bridged = False  # whether the submaps' returns were bridged (``GridConfig.bridge``: the map check's)
         self.ambiguous = 0  # matches with a second peak (rejected or widened, ``LoopConfig.ambiguity``)
         # (old, new, best bnb.Match, its second peaks) of every branch-and-bound match checked, for diagnostics
         self.peaks: list[tuple[int, int, object, list]] = []
@@ -341,7 +340,7 @@ class LoopSearch:
         of ``loop_consistency``), counted under ``kind``."""
         c = self.cfg
         if c.verify.enabled:
-            verify = c.verify.scaled(self.scale, self.bridged)  # a sparse laser's walls agree less (``VerifyConfig``)
+            verify = c.verify.scaled(self.scale)  # a sparse laser's walls agree less (``VerifyConfig``)
             agree = map_agreement(self.grids, est_wTa, self._parts(len(est_wTa)), cand.old, cand.new, cand.mTn,
                                   verify)
             if agree.verdict(verify) is False:

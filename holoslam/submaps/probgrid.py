@@ -43,11 +43,16 @@ class GridConfig:
     reference_rate_hz: float = 4.6
     # A laser whose neighbouring returns lie farther apart than a cell at its median range (``for_beams``: every
     # second beam of intel and ACES dropped, 2 deg, 6.8 and 8.2 cm) leaves a wall one scan sees as dotted cells, and
-    # scans matched into it worse. Such a laser's neighbouring returns on one surface are joined by hits a cell apart
-    # (``bridge_returns``; the matched points stay the returns). 0: never. Measured on the shared logs, laser frame
-    # (README: *Coarse beams*): ACES with half its beams 0.0467 m / 0.505 deg -> BRIDGE_ACES, fr079 with a quarter
-    # BRIDGE_FR079; the logs' own lasers (1.6-4.1 cm) are not bridged
-    bridge_over_cells: float = 1.0
+    # scans match into it worse. With this > 0, when the gap exceeds this many cells each scan's neighbouring returns
+    # on one surface are joined in the submaps by hits a cell apart (``bridge_returns``; the matched points stay the
+    # returns). Off by default: it maps such lasers better (whole runs at the laser, 2 deg beams: intel 0.0319 m /
+    # 0.520 deg -> 0.0180 / 0.330, ACES 0.0467 / 0.505 -> 0.0370 / 0.350; fr079 with a quarter of its beams 0.0525 /
+    # 0.585 -> 0.0470 / 0.498), but bridged submaps score scans like a full-rate laser's, the loop search's score
+    # scale no longer lowers the map check's threshold, and ACES at 1.4 Hz with half its beams kidnapped in its
+    # middle is not joined (its right matches agree 0.74-0.95 with the other side's walls, under 0.9). 1: bridge
+    # every laser whose gap exceeds a cell (README: *Coarse beams*). The shared logs' own lasers (1.6-4.1 cm), the
+    # household's and the simulated building's (3.2-4.3 cm) are not bridged at 1
+    bridge_over_cells: float = 0.0
     # deg: two neighbouring returns are one surface when their chord is at most the gap r dphi of a wall seen at
     # this incidence (r dphi / cos: 2.9 gaps at 70 deg); farther apart they are an edge and what lies behind it
     bridge_max_incidence_deg: float = 70.0
@@ -56,7 +61,7 @@ class GridConfig:
     def for_beams(self, beam_step_rad: float, median_range_m: float) -> GridConfig:
         """These settings for a laser whose beams are ``beam_step_rad`` apart and whose returns lie at
         ``median_range_m`` (median): returns bridged (``bridge``) when the gap between two neighbouring returns
-        there exceeds ``bridge_over_cells`` cells; unchanged otherwise."""
+        there exceeds ``bridge_over_cells`` cells (> 0); unchanged otherwise."""
         gap = abs(beam_step_rad) * median_range_m
         if self.bridge_over_cells <= 0 or not gap > self.bridge_over_cells * self.resolution:  # nan included
             return self

@@ -156,13 +156,15 @@ def test_a_slower_laser_gets_stronger_odds_updates():
 
 
 def test_returns_are_bridged_only_for_a_laser_whose_returns_lie_farther_apart_than_a_cell():
-    """``GridConfig.for_beams``: a laser whose neighbouring returns lie closer than a cell at its median range is
-    not bridged; one whose returns lie farther apart is; ``bridge_over_cells`` 0 never, nor a log without returns."""
+    """``GridConfig.for_beams`` at ``bridge_over_cells`` 1: a laser whose neighbouring returns lie closer than a cell
+    at its median range is not bridged; one whose returns lie farther apart is; at 0 (the default) never, nor a log
+    without returns."""
     import math
 
     from holoslam.submaps.probgrid import GridConfig
 
-    cfg = GridConfig()
+    assert GridConfig().for_beams(math.radians(2.0), 2.34).bridge is False  # off by default (README: *Coarse beams*)
+    cfg = GridConfig(bridge_over_cells=1.0)
     one_deg = math.radians(1.0)
     assert cfg.for_beams(one_deg, 2.3) is cfg and not cfg.bridge  # 4.0 cm gaps in 5 cm cells
     coarse = cfg.for_beams(2 * one_deg, 2.34)  # ACES with every second beam dropped: 8.2 cm

@@ -1,8 +1,8 @@
 """A laser with beams 2 deg apart: the first 800 s of the Freiburg benchmark's ACES log (../shared/realdata, not in
 the repository) with every second beam dropped. At the log's median range (2.1-2.3 m) two neighbouring returns lie
 7-8 cm apart, so one scan's returns on a wall fall one or two 5 cm cells apart; the submaps bridge neighbouring
-returns on one surface (``GridConfig.for_beams``, ``probgrid.bridge_returns``) and the keyframes match more truly
-than into dotted walls."""
+returns on one surface when asked to (``GridConfig.bridge_over_cells`` 1; ``probgrid.bridge_returns``) and the
+keyframes match more truly than into dotted walls."""
 
 from __future__ import annotations
 
@@ -55,9 +55,9 @@ def aces_half_beams(tmp_path_factory):
     log = derive.drop_beams(full, 2)
     stamps = np.array([s.stamp_ns for s in log.scans], np.int64)
     rel = cut_relations(read_relations(REALDATA / "aces.relations"), int(stamps[0]), int(stamps[-1]))
-    cfg = FrontEndConfig()
-    dotted = dataclasses.replace(cfg, local=dataclasses.replace(
-        cfg.local, grid=dataclasses.replace(cfg.local.grid, bridge_over_cells=0.0)))
+    dotted = FrontEndConfig()  # bridging is off by default (``GridConfig.bridge_over_cells``)
+    cfg = dataclasses.replace(dotted, local=dataclasses.replace(
+        dotted.local, grid=dataclasses.replace(dotted.local.grid, bridge_over_cells=1.0)))
     bridged_fe = build_problem(log, config=cfg, optimize=reestimate_anchors)
     dotted_fe = build_problem(log, config=dotted, optimize=reestimate_anchors)
     return bridged_fe, dotted_fe, _errors(log, bridged_fe, rel), _errors(log, dotted_fe, rel)
