@@ -70,6 +70,7 @@ def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None, odometer
         breaks=int(fe.breaks),
         return_gap_m=round(float(fe.return_gap_m), 4) if math.isfinite(fe.return_gap_m) else None,
         bridged_returns=bool(fe.bridged_returns),
+        grid_cell_m=float(fe.grid_cell_m),
     )
 
 

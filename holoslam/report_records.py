@@ -69,6 +69,7 @@ class SubmapSummary:
     # so that each scan's returns on one surface were joined in the submaps (GridConfig.bridge_over_cells)
     return_gap_m: float | None = None
     bridged_returns: bool = False
+    grid_cell_m: float | None = None  # m: the submaps' cell
 
 
 @dataclass(frozen=True)

@@ -74,12 +74,21 @@ def _vision_text(v: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def _gap_note(sm: SubmapSummary) -> str:
+    """What the submaps made of a laser whose neighbouring returns lie farther apart than a cell."""
+    if sm.bridged_returns:
+        return " (wider than a cell: bridged in the submaps)"
+    if sm.return_gap_m and sm.grid_cell_m and sm.return_gap_m > sm.grid_cell_m:
+        return (f" (wider than the {100 * sm.grid_cell_m:.0f} cm cell: walls are dotted; "
+                "frontend.local.grid.bridge_over_cells: 1 bridges them, README *Coarse beams*)")
+    return ""
+
+
 def _submaps_text(sm: SubmapSummary) -> list[str]:
     lines = [
         f"  submaps: {sm.count} ({', '.join(f'{k} {n}' for k, n in sm.split_reasons.items())}); "
         f"{sm.loops_tried} revisit registrations tried"
-        + (f"; neighbouring returns {100 * sm.return_gap_m:.1f} cm apart at the median range"
-           + (" (wider than a cell: bridged in the submaps)" if sm.bridged_returns else "")
+        + (f"; neighbouring returns {100 * sm.return_gap_m:.1f} cm apart at the median range" + _gap_note(sm)
            if sm.return_gap_m else "")
     ]
     if sm.nodes is not None:

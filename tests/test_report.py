@@ -35,7 +35,7 @@ REPORT = {
                 "odometer": {"scale": 0.9926, "scale_std": 0.0013, "yaw_deg_per_m": -0.916, "yaw_std": 0.072,
                              "stretches": 62, "distance_m": 122.7, "off": True},
                 "loop_search": {"global searches": 12, "global: accepted (consistent)": 2, "windowed searches": 1585},
-                "breaks": 1, "return_gap_m": 0.0817, "bridged_returns": True},
+                "breaks": 1, "return_gap_m": 0.0817, "bridged_returns": True, "grid_cell_m": 0.05},
     "factors": {"relative_pose/dead_reckoning": 42, "relative_pose/loop": 497, "compass_heading": 42,
                 "object_landmark": 104},
     "solver": {"method": "batch", "iterations": 9, "rounds": 3, "initial_error": 794.4, "final_error": 101.4,
@@ -170,3 +170,23 @@ def test_each_stage_gives_its_freed_memory_back(monkeypatch):
     with pytest.raises(RuntimeError), clock.stage("b"):
         raise RuntimeError("a failing stage gives its memory back too")
     assert calls == [0, 0] and set(clock.timings) == {"a", "b"}
+
+
+def test_the_text_says_how_far_apart_the_lasers_returns_lie_and_what_the_submaps_made_of_it():
+    """Neighbouring returns closer than a cell: the gap alone; farther apart and bridged: so; farther apart and not
+    bridged (the default): that the walls are dotted and which setting bridges them."""
+    import copy
+
+    def submaps_line(**fields):
+        r = copy.deepcopy(REPORT)
+        r["submaps"].update(fields)
+        (line,) = [t for t in RunReport.from_dict(r).text().splitlines() if t.startswith("  submaps:")]
+        return line
+
+    fine = submaps_line(return_gap_m=0.0325, bridged_returns=False)
+    assert fine.endswith("neighbouring returns 3.2 cm apart at the median range")
+    assert submaps_line(return_gap_m=0.0817, bridged_returns=True).endswith(
+        "8.2 cm apart at the median range (wider than a cell: bridged in the submaps)")
+    dotted = submaps_line(return_gap_m=0.0817, bridged_returns=False)
+    assert "wider than the 5 cm cell: walls are dotted" in dotted and "bridge_over_cells: 1" in dotted
+    assert "apart" not in submaps_line(return_gap_m=None)

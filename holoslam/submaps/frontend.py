@@ -126,6 +126,7 @@ class FrontEnd:
     # such gaps (wider than a cell: ``local_grid_config``)
     return_gap_m: float = math.nan
     bridged_returns: bool = False
+    grid_cell_m: float = 0.05  # m: the submaps' cell
 
     def blind_at(self, stamps_ns: np.ndarray) -> np.ndarray:
         """Which of ``stamps_ns`` are nodes whose match was blind along the track (bool, same shape)."""
@@ -222,7 +223,7 @@ def build_problem(
                     {**dict(sorted(loops.counts.items())),
                      **{f"{k} search ms": int(1000 * v) for k, v in loops.seconds.items()}},
                     sum(k == "lost" for k in graph.kind), loops.scale, watch.blind_share, correction,
-                    watch.blind_stamps_ns, return_gap, grid.bridge)
+                    watch.blind_stamps_ns, return_gap, grid.bridge, grid.resolution)
 
 
 def corrected_log(log: LogData, fe: FrontEnd) -> LogData:
