@@ -122,11 +122,18 @@ class FrontEnd:
     odometer_correction: OdometerCorrection | None = None
     # the stamps of those blind matched nodes: the odometer checks leave out the stretches that hold one
     blind_stamps_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    # m: the gap between two neighbouring returns at the laser's median range, and whether the submaps bridged
-    # such gaps (wider than a cell: ``local_grid_config``)
+    # m: the gap between two neighbouring returns at the laser's median range, and the submaps' grid settings as
+    # fitted to the laser (``local_grid_config``: its rate, and whether such gaps were bridged)
     return_gap_m: float = math.nan
-    bridged_returns: bool = False
-    grid_cell_m: float = 0.05  # m: the submaps' cell
+    grid: GridConfig = field(default_factory=GridConfig)
+
+    @property
+    def bridged_returns(self) -> bool:
+        return self.grid.bridge
+
+    @property
+    def grid_cell_m(self) -> float:
+        return self.grid.resolution
 
     def blind_at(self, stamps_ns: np.ndarray) -> np.ndarray:
         """Which of ``stamps_ns`` are nodes whose match was blind along the track (bool, same shape)."""
@@ -223,7 +230,7 @@ def build_problem(
                     {**dict(sorted(loops.counts.items())),
                      **{f"{k} search ms": int(1000 * v) for k, v in loops.seconds.items()}},
                     sum(k == "lost" for k in graph.kind), loops.scale, watch.blind_share, correction,
-                    watch.blind_stamps_ns, return_gap, grid.bridge, grid.resolution)
+                    watch.blind_stamps_ns, return_gap, grid)
 
 
 def corrected_log(log: LogData, fe: FrontEnd) -> LogData:

@@ -339,14 +339,14 @@ class LoopSearch:
         """``cand`` through the map check and the consistency test: the closures accepted now (module docstring
         of ``loop_consistency``), counted under ``kind``."""
         c = self.cfg
+        parts = self._parts(len(est_wTa))  # the map check's and the consistency test's
         if c.verify.enabled:
             verify = c.verify.scaled(self.scale)  # a sparse laser's walls agree less (``VerifyConfig``)
-            agree = map_agreement(self.grids, est_wTa, self._parts(len(est_wTa)), cand.old, cand.new, cand.mTn,
-                                  verify)
+            agree = map_agreement(self.grids, est_wTa, parts, cand.old, cand.new, cand.mTn, verify)
             if agree.verdict(verify) is False:
                 self._count(f"{kind}: rejected by the map check")
                 return []
-        accepted = self.consistency.offer(cand, est_wTa, travel, self._parts(len(est_wTa)))
+        accepted = self.consistency.offer(cand, est_wTa, travel, parts)
         self._count(f"{kind}: accepted (consistent)" if accepted else f"{kind}: waiting for agreement")
         if self.consistency.rivalled:
             self._count(f"{kind}: waiting, a rival clique as certain")
