@@ -67,8 +67,8 @@ point's x in the base frame; matched = relations with a pose within
 variants, the laser-frame translational / rotational means over the relations whose two stamps are the sparse log's
 own scans, and their count: what the relations of a log recorded sparse score (made at its scans, as the held-out
 hospital's are); the row's other relations have a stamp at a dropped scan within 0.1 s of a kept one, where the pose
-is the odometry's between two scans (intel, whose stamps come in bursts: 573 of its 679 relations, 2026-12-06: 0.959 deg
-mean over the row, 0.454 deg at its scans); run s = the child's
+is the odometry's between two scans (intel, whose stamps come in bursts: 573 of its 679 relations, 2026-12-07: 0.810 deg
+mean over the row, 0.454 deg at its scans; README *Between scans*); run s = the child's
 wall time, cpu s = its user + system CPU time (what the run costs on one core whatever else the machine runs;
 the pipeline is single-threaded but for numba's and OpenCV's own threads), pipeline s = ``report.json``'s total of the stages; RSS = the child's peak resident set; carto =
 Cartographer's published error (Hess et al. 2016, Table II, as quoted in the data README); ratio = holoslam /

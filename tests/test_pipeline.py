@@ -151,6 +151,28 @@ def test_optimised_trajectory_follows_anchors():
     assert np.allclose(out[60], g.compose(wTa[1], np.array([1.0, 0.0, 0.0])))
 
 
+def test_optimised_trajectory_shares_the_odometrys_error_by_its_motion_not_by_time():
+    """The robot stands still for the first half of a segment, then drives 5 m turning 0.5 rad; the solver moves the
+    segment's end by 0.5 m and 0.1 rad. The odometry erred while it moved: the still half keeps the start's pose
+    (shared by time it would carry a quarter of the correction: 0.125 m), and half-way through the motion half the
+    correction is applied."""
+    from holoslam import geometry as g
+    from holoslam.trajectory import optimised_trajectory
+
+    stamps = np.arange(0, 101, dtype=np.int64) * 10
+    s = np.clip((stamps - 500) / 500.0, 0.0, 1.0)  # the motion's share: 0 until half-way
+    dr = np.column_stack([5.0 * s, np.zeros_like(s), 0.5 * s])
+    wTa = np.array([[0.0, 0.0, 0.0], [5.5, 0.0, 0.6]])
+    out = optimised_trajectory(stamps, stamps, dr, np.array([0, 1000], np.int64), wTa)
+    np.testing.assert_allclose(out[:51], np.zeros((51, 3)), atol=1e-9)  # still: no share of the correction
+    np.testing.assert_allclose(out[100], wTa[1], atol=1e-9)
+    E = g.between(g.between(dr[0], dr[100]), g.between(wTa[0], wTa[1]))
+    np.testing.assert_allclose(out[75], g.compose(dr[75], 0.5 * E), atol=1e-9)
+    # a segment whose odometry did not move at all shares the correction by time, as before
+    still = optimised_trajectory(stamps, stamps, np.zeros((101, 3)), np.array([0, 1000], np.int64), wTa)
+    np.testing.assert_allclose(still[50], 0.5 * wTa[1], atol=1e-9)
+
+
 def test_run_data_maps_a_log_in_memory_as_run_maps_its_file(tmp_path):
     from holoslam.io.mcap import read_log
     from holoslam.pipeline import run, run_data
