@@ -2,7 +2,8 @@
 next to Cartographer's published figures.
 
     .venv/bin/python benchmarks/bench_realdata.py [--logs intel aces fr079] [--duration S] [--out DIR]
-                                                  [--variants full kidnap sparse sparse_kidnap drift sparse_drift short]
+                                                  [--variants full kidnap sparse sparse_kidnap drift sparse_drift short
+                                                   holes sparse_holes]
 
 Variants (``holoslam.derive``, what a hospital's or a carried robot's log makes of the same real scans):
 ``full`` the log as it is; ``kidnap`` the odometry jumps by (30 m, 0, 90 deg) at the middle scan with the 30 s of
@@ -20,7 +21,10 @@ alone, a wobble no calibration would notice (``drift@1.002 drift@0.998``: how fa
 intel 0.0186 m at the laser moves to 0.0205 / 0.0192). ``drift`` / ``sparse_drift``: the odometer biased
 (``holoslam.derive.bias_odometry``: 5 % long, turning 0.5 deg per metre, a wheel 0.35 % smaller than its twin on a
 0.4 m axle), scored as full / sparse. ``short`` / ``short@R``: every return beyond 8 m (R m) a no-return
-(``holoslam.derive.cap_ranges``: the cheap lasers of home robots reach 8-12 m), scored as full. A variant runs in the child on the log
+(``holoslam.derive.cap_ranges``: the cheap lasers of home robots reach 8-12 m), scored as full. ``holes`` /
+``sparse_holes`` (``@F``): 12 % (F) of the returns made no-returns at random, one seeded draw
+(``holoslam.derive.drop_returns``: the held-out hospital log's laser leaves 12 % of its beams without a return),
+scored as full / sparse. A variant runs in the child on the log
 in memory (``holoslam.pipeline.run_data``) and writes the trajectory and the report; the independent scorer
 checks the full rows.
 
@@ -108,9 +112,12 @@ KIDNAP_GAP_S = 30.0
 SPARSE_HZ, SPARSE_KEEP_EVERY = 1.4, 2
 DRIFT_SCALE, DRIFT_YAW_DEG_PER_M = 1.05, 0.5  # the drift variants' odometer: 5 % long, turning 0.5 deg per m
 ACROSS_LIMIT_M = 0.2  # m: issue 25's "every relation across the kidnap within 0.2 m"
-VARIANTS = ("full", "kidnap", "sparse", "sparse_kidnap", "drift", "sparse_drift", "short")
+VARIANTS = ("full", "kidnap", "sparse", "sparse_kidnap", "drift", "sparse_drift", "short", "holes", "sparse_holes")
 MAX_DT = {"full": 0.05, "kidnap": 0.05, "sparse": 0.1, "sparse_kidnap": 0.1, "drift": 0.05, "sparse_drift": 0.1,
-          "short": 0.05}  # s, relation stamp to the nearest pose
+          "short": 0.05, "holes": 0.05, "sparse_holes": 0.1}  # s, relation stamp to the nearest pose
+# ``holes``: the share of returns made no-returns at random (the Freiburg hospital log's beams without a return),
+# and the draw's seed (``holes@F`` another share; one draw: the row is a lottery of which returns go)
+HOLES_FRACTION, HOLES_SEED = 0.12, 0
 SHORT_RANGE_M = 8.0  # ``short``: a cheap laser's range (the issue's 8-10 m; 2D lasers sold for home robots: 8-12 m)
 
 
@@ -159,6 +166,10 @@ def variant_log(data, variant: str):
         return variant_log(variant_log(data, "sparse")[0], "drift" + variant[len(base):])
     if base == "short":  # short@R: every return beyond R m a no-return (a cheaper laser)
         return derive.cap_ranges(data, float(where) if where else SHORT_RANGE_M), None
+    if base == "holes":  # holes@F: that share of the returns no-returns, at random
+        return derive.drop_returns(data, float(where) if where else HOLES_FRACTION, HOLES_SEED), None
+    if base == "sparse_holes":
+        return variant_log(variant_log(data, "sparse")[0], "holes" + variant[len(base):])
     return data, None
 
 
@@ -168,12 +179,14 @@ def variant_name(text: str) -> str:
     base, at, where = text.partition("@")
     ok = base in VARIANTS and (not at or ("kidnap" in base and _within(where, 0.0, 1.0))
                                or ("drift" in base and _within(where, 0.5, 1.5))
-                               or (base == "short" and _within(where, 0.5, 100.0)))
+                               or (base == "short" and _within(where, 0.5, 100.0))
+                               or ("holes" in base and _within(where, 0.0, 1.0)))
     if not ok:
         raise argparse.ArgumentTypeError(f"{text!r}: one of {', '.join(VARIANTS)}; a kidnapped one may end in @F, "
                                          "F the fraction of the log's scans where the kidnap happens (0 < F < 1); "
                                          "a drift one in @S, the odometer scaled by S alone (0.5 < S < 1.5); a short "
-                                         "one in @R, the laser's range in m (0.5 < R < 100)")
+                                         "one in @R, the laser's range in m (0.5 < R < 100); a holes one in @F, the "
+                                         "share of returns dropped (0 < F < 1)")
     return text
 
 

@@ -10,6 +10,8 @@ original's ground truth (``.relations``) still names the same scan.
   laser runs at 1.4 Hz where intel's runs at 5 Hz);
 - :func:`drop_beams`: keep every k-th beam of every scan (180 beams over 180 degrees -> 90);
 - :func:`cap_ranges`: returns beyond ``max_range_m`` become no-returns (a cheaper laser);
+- :func:`drop_returns`: each return becomes a no-return with a given probability, drawn from a seeded generator
+  (a laser that misses dark and shiny surfaces: the Freiburg hospital log's leaves 12 % of its beams without one);
 - :func:`kidnap`: from stamp ``at_ns`` on, the odometry (and the odometry frame's transforms) is moved by a
   rigid transform the mapper is not told about, and the scans of the ``gap_s`` after it are removed, so the
   two parts of the log share no scan that would let the local matcher bridge them: only a global search can;
@@ -31,7 +33,7 @@ import numpy as np
 from holoslam import geometry as g
 from holoslam.types import LogData, Odometry, Pose2, Scan
 
-__all__ = ["decimate_scans", "drop_beams", "cap_ranges", "kidnap", "bias_odometry", "repeat", "repeat_span_ns"]
+__all__ = ["decimate_scans", "drop_beams", "cap_ranges", "drop_returns", "kidnap", "bias_odometry", "repeat", "repeat_span_ns"]
 
 
 def decimate_scans(log: LogData, rate_hz: float) -> LogData:
@@ -63,6 +65,17 @@ def cap_ranges(log: LogData, max_range_m: float) -> LogData:
         raise ValueError(f"cap_ranges: max_range_m must be a finite number > 0, got {max_range_m}")
     scans = tuple(replace(s, valid=s.valid & (s.ranges <= max_range_m), range_max=min(s.range_max, max_range_m))
                   for s in log.scans)
+    return replace(log, scans=scans)
+
+
+def drop_returns(log: LogData, fraction: float, seed: int = 0) -> LogData:
+    """The log with each return made a no-return (its beam invalid) with probability ``fraction``, independently,
+    from ``numpy.random.default_rng(seed)`` drawn scan by scan in the log's order (the same log and seed: the same
+    holes)."""
+    if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
+        raise ValueError(f"drop_returns: fraction must be a number in [0, 1], got {fraction}")
+    rng = np.random.default_rng(seed)
+    scans = tuple(replace(s, valid=s.valid & (rng.random(s.valid.shape) >= fraction)) for s in log.scans)
     return replace(log, scans=scans)
 
 

@@ -116,3 +116,42 @@ def test_the_real_log_benchmarks_short_laser_cuts_the_returns_beyond_its_range()
     for bad in ("short@0.2", "short@x", "sparse@5"):
         with pytest.raises(argparse.ArgumentTypeError):
             bench.variant_name(bad)
+
+
+def test_dropped_returns_take_their_share_of_the_returns_the_same_ones_for_the_same_seed():
+    """``derive.drop_returns``: each return a no-return with the given probability, independently; the ranges, the
+    stamps and the beams already without a return untouched; the same seed, the same holes; shares outside [0, 1]
+    refused. The bench's ``holes`` (12 %, the held-out hospital laser's share) and ``sparse_holes@F``."""
+    import argparse
+
+    from repo_paths import REPO, benchmark_module
+
+    from holoslam.io.mcap import read_log
+
+    log, _ = read_log(REPO / "datasets" / "household_small.mcap", require=["odometry", "scan"])
+    before = np.concatenate([s.valid for s in log.scans])
+    holed = derive.drop_returns(log, 0.25, seed=3)
+    after = np.concatenate([s.valid for s in holed.scans])
+    assert not (after & ~before).any()  # no beam without a return gained one
+    share = 1.0 - after.sum() / before.sum()
+    n = before.sum()
+    assert abs(share - 0.25) < 4 * math.sqrt(0.25 * 0.75 / n)  # binomial: within 4 sigma of the share
+    assert all(np.array_equal(a.ranges, b.ranges) and a.stamp_ns == b.stamp_ns
+               for a, b in zip(log.scans, holed.scans, strict=True))
+    again = np.concatenate([s.valid for s in derive.drop_returns(log, 0.25, seed=3).scans])
+    other = np.concatenate([s.valid for s in derive.drop_returns(log, 0.25, seed=4).scans])
+    assert np.array_equal(after, again) and not np.array_equal(after, other)
+    assert np.array_equal(np.concatenate([s.valid for s in derive.drop_returns(log, 0.0).scans]), before)
+    for bad in (-0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="fraction must be"):
+            derive.drop_returns(log, bad)
+    bench = benchmark_module("bench_realdata")
+    sparse_holed, at = bench.variant_log(log, "sparse_holes@0.5")
+    sparse, _ = bench.variant_log(log, "sparse")
+    assert at is None and [s.stamp_ns for s in sparse_holed.scans] == [s.stamp_ns for s in sparse.scans]
+    kept = np.concatenate([s.valid for s in sparse_holed.scans]).sum()
+    assert 0.4 < kept / np.concatenate([s.valid for s in sparse.scans]).sum() < 0.6
+    assert bench.variant_name("holes@0.3") == "holes@0.3"
+    for bad in ("holes@1.5", "holes@x"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            bench.variant_name(bad)
