@@ -6,6 +6,9 @@
   of the front end's nearest-neighbour grid, the blocks of each planning region.
 * :func:`argsort_stable` -- ``np.argsort(key, kind="mergesort")`` (numba's own took 2 s of a first run to
   compile in each kernel that used it): the branch and bound's top-level order, the line splitter's pieces.
+* :func:`heap_push`, :func:`heap_pop` -- a binary min-heap of (distance, node) in two preallocated arrays, ties
+  by the node as ``heapq``'s tuples order them: the Dijkstra searches of the anchor graph and of the rooms' cells
+  (numba's ``heapq`` on a list of tuples compiles for ~0.4 s more in each kernel that uses it).
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from holoslam._jit import JIT
+from holoslam._jit import JIT, JIT_INNER
 
 
 @nb.njit(**JIT)
@@ -93,3 +96,44 @@ def argsort_stable(key):  # pragma: no cover - compiled
         idx, buf = buf, idx
         width *= 2
     return idx
+
+
+@nb.njit(**JIT_INNER)
+def heap_push(hd, hv, n, d, v):  # pragma: no cover - compiled
+    """Push (``d``, ``v``) onto the heap of the first ``n`` entries of ``hd`` (distances) and ``hv`` (nodes), whose
+    capacity the caller sized; the new count."""
+    i = n
+    hd[i] = d
+    hv[i] = v
+    while i > 0:
+        p = (i - 1) >> 1
+        if hd[p] < hd[i] or (hd[p] == hd[i] and hv[p] <= hv[i]):
+            break
+        hd[p], hd[i] = hd[i], hd[p]
+        hv[p], hv[i] = hv[i], hv[p]
+        i = p
+    return n + 1
+
+
+@nb.njit(**JIT, inline="always")  # a few lines at each call site: no kernel of its own to compile
+def heap_pop(hd, hv, n):  # pragma: no cover - compiled
+    """Pop the least (distance, node) of the heap of ``n`` entries: (distance, node, the new count); n > 0."""
+    d, v = hd[0], hv[0]
+    n -= 1
+    hd[0] = hd[n]
+    hv[0] = hv[n]
+    i = 0
+    while True:
+        a = 2 * i + 1
+        if a >= n:
+            break
+        b = a + 1
+        s = a
+        if b < n and (hd[b] < hd[a] or (hd[b] == hd[a] and hv[b] < hv[a])):
+            s = b
+        if hd[i] < hd[s] or (hd[i] == hd[s] and hv[i] <= hv[s]):
+            break
+        hd[s], hd[i] = hd[i], hd[s]
+        hv[s], hv[i] = hv[i], hv[s]
+        i = s
+    return d, v, n

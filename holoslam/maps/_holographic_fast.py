@@ -19,6 +19,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from holoslam._common_fast import heap_pop, heap_push
 from holoslam._jit import JIT, JIT_INNER
 
 
@@ -75,44 +76,6 @@ def restore(cells, lab, parent, area, mx, clr, next_id, w):
     return next_id + k
 
 
-@nb.njit(**JIT_INNER)
-def _push(hd, hv, n, d, v):
-    i = n
-    hd[i] = d
-    hv[i] = v
-    while i > 0:
-        p = (i - 1) >> 1
-        if hd[p] < hd[i] or (hd[p] == hd[i] and hv[p] <= hv[i]):
-            break
-        hd[p], hd[i] = hd[i], hd[p]
-        hv[p], hv[i] = hv[i], hv[p]
-        i = p
-    return n + 1
-
-
-@nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
-def _pop(hd, hv, n):
-    d, v = hd[0], hv[0]
-    n -= 1
-    hd[0] = hd[n]
-    hv[0] = hv[n]
-    i = 0
-    while True:
-        a = 2 * i + 1
-        if a >= n:
-            break
-        b = a + 1
-        s = a
-        if b < n and (hd[b] < hd[a] or (hd[b] == hd[a] and hv[b] < hv[a])):
-            s = b
-        if hd[i] < hd[s] or (hd[i] == hd[s] and hv[i] <= hv[s]):
-            break
-        hd[s], hd[i] = hd[i], hd[s]
-        hv[s], hv[i] = hv[i], hv[s]
-        i = s
-    return d, v, n
-
-
 @nb.njit(**JIT)
 def dijkstra_to(indptr, indices, data, source, targets):
     """(dist, pred) from ``source``, searched until every cell of ``targets`` is settled (or none is left)."""
@@ -130,10 +93,10 @@ def dijkstra_to(indptr, indices, data, source, targets):
     hd = np.empty(cap, dtype=np.float64)
     hv = np.empty(cap, dtype=np.int64)
     dist[source] = 0.0
-    # np.int64 arguments: a literal 0 or an int32 node would compile _push once more for that type
-    m = _push(hd, hv, np.int64(0), 0.0, source)
+    # np.int64 arguments: a literal 0 or an int32 node would compile heap_push once more for that type
+    m = heap_push(hd, hv, np.int64(0), 0.0, source)
     while m > 0 and left > 0:
-        d, u, m = _pop(hd, hv, m)
+        d, u, m = heap_pop(hd, hv, m)
         if done[u]:
             continue
         done[u] = True
@@ -145,7 +108,7 @@ def dijkstra_to(indptr, indices, data, source, targets):
             if nd < dist[v]:
                 dist[v] = nd
                 pred[v] = u
-                m = _push(hd, hv, m, nd, np.int64(v))
+                m = heap_push(hd, hv, m, nd, np.int64(v))
     return dist, pred
 
 
