@@ -29,6 +29,46 @@ def test_a_keyframe_belongs_to_the_submap_it_was_matched_into():
     assert nodes.stamps_ns.tolist() == [10, 20, 30, 40]
     assert nodes.host.tolist() == [0, 0, 0, 1]
     assert nodes.aTb[2].tolist() == [2, 0, 0] and nodes.aTb[3].tolist() == [1, 0, 0]
+    # the shared node remembers its second submap and its pose there (the disputed nodes' second placement)
+    assert nodes.second.tolist() == [-1, -1, 1, -1] and nodes.second_aTb[2].tolist() == [0, 0, 0]
+
+
+def _slipped(second: bool):
+    """Five nodes in submap 1 (host) and submap 2 (second), 0.5 m apart along x in both. The solved anchors place
+    submap 2 one metre further along than submap 1 (the closures of the nodes after a slip inside submap 1 moved
+    submap 2's anchor): by their host the nodes lie 1 m short of where their scans are; each node's match into
+    the old submap 0 (the world's frame) says where (the truth, by submap 2)."""
+    x = np.arange(5) * 0.5
+    aTb = np.column_stack([x, np.zeros(5), np.zeros(5)])
+    cov = np.broadcast_to(np.diag([0.02**2, 0.02**2, np.radians(0.5) ** 2]), (5, 3, 3)).copy()
+    nodes = Nodes(np.arange(5, dtype=np.int64), np.ones(5, np.int64), aTb, cov, (np.zeros((0, 2)),) * 5,
+                  np.full(5, 2 if second else -1, np.int64), aTb.copy())
+    wTa = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    truth = aTb + [1.0, 0.0, 0.0]
+    matches = NodeMatches(np.zeros(5, np.int64), np.arange(5), truth,
+                          np.broadcast_to(np.diag([1e-4, 1e-4, np.radians(0.2) ** 2]), (5, 3, 3)), np.full(5, 0.7))
+    return nodes, wTa, truth, matches
+
+
+def test_nodes_two_solved_anchors_place_apart_are_placed_by_their_matches():
+    """A slip of local SLAM inside a submap: the nodes it shares with the next are placed 1 m apart by the two
+    solved anchors (more than ``max_shift_m``): disputed, their host ties and steps are robust, and their matches
+    into the old submap place them (``revisits.disputed_nodes``). Without the second placement the host's tie
+    holds them a metre off."""
+    from holoslam.submaps.revisits import RevisitConfig, disputed_nodes
+
+    cov_wTa = np.broadcast_to(np.diag([1e-6, 1e-6, 1e-8]), (3, 3, 3))
+    nodes, wTa, truth, matches = _slipped(second=True)
+    assert disputed_nodes(nodes, wTa, RevisitConfig().max_shift_m).all()
+    assert not disputed_nodes(nodes, wTa, 1.5).any()  # placements 1 m apart agree within 1.5 m
+    lone, _, _, _ = _slipped(second=False)
+    assert not disputed_nodes(lone, wTa, 0.3).any()
+    held = solve_nodes(lone, matches, wTa, cov_wTa)
+    freed = solve_nodes(nodes, matches, wTa, cov_wTa)
+    held_err = np.hypot(*(held.wTn[:, :2] - truth[:, :2]).T)
+    freed_err = np.hypot(*(freed.wTn[:, :2] - truth[:, :2]).T)
+    assert held_err.min() > 0.9  # measured 0.97 m: the host's tie (2 cm) outweighs one robust match each
+    assert freed_err.max() < 0.03  # measured 1.0 cm: robust both ways, the match (1.4 cm with its floor) places it
 
 
 def test_bad_settings_are_a_config_error_that_names_them():
