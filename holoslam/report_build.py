@@ -64,6 +64,7 @@ def submap_summary(fe: Any, revisits: Any = None, mounting: Any = None, odometer
         keyframes_solved=revisits is not None,
         keyframe_matches=0 if revisits is None else len(revisits.matches),
         keyframe_matches_tried=0 if revisits is None else int(revisits.matches.tried),
+        keyframes_disputed=0 if revisits is None else int(revisits.solution.disputed),
         laser_mounting=mounting,
         odometer=odometer,
         loop_search=dict(fe.loop_counts) or None,

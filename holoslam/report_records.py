@@ -54,6 +54,9 @@ class SubmapSummary:
     keyframes_solved: bool = False
     keyframe_matches: int = 0
     keyframe_matches_tried: int = 0
+    # keyframes the solved anchors placed more than RevisitConfig.max_shift_m apart by their two submaps (a slip of
+    # local SLAM inside one): matched from both placements, their ties robust (holoslam.submaps.revisits)
+    keyframes_disputed: int = 0
     # the laser's position from the point the robot turns about, measured from its motion, against the log's
     # transform (holoslam.submaps.mounting.mounting_check); None when the robot turned too little to tell
     laser_mounting: dict[str, Any] | None = None

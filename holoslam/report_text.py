@@ -106,6 +106,9 @@ def _submaps_text(sm: SubmapSummary) -> list[str]:
         lines.append(
             f"  keyframes: solved as poses against the old submaps they revisit, {sm.keyframe_matches} of "
             f"{sm.keyframe_matches_tried} matches into old submaps kept"
+            + (f"; {sm.keyframes_disputed} placed apart by their two submaps beyond the stage's max_shift_m (a slip "
+               "of local SLAM inside one): matched from both placements, placed by their matches"
+               if sm.keyframes_disputed else "")
         )
     if sm.odometry_noise:
         lines.append(f"  odometry noise: {sm.odometry_noise['source']} ({sm.odometry_noise['reason']})")

@@ -28,7 +28,7 @@ REPORT = {
                 "observations_before_first_anchor": 0, "nodes": 1916, "scans_localised_between_nodes": 584,
                 "dead_reckoning_inflation": 1.288, "odometry_noise": {"source": "log", "reason": "propagated"},
                 "loop_pairs": 151, "dead_reckoning_slips": 3, "keyframes_solved": True, "keyframe_matches": 2960,
-                "keyframe_matches_tried": 3834,
+                "keyframe_matches_tried": 3834, "keyframes_disputed": 0,
                 "laser_mounting": {"laser_x_m": -0.018, "laser_x_std_m": 0.0007, "pairs": 4932, "turns": 2895,
                                    "tf_laser_x_m": 0.04, "centre_in_base_x_m": 0.058, "base_off_centre": True,
                                    "base_frame": "base_link", "laser_frame": "laser"},
@@ -190,3 +190,17 @@ def test_the_text_says_how_far_apart_the_lasers_returns_lie_and_what_the_submaps
     dotted = submaps_line(return_gap_m=0.0817, bridged_returns=False)
     assert "wider than the 5 cm cell: walls are dotted" in dotted and "bridge_over_cells: 1" in dotted
     assert "apart" not in submaps_line(return_gap_m=None)
+
+
+def test_the_keyframes_line_says_how_many_were_disputed_only_when_some_were():
+    """A slip of local SLAM inside a submap (``revisits.disputed_nodes``): the keyframes line counts the nodes placed
+    apart by their two submaps; none, and the line is as before."""
+    def keyframes_line(disputed: int) -> str:
+        r = copy.deepcopy(REPORT)
+        r["submaps"]["keyframes_disputed"] = disputed
+        (line,) = [t for t in RunReport.from_dict(r).text().splitlines() if t.startswith("  keyframes:")]
+        return line
+
+    assert keyframes_line(0).endswith("2960 of 3834 matches into old submaps kept")
+    assert "; 88 placed apart by their two submaps" in keyframes_line(88)
+    assert "matched from both placements" in keyframes_line(88)

@@ -40,13 +40,14 @@ __all__ = ["NodeSolution", "KeyframeSolve", "solve_nodes"]
 @dataclass(frozen=True, eq=False)
 class NodeSolution:
     """Every node's solved world pose ``wTn`` (N, 3), the anchors of the node solve ``wTa`` (K, 3), the final
-    and initial errors and the iterations."""
+    and initial errors, the iterations and how many nodes were disputed (``revisits.disputed_nodes``)."""
 
     wTn: np.ndarray
     wTa: np.ndarray
     error: float
     initial_error: float
     iterations: int
+    disputed: int = 0
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,4 +113,4 @@ def solve_nodes(nodes: Nodes, matches: NodeMatches, wTa: np.ndarray, cov_wTa: np
     result = opt.optimize()
     wTn = np.array([[p.x(), p.y(), p.theta()] for p in map(result.atPose2, nk.tolist())])
     wTa_out = np.array([[p.x(), p.y(), p.theta()] for p in map(result.atPose2, ak.tolist())])
-    return NodeSolution(wTn, wTa_out, float(graph.error(result)), e0, int(opt.iterations()))
+    return NodeSolution(wTn, wTa_out, float(graph.error(result)), e0, int(opt.iterations()), int(disputed.sum()))
