@@ -303,7 +303,7 @@ class LoopSearch:
                 self.ambiguous += bool(peaks)
             kind = None
             if cand is not None and reason == "windowed: accepted":
-                reason, kind = self._must_agree(job, hit.aTb) or (reason, None)
+                reason, kind = self._must_agree(job, hit.aTb, band) or (reason, None)
             elif cand is not None and reason.endswith("offered for agreement"):
                 kind = "windowed weak"
             self._count(reason)
@@ -315,9 +315,10 @@ class LoopSearch:
                 found.append(cand)
         return found
 
-    def _must_agree(self, job: _Job, aTb: np.ndarray) -> tuple[str, str] | None:
+    def _must_agree(self, job: _Job, aTb: np.ndarray, band: bool = False) -> tuple[str, str] | None:
         """Why a match its window accepts must be offered for agreement instead, and the kind it is counted under
-        there ((reason, kind)), or None: it stands on its own."""
+        there ((reason, kind)), or None: it stands on its own. ``band``: the window is the compass's agreement
+        bound (``_window_match``)."""
         # across a break of local SLAM the window stands on no estimate (the robot may have been carried):
         # a match there is a hypothesis like a global one, and needs the others' agreement. Accepted on its own,
         # intel at 1.4 Hz kidnapped at two thirds took two aliases 14 m / 94-101 deg off: never joined
@@ -325,9 +326,10 @@ class LoopSearch:
             return "windowed across a break: offered for agreement", "windowed across a break"
         if beyond_ellipse(aTb, job.seed, job.wxy, self.cfg.far_from_seed):
             return "windowed, beyond its window's ellipse: offered for agreement", "windowed weak"
-        # one scan saying the map is metres off: a hypothesis (``LoopConfig.solo_max_offset_m``)
+        # one scan saying the map is metres off: a hypothesis (``LoopConfig.solo_max_offset_m``), unless the
+        # compass's agreement bounds the window (``band``)
         moved = math.hypot(float(aTb[0]) - float(job.seed[0]), float(aTb[1]) - float(job.seed[1]))
-        if moved > self.cfg.solo_max_offset_m:
+        if not band and moved > self.cfg.solo_max_offset_m:
             return "windowed, far from its seed: offered for agreement", "windowed far"
         widened = job.wxy[0] > job.drift_xy[0] or job.wxy[1] > job.drift_xy[1]  # never with a compass
         if (self.cfg.widened_needs_agreement and widened
