@@ -705,7 +705,7 @@ def test_a_match_far_from_its_seed_waits_for_agreement(household_place):
     nTr = g.between(wTn, wTr)
     b_pts = points(ray_scan(segs, wTr, np.random.default_rng(13)))
 
-    def search(off_m: float, solo: float = LoopConfig().solo_max_offset_m):
+    def search(off_m: float, solo: float = LoopConfig().solo_max_offset_m, dis=None):
         ls = LoopSearch(LoopConfig(solo_max_offset_m=solo), MatchConfig())
         ls.add_submap(0, grid)
         est = np.zeros((6, 3))
@@ -713,7 +713,7 @@ def test_a_match_far_from_its_seed_waits_for_agreement(household_place):
         along = wTm[2]  # m's x axis: the window's
         est[5] = g.compose(np.array([off_m * math.cos(along), off_m * math.sin(along), 0.0]), wTn)
         found = ls.search(5, nTr, np.diag([1e-4, 1e-4, 1e-5]), b_pts, est, np.full(6, 120.0), 0.0,
-                          travel=np.zeros(6))
+                          travel=np.zeros(6), disagreement=dis)
         return ls, found
 
     ls, found = search(5.0)
@@ -725,6 +725,13 @@ def test_a_match_far_from_its_seed_waits_for_agreement(household_place):
     assert math.hypot(e[0], e[1]) < 0.03 and abs(e[2]) < math.radians(0.3)
     ls, found = search(3.0)  # 3 m: accepted on its own
     assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    # where dead reckoning with a compass bounds the window (it disagrees with the estimate by the 5 m), a match
+    # within that bound is not one scan's word against the estimate: accepted on its own
+    ls, found = search(5.0, dis=(np.full(6, 5.0), np.full(6, math.radians(0.5))))
+    assert len(found) == 1 and ls.counts["windowed: accepted"] == 1
+    assert ls.counts["windowed: window narrowed by dead reckoning's agreement"] == 1
+    e = g.between(g.between(wTm, wTn), found[0].mTn)
+    assert math.hypot(e[0], e[1]) < 0.03 and abs(e[2]) < math.radians(0.3)
     with pytest.raises(ValueError, match="solo_max_offset_m"):
         LoopSearch(LoopConfig(solo_max_offset_m=0.0), MatchConfig())
 
