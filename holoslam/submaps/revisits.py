@@ -178,19 +178,26 @@ def _cores() -> int:
         return os.cpu_count() or 1
 
 
-def _tasks(by_index: dict[int, Any], wTa: np.ndarray, wTn: np.ndarray, host: np.ndarray, which: Iterable[int],
-           cfg: RevisitConfig) -> list[tuple[int, int, np.ndarray]]:
-    """(submap, node, the node's predicted pose in the submap) for the nodes ``which`` placed at ``wTn`` (world),
-    into the old submaps (not ``host``'s chain neighbours) with a keyframe within ``keyframe_distance_m``."""
+def _keyframes(by_index: dict[int, Any], wTa: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every submap's keyframes placed by the solved ``wTa``: their world positions (K, 2) and submaps (K,), submap
+    by submap."""
     order = sorted(by_index)
     if not order:
-        return []
-    keyframes = np.vstack([g.compose(np.broadcast_to(wTa[k], np.shape(by_index[k].aTb)),
-                                      np.asarray(by_index[k].aTb))[:, :2] for k in order])
-    owner = np.concatenate([np.full(len(by_index[k].aTb), k) for k in order])
+        return np.zeros((0, 2)), np.zeros(0, np.int64)
+    return (np.vstack([g.compose(np.broadcast_to(wTa[k], np.shape(by_index[k].aTb)),
+                                 np.asarray(by_index[k].aTb))[:, :2] for k in order]),
+            np.concatenate([np.full(len(by_index[k].aTb), k) for k in order]))
+
+
+def _tasks(by_index: dict[int, Any], wTa: np.ndarray, keyframes: tuple[np.ndarray, np.ndarray], wTn: np.ndarray,
+           host: np.ndarray, which: Iterable[int], cfg: RevisitConfig) -> list[tuple[int, int, np.ndarray]]:
+    """(submap, node, the node's predicted pose in the submap) for the nodes ``which`` placed at ``wTn`` (world),
+    into the old submaps (not ``host``'s chain neighbours) with one of the ``keyframes`` (``_keyframes``) within
+    ``keyframe_distance_m``."""
+    positions, owner = keyframes
     tasks = []
     for n in which:
-        d = np.hypot(keyframes[:, 0] - wTn[n, 0], keyframes[:, 1] - wTn[n, 1])
+        d = np.hypot(positions[:, 0] - wTn[n, 0], positions[:, 1] - wTn[n, 1])
         near = (d <= cfg.keyframe_distance_m) & (np.abs(owner - host[n]) > cfg.skip_recent)
         if not near.any():
             continue
@@ -217,12 +224,13 @@ def match_nodes(submaps: Sequence[Any], nodes: Nodes, wTa: np.ndarray, cfg: Revi
     by_index = {int(sm.index): sm for sm in submaps}
     mcfg = replace(match_cfg, angular_window_deg=cfg.angular_window_deg)
     wTn = g.compose(wTa[nodes.host], nodes.aTb) if len(nodes) else np.zeros((0, 3))
-    tasks = _tasks(by_index, wTa, wTn, nodes.host, range(0, len(nodes), cfg.sample_every), cfg)
+    keyframes = _keyframes(by_index, wTa)
+    tasks = _tasks(by_index, wTa, keyframes, wTn, nodes.host, range(0, len(nodes), cfg.sample_every), cfg)
     disputed = np.flatnonzero(disputed_nodes(nodes, wTa, cfg.max_shift_m))
-    if disputed.size and nodes.second is not None and nodes.second_aTb is not None:
+    if disputed.size and nodes.second is not None and nodes.second_aTb is not None:  # (disputed: both are known)
         wTn2 = wTn.copy()
         wTn2[disputed] = g.compose(wTa[nodes.second[disputed]], nodes.second_aTb[disputed])
-        tasks += _tasks(by_index, wTa, wTn2, np.where(nodes.second >= 0, nodes.second, nodes.host), disputed, cfg)
+        tasks += _tasks(by_index, wTa, keyframes, wTn2, nodes.second, disputed, cfg)
 
     def one(task: tuple[int, int, np.ndarray]):
         k, n, pred = task
