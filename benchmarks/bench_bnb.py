@@ -130,7 +130,7 @@ def case(grids, segs, poses, loop: bool, repeat: int, ref_scans: tuple[int, int]
         ncand.append(cand.angles.size * (cand.box[1] * 2 + 1) * (cand.box[3] * 2 + 1))
         ref = []
         if k < ref_scans[0]:
-            t, e = timed(lambda c=cand: _bnb_fast.exhaustive(grids.prob, c.rows, c.cols, c.box,
+            t, e = timed(lambda c=cand: _bnb_fast.exhaustive(grids.prob, c.rows, c.cols, c.cells_box, c.box,
                                                              float(bnb.OUTSIDE)), 1)
             t_exh.append(t)
             ref.append(e[0] / pts.shape[0])
@@ -161,7 +161,7 @@ def main() -> None:
     warm = bnb.precompute(np.full((20, 20), 0.5, np.float32), 7, origin=(0.0, 0.0), res=RES)
     bnb.search(warm, np.ones((3, 2)), np.zeros(3), 0.1, 0.1, 0.0)
     c = bnb._candidates(warm, np.ones((3, 2)), np.zeros(3), 0.1, 0.1, None)
-    _bnb_fast.exhaustive(warm.prob, c.rows, c.cols, c.box, 0.1)
+    _bnb_fast.exhaustive(warm.prob, c.rows, c.cols, c.cells_box, c.box, 0.1)
     print(f"branch and bound vs brute force: {RES} m grids, 360-beam scans, medians of {args.repeat} "
           f"(B&B) over {args.scans} scans; ms per call")
     print(f"{'grid':<9}{'precompute_ms':>14}{'MB':>7}  {'window':<7}{'candidates':>11}{'bnb_ms':>9}{'cpu_ms':>8}"

@@ -1,4 +1,4 @@
-"""A compile worker's numba, quicker by exact equivalents of three of its internals.
+"""A compile worker's numba, quicker by exact equivalents of three of its internals and one lighter pass level.
 
 Only the processes of :mod:`holoslam.warmup`'s compile pools call :func:`quicken` (their initializer): a user's
 process keeps numba as it is. Each replacement gives what numba's own code gives, for less CPU, and each is
@@ -7,7 +7,9 @@ skipped (numba left as it is, the function returns False) when this numba lacks 
 * :func:`quicker_flags`: ``TargetConfig.values`` and ``__hash__`` without rebuilding a dict of all ~40 options;
 * :func:`one_function_pass_manager`: the function passes run on a module's functions by one pass manager,
   where numba builds one per function; the machine code is the same (the household's 71 cached kernels: the
-  same object code, byte for byte, as numba's own, less the 2 whose bytes differ between two runs of numba's);
+  same object code, byte for byte, as numba's own, less the 2 whose bytes differ between two runs of numba's).
+  :func:`quicken` also runs those passes at ``FUNCTION_PASS_OPT`` (-O1) where numba runs them at its ``-O3``:
+  the one deviation from numba's own output (its machine code, not its results: ``FUNCTION_PASS_OPT``);
 * :func:`overloads_by_inherited_flags`: an ``@overload``'s implementation (``np.empty``, ``max``...) compiled once
   per argument types and per value of the options a compile inherits from its caller, instead of once per whole
   set of the caller's options: the others (``nogil``, the wrappers) never reach the implementation's compile.
@@ -22,15 +24,31 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["quicken", "quicker_flags", "one_function_pass_manager", "overloads_by_inherited_flags"]
+__all__ = ["FUNCTION_PASS_OPT", "quicken", "quicker_flags", "one_function_pass_manager", "overloads_by_inherited_flags"]
+
+
+#: the optimisation level of the per-function passes numba runs on each function as its IR is added to a library
+#: (numba: its ``NUMBA_OPT``, 3), in a compile worker. Every kernel's machine code comes from the full ``-O3``
+#: module pipeline numba runs afterwards on the linked final module, which this leaves as it is; the early
+#: function passes only prepare for it. At -O1 the household's recorded kernels compile in 4.6 % less CPU
+#: (18.68 -> 17.81 s serially, medians of 5 alternated, 2026-12-07; 18.27 -> 17.84 and 18.71 -> 17.48 s on two
+#: more days), its warm run is as quick (6.93 -> 6.69 s wall, medians of 6 alternated with each cache), numba's
+#: cache 0.3 % smaller, and every output of the household's run byte-identical but the run's timestamps (no
+#: kernel reassociates floating point without ``fastmath``, which these passes do not change). -O0 and no
+#: function passes at all compiled quicker still but ran the household 5-15 % slower.
+FUNCTION_PASS_OPT = 1
 
 
 def quicken() -> dict[str, bool]:
-    """Apply the three replacements in this process (a compile worker's); which ones took. The household's
-    recorded kernels compiled serially (``python benchmarks/bench_jit_compile.py --repeats 3``, 2026-12-06):
-    18.6 s CPU with numba as it is, 16.8 s with the three (``quicker_flags`` alone: 19.8 -> 18.9 s, medians of 6
-    alternated, an earlier day)."""
-    return {f.__name__: f() for f in (quicker_flags, one_function_pass_manager, overloads_by_inherited_flags)}
+    """Apply the three replacements in this process (a compile worker's), the function passes at
+    ``FUNCTION_PASS_OPT``; which ones took. The household's recorded kernels compiled serially (``python
+    benchmarks/bench_jit_compile.py --repeats 3``, 2026-12-06): 18.6 s CPU with numba as it is, 16.8 s with
+    the three (``quicker_flags`` alone: 19.8 -> 18.9 s, medians of 6 alternated, an earlier day)."""
+    return {
+        "quicker_flags": quicker_flags(),
+        "one_function_pass_manager": one_function_pass_manager(FUNCTION_PASS_OPT),
+        "overloads_by_inherited_flags": overloads_by_inherited_flags(),
+    }
 
 
 def quicker_flags() -> bool:
@@ -69,15 +87,18 @@ def quicker_flags() -> bool:
     return True
 
 
-def one_function_pass_manager() -> bool:
+def one_function_pass_manager(opt: int | None = None) -> bool:
     """``CPUCodeLibrary._optimize_functions`` with one function pass manager for the module's functions (numba's
     builds a pass builder and a manager for each, ~3,300 for the household's kernels) and no run on a mere
-    declaration (no body: a pass has nothing to do). Same passes, same options, same order."""
+    declaration (no body: a pass has nothing to do). Same passes, same options, same order; ``opt`` (0-3) sets
+    their optimisation level instead of numba's (``FUNCTION_PASS_OPT``). Once per process: a later call keeps
+    the level the first one set."""
     from numba.core import codegen
 
     cls = codegen.CPUCodeLibrary
     if getattr(cls, "_holoslam_one_fpm", False):
         return True
+    options = {} if opt is None else {"opt": int(opt)}
     if not hasattr(codegen.CPUCodegen, "_function_pass_manager"):
         return False
     # the replacement rests on numba's body being exactly this: a new manager per function, run on it
@@ -87,7 +108,7 @@ def one_function_pass_manager() -> bool:
 
     def _optimize_functions(self: Any, ll_module: Any) -> None:
         ll_module.data_layout = self._codegen._data_layout
-        fpm, pb = self._codegen._function_pass_manager()
+        fpm, pb = self._codegen._function_pass_manager(**options)
         for func in ll_module.functions:
             if not func.is_declaration:
                 fpm.run(func, pb)

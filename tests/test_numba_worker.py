@@ -9,6 +9,8 @@ import sys
 
 from repo_paths import REPO
 
+from holoslam._numba_worker import FUNCTION_PASS_OPT
+
 
 def _in_child(code: str, cache, *args: str) -> list[str]:
     """``code`` run by a fresh interpreter with numba's cache in the folder ``cache``: its printed words."""
@@ -127,3 +129,38 @@ def test_quicken_takes_on_this_numba_and_leaves_the_importing_process_alone(tmp_
     assert _in_child(code, tmp_path) == [
         "False", "False", "one_function_pass_manager=True", "overloads_by_inherited_flags=True", "quicker_flags=True"
     ]
+
+
+
+def test_a_workers_function_passes_run_at_its_level_and_its_kernels_compute_the_same(tmp_path):
+    """``quicken`` (a compile worker's) builds numba's per-function passes at ``FUNCTION_PASS_OPT``, not numba's
+    own level; the ray caster so compiled counts the same cells, beam for beam, as compiled by numba as it is."""
+    code = (
+        "import hashlib, sys\n"
+        "import numpy as np\n"
+        "from numba.core import codegen\n"
+        "from holoslam import _numba_worker\n"
+        "levels = set()\n"
+        "own = codegen.CPUCodegen._function_pass_manager\n"
+        "def spy(self, **kw):\n"
+        "    levels.add(str(kw.get('opt', 'numba')))\n"
+        "    return own(self, **kw)\n"
+        "codegen.CPUCodegen._function_pass_manager = spy\n"
+        "took = _numba_worker.quicken()['one_function_pass_manager'] if sys.argv[1] == '1' else 'off'\n"
+        "from holoslam.maps import _raycast_fast as rf\n"
+        "rng = np.random.default_rng(7)\n"
+        "n, h, w = 5000, 60, 80\n"
+        "ox, oy = rng.uniform(-20, 100, n), rng.uniform(-20, 80, n)\n"
+        "ex, ey = rng.uniform(-20, 100, n), rng.uniform(-20, 80, n)\n"
+        "hits, misses = np.zeros(h * w, np.int32), np.zeros(h * w, np.int32)\n"
+        "rf.cast_counts_into(ox, oy, ex, ey, rng.random(n) < 0.7, h, w, hits, misses)\n"
+        "digest = hashlib.sha256(hits.tobytes() + misses.tobytes()).hexdigest()\n"
+        "print(took, ','.join(sorted(levels)), int(misses.sum()) > 10000, digest)\n"
+    )
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    own = _in_child(code, tmp_path / "a", "0")
+    quick = _in_child(code, tmp_path / "b", "1")
+    assert own[:3] == ["off", "numba", "True"]
+    assert quick[:3] == ["True", str(FUNCTION_PASS_OPT), "True"]
+    assert quick[3] == own[3]

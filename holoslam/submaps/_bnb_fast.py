@@ -10,8 +10,8 @@ quantised (uint8, ``q = ceil((p - lo) / step)``, so ``lo + q * step >= p``) and 
 (H + w - 1) x (W + w - 1): its cell (i, j) holds the maximum over the fine cells [i - w + 1, i] x [j - w + 1, j]
 (cells outside the grid count as the outside value), i.e. the block of w x w fine cells *starting* at fine cell
 (i - w + 1, j - w + 1). A point in fine cell (r, c) shifted by the candidate offset (x, y) looks up level d at
-(r + y + w - 1, c + x + w - 1): the bound of every offset in [x, x + w) x [y, y + w). Levels are built by
-doubling, ``L_d[i] = max(L_{d-1}[i - w/2], L_{d-1}[i])`` along rows then columns: O(1) per cell and level.
+(r + y + w - 1, c + x + w - 1): the bound of every offset in [x, x + w) x [y, y + w). The levels are built
+in numpy by :func:`holoslam.submaps.bnb.precompute` (once per submap, as quick as a kernel: not worth one's compile).
 
 Scores are sums over the points (the caller divides by N): exact ones in float64 of the float32 cells, in
 point order (the same additions as the numpy reference, so the two agree bit for bit); bounds are
@@ -48,73 +48,6 @@ def quantise(prob, lo, step):  # pragma: no cover - compiled
             k += 1
         q[i] = np.uint8(k)
     return q.reshape(h, w)
-
-
-@nb.njit(**JIT_INNER)
-def _max2(dst, a, b):  # pragma: no cover - compiled
-    """dst = max(a, b) elementwise (slices: the loop vectorises)."""
-    for j in range(dst.size):
-        u, v = a[j], b[j]
-        dst[j] = u if u > v else v
-
-
-@nb.njit(**JIT_INNER)
-def _max1(dst, a, q_out):  # pragma: no cover - compiled
-    """dst = max(a, q_out) elementwise."""
-    for j in range(dst.size):
-        u = a[j]
-        dst[j] = u if u > q_out else q_out
-
-
-@nb.njit(**JIT_INNER)
-def _pool(src, hs, ws, half, q_out, tmp, dst):  # pragma: no cover - compiled
-    """One doubling step: src (hs x ws, flat) -> dst ((hs + half) x (ws + half), flat), through tmp
-    (hs x (ws + half)): each cell the max of the cell and the one ``half`` before it (cells outside count
-    q_out), along rows then columns."""
-    wd = ws + half
-    for i in range(hs):  # column j: src[j - half] (if j >= half) and src[j] (if j < ws)
-        s, t = src[i * ws:(i + 1) * ws], tmp[i * wd:(i + 1) * wd]
-        if half <= ws:
-            _max1(t[:half], s[:half], q_out)
-            _max2(t[half:ws], s[:ws - half], s[half:])
-            _max1(t[ws:], s[ws - half:], q_out)
-        else:
-            _max1(t[:ws], s, q_out)
-            t[ws:half] = q_out
-            _max1(t[half:], s, q_out)
-    for i in range(hs + half):  # row i: tmp row i - half (if i >= half) and row i (if i < hs)
-        d = dst[i * wd:(i + 1) * wd]
-        if half <= i < hs:
-            _max2(d, tmp[(i - half) * wd:(i - half + 1) * wd], tmp[i * wd:(i + 1) * wd])
-        elif i < hs:
-            _max1(d, tmp[i * wd:(i + 1) * wd], q_out)
-        elif i >= half:
-            _max1(d, tmp[(i - half) * wd:(i - half + 1) * wd], q_out)
-        else:
-            d[:] = q_out
-
-
-@nb.njit(**JIT)
-def pool_levels(q0, depth, q_out):  # pragma: no cover - compiled
-    """Levels 1..depth-1 of the quantised grid q0 (H x W) in one flat uint8 buffer; ``starts[d]`` is where
-    level d begins (starts[0] = 0, unused: level 0 is the float grid)."""
-    h, w = q0.shape
-    starts = np.zeros(depth + 1, dtype=np.int64)
-    for d in range(1, depth):
-        sh = (1 << d) - 1
-        starts[d + 1] = starts[d] + (h + sh) * (w + sh)
-    levels = np.empty(starts[depth], dtype=np.uint8)
-    if depth <= 1:
-        return levels, starts
-    big = (1 << (depth - 1)) - 1
-    tmp = np.empty((h + big) * (w + big), dtype=np.uint8)
-    # half as np.int64, not the literal 1: numba would compile _pool a second time for that literal type
-    _pool(q0.ravel(), h, w, np.int64(1), q_out, tmp, levels[starts[1]:starts[2]])
-    for d in range(2, depth):
-        half = 1 << (d - 1)
-        hs, ws = h + half - 1, w + half - 1
-        _pool(levels[starts[d - 1]:starts[d]], hs, ws, half, q_out, tmp, levels[starts[d]:starts[d + 1]])
-    return levels, starts
 
 
 @nb.njit(**JIT, inline="always")
@@ -170,31 +103,15 @@ def _score(prob, levels, starts, d, rows, cols, bb, a, x, y, quant):  # pragma: 
     return rows.shape[1] * lo + q * step + slack
 
 
-@nb.njit(**JIT_INNER)
-def _boxes(rows, cols):  # pragma: no cover - compiled
-    """Per angle a: (min row, max row, min col, max col) of the points' cells."""
-    bb = np.empty((rows.shape[0], 4), dtype=np.int64)
-    for a in range(rows.shape[0]):  # written out: numba's array min/max took a second to compile
-        r_lo = r_hi = rows[a, 0]
-        c_lo = c_hi = cols[a, 0]
-        for i in range(1, rows.shape[1]):
-            r, c = rows[a, i], cols[a, i]
-            r_lo, r_hi = min(r_lo, r), max(r_hi, r)
-            c_lo, c_hi = min(c_lo, c), max(c_hi, c)
-        bb[a, 0], bb[a, 1], bb[a, 2], bb[a, 3] = r_lo, r_hi, c_lo, c_hi
-    return bb
-
-
 @nb.njit(**JIT)
-def top_bounds(prob, levels, starts, rows, cols, box, d_top, quant):  # pragma: no cover - compiled
+def top_bounds(prob, levels, starts, rows, cols, bb, box, d_top, quant):  # pragma: no cover - compiled
     """The bounds of the top level's nodes (angle-major, then x, then y) and their order, best first (ties in
-    node order): (bounds (A nx ny,), order)."""
+    node order): (bounds (A nx ny,), order). ``bb`` (A, 4): :func:`discretise`'s cell boxes of the points."""
     n_ang = rows.shape[0]
     x_lo, x_hi, y_lo, y_hi = box
     w = 1 << d_top
     nx = (x_hi - x_lo) // w + 1
     ny = (y_hi - y_lo) // w + 1
-    bb = _boxes(rows, cols)
     top = np.empty(n_ang * nx * ny, dtype=np.float64)
     for a in range(n_ang):
         for ix in range(nx):
@@ -218,14 +135,13 @@ def _defer(buf, n, a, x, y, d, bound):  # pragma: no cover - compiled
 
 
 @nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
-def _workspace(box, d_top, rows, cols, defer):  # pragma: no cover - compiled
-    """:func:`descend`'s arrays: the top level's node counts (nx, ny), the scan's cell boxes, the depth-first
-    stack (angle, x, y, level, bound), the children scratch (cx, cy, cs) and the set-aside buffer."""
+def _workspace(box, d_top, defer):  # pragma: no cover - compiled
+    """:func:`descend`'s arrays: the top level's node counts (nx, ny), the depth-first stack (angle, x, y, level, bound), the children scratch (cx, cy, cs) and the set-aside buffer."""
     w = 1 << d_top
     cap = 4 * d_top + 4
     st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
           np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.float64))
-    return ((box[1] - box[0]) // w + 1, (box[3] - box[2]) // w + 1, _boxes(rows, cols), st,
+    return ((box[1] - box[0]) // w + 1, (box[3] - box[2]) // w + 1, st,
             np.empty(4, dtype=np.int64), np.empty(4, dtype=np.int64), np.empty(4, dtype=np.float64),
             np.empty((64 if defer >= 0 else 0, 5), dtype=np.float64))
 
@@ -245,12 +161,13 @@ def _top_node(k, nx, ny, x_lo, y_lo, d_top, top):  # pragma: no cover - compiled
 
 
 @nb.njit(**JIT)
-def descend(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, order, k0, seeds, centres, ex, first,
+def descend(prob, levels, starts, rows, cols, bb, box, d_top, quant, best0, top, order, k0, seeds, centres, ex, first,
             defer):  # pragma: no cover - compiled
     """Depth-first branch and bound (Hess et al. 2016, Alg. 3; best child first) over angles 0..A-1 (rows/cols
     (A, N): the points' cells at each angle) and integer offsets box = (x_lo, x_hi, y_lo, y_hi), below the top
-    level d_top whose bounds and order :func:`top_bounds` gave: first from the nodes ``seeds`` (m, 5: angle, x,
-    y, level, bound), then from the top level's nodes ``order[k0:]`` until their bound falls to the best.
+    level d_top whose bounds and order :func:`top_bounds` gave (``bb``: :func:`discretise`'s cell boxes): first
+    from the nodes ``seeds`` (m, 5: angle, x, y, level, bound), then from the top level's nodes ``order[k0:]``
+    until their bound falls to the best.
 
     Boxes cut out: no candidate within +-ex[0] offsets (x and y) and +-ex[1] angle indices of any of ``centres``
     (k, 3: angle, x, y) is returned, and a node whose block lies inside one box is dropped (the bounds of the
@@ -264,7 +181,7 @@ def descend(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, ord
     Counts and indices start as ``np.int64`` values, not literals: numba would compile ``_defer`` again for each
     literal type its first typing pass sees (0, -1)."""
     x_lo, x_hi, y_lo, y_hi = box
-    nx, ny, bb, st, cx, cy, cs, buf = _workspace(box, d_top, rows, cols, defer)
+    nx, ny, st, cx, cy, cs, buf = _workspace(box, d_top, defer)
     nd = np.int64(0)
     best, ba, bx, by = best0, np.int64(-1), np.int64(0), np.int64(0)
     k_break = order.size
@@ -333,27 +250,33 @@ def descend(prob, levels, starts, rows, cols, box, d_top, quant, best0, top, ord
 @nb.njit(**JIT)
 def discretise(px, py, angles, x0, y0, ox, oy, res, lim):  # pragma: no cover - compiled
     """The cells (rows, cols) (A, N) int32 of the points (px, py) rotated by each angle and moved to (x0, y0):
-    floor((x - ox) / res), clamped to +-lim."""
+    floor((x - ox) / res), clamped to +-lim; and per angle the box of those cells, bb (A, 4) int64: (min row,
+    max row, min col, max col), which lets :func:`top_bounds` and :func:`descend` score a candidate whose points
+    all fall inside the grid without a bounds test per point. N >= 1."""
     n_ang, n = angles.size, px.size
     rows = np.empty((n_ang, n), dtype=np.int32)
     cols = np.empty((n_ang, n), dtype=np.int32)
+    bb = np.empty((n_ang, 4), dtype=np.int64)
     for a in range(n_ang):
         c, s = math.cos(angles[a]), math.sin(angles[a])
+        r_lo, r_hi, c_lo, c_hi = int(lim), -int(lim), int(lim), -int(lim)
         for i in range(n):
             x = (c * px[i] - s * py[i] + x0 - ox) / res
             y = (s * px[i] + c * py[i] + y0 - oy) / res
-            cols[a, i] = int(math.floor(min(max(x, -lim), lim)))
-            rows[a, i] = int(math.floor(min(max(y, -lim), lim)))
-    return rows, cols
+            ci = int(math.floor(min(max(x, -lim), lim)))
+            ri = int(math.floor(min(max(y, -lim), lim)))
+            cols[a, i], rows[a, i] = ci, ri
+            r_lo, r_hi, c_lo, c_hi = min(r_lo, ri), max(r_hi, ri), min(c_lo, ci), max(c_hi, ci)
+        bb[a, 0], bb[a, 1], bb[a, 2], bb[a, 3] = r_lo, r_hi, c_lo, c_hi
+    return rows, cols, bb
 
 
 @nb.njit(**JIT)
-def exhaustive(prob, rows, cols, box, p_out):  # pragma: no cover - compiled
+def exhaustive(prob, rows, cols, bb, box, p_out):  # pragma: no cover - compiled
     """Every candidate scored exactly (the compiled brute force, for benchmarks): (best sum, a, x, y), the
     first best in (a, y, x) order."""
     x_lo, x_hi, y_lo, y_hi = box
     best, ba, bx, by = -np.inf, -1, 0, 0
-    bb = _boxes(rows, cols)
     for a in range(rows.shape[0]):
         for y in range(y_lo, y_hi + 1):
             for x in range(x_lo, x_hi + 1):

@@ -28,8 +28,9 @@ class SearchWindow:
         self.n = n
         self.quant = (pre.q_lo, pre.q_step, float(pre.q_out), float(bnb.OUTSIDE), bnb._SLACK * n)
         self.d_top = bnb._top_level(pre, self.cand.box)
-        self.top, self.order = bnb._kernels().top_bounds(pre.prob, pre.levels, pre.starts, self.cand.rows,
-                                                         self.cand.cols, self.cand.box, self.d_top, self.quant)
+        c = self.cand
+        self.top, self.order = bnb._kernels().top_bounds(pre.prob, pre.levels, pre.starts, c.rows, c.cols,
+                                                         c.cells_box, c.box, self.d_top, self.quant)
         a = self.cand.angles
         self.angle_step = abs(float(a[1] - a[0])) if a.size > 1 else math.pi
         self.margin = -1.0  # best()'s margin: the nodes it set aside (aside) and where its top level stopped
@@ -44,7 +45,7 @@ class SearchWindow:
         pre, c = self.pre, self.cand
         seeds, k0 = (self.aside, self.k_break) if resume else (np.zeros((0, 5)), 0)
         s, a, x, y, k_break, aside = bnb._kernels().descend(
-            pre.prob, pre.levels, pre.starts, c.rows, c.cols, c.box, self.d_top, self.quant,
+            pre.prob, pre.levels, pre.starts, c.rows, c.cols, c.cells_box, c.box, self.d_top, self.quant,
             float(min_score) * self.n, self.top, self.order, k0, seeds,
             np.asarray(centres if centres is not None else np.zeros((0, 3)), np.int64).reshape(-1, 3),
             np.asarray(ex, np.int64), first, float(defer) * self.n if defer >= 0 else -1.0)
