@@ -1,4 +1,4 @@
-"""A compile worker's numba, quicker by exact equivalents of three of its internals and one lighter pass level.
+"""A compile worker's numba, quicker by exact equivalents of three of its internals and two lighter pass levels.
 
 Only the processes of :mod:`holoslam.warmup`'s compile pools call :func:`quicken` (their initializer): a user's
 process keeps numba as it is. Each replacement gives what numba's own code gives, for less CPU, and each is
@@ -8,8 +8,9 @@ skipped (numba left as it is, the function returns False) when this numba lacks 
 * :func:`one_function_pass_manager`: the function passes run on a module's functions by one pass manager,
   where numba builds one per function; the machine code is the same (the household's 71 cached kernels: the
   same object code, byte for byte, as numba's own, less the 2 whose bytes differ between two runs of numba's).
-  :func:`quicken` also runs those passes at ``FUNCTION_PASS_OPT`` (-O1) where numba runs them at its ``-O3``:
-  the one deviation from numba's own output (its machine code, not its results: ``FUNCTION_PASS_OPT``);
+  :func:`quicken` also runs those passes at ``FUNCTION_PASS_OPT`` (-O1) and the module passes at
+  ``MODULE_PASS_OPT`` (-O2) where numba runs both at ``-O3``: the deviations from numba's own output (its
+  machine code, not the kernels' results: measured at the two settings);
 * :func:`overloads_by_inherited_flags`: an ``@overload``'s implementation (``np.empty``, ``max``...) compiled once
   per argument types and per value of the options a compile inherits from its caller, instead of once per whole
   set of the caller's options: the others (``nogil``, the wrappers) never reach the implementation's compile.
@@ -24,31 +25,58 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["FUNCTION_PASS_OPT", "quicken", "quicker_flags", "one_function_pass_manager", "overloads_by_inherited_flags"]
+__all__ = ["FUNCTION_PASS_OPT", "MODULE_PASS_OPT", "module_passes_at", "quicken", "quicker_flags", "one_function_pass_manager", "overloads_by_inherited_flags"]
 
 
 #: the optimisation level of the per-function passes numba runs on each function as its IR is added to a library
-#: (numba: its ``NUMBA_OPT``, 3), in a compile worker. Every kernel's machine code comes from the full ``-O3``
-#: module pipeline numba runs afterwards on the linked final module, which this leaves as it is; the early
-#: function passes only prepare for it. At -O1 the household's recorded kernels compile in 4.6 % less CPU
-#: (18.68 -> 17.81 s serially, medians of 5 alternated, 2026-12-07; 18.27 -> 17.84 and 18.71 -> 17.48 s on two
-#: more days), its warm run is as quick (6.93 -> 6.69 s wall, medians of 6 alternated with each cache), numba's
-#: cache 0.3 % smaller, and every output of the household's run byte-identical but the run's timestamps (no
-#: kernel reassociates floating point without ``fastmath``, which these passes do not change). -O0 and no
-#: function passes at all compiled quicker still but ran the household 5-15 % slower.
+#: (numba: its ``NUMBA_OPT``, 3), in a compile worker: they only prepare the linked final module for the module
+#: passes below, which every kernel's machine code comes from. At -O1 the household's recorded kernels compile
+#: in 4.6 % less CPU (18.68 -> 17.81 s serially, medians of 5 alternated, 2026-12-07; 18.27 -> 17.84 and 18.71
+#: -> 17.48 s in two more such comparisons), its warm run is as quick (6.93 -> 6.69 s wall, medians of 6
+#: alternated with each cache), intel at full rate too (30.6 -> 29.8 s), and every output of the household's run
+#: is byte-identical but the run's timestamps. -O0, or no function passes at all, compiled quicker still but ran
+#: the household 5-15 % slower.
 FUNCTION_PASS_OPT = 1
+
+#: the optimisation level of numba's module passes on a kernel's final module (numba: ``NUMBA_OPT``, 3), in a
+#: compile worker; the machine code generator, set up before the workers fork, keeps numba's level. At -O2 the
+#: record compiles in 3 % less CPU (17.52 -> 16.98 s serially, medians of 5 alternated, with the function passes
+#: at -O1), the household's warm run is as quick (7.04 -> 6.75 s, medians of 6), intel at full rate too (30.1 ->
+#: 29.3 s, 2 each) with the same trajectory, byte for byte. Loop unrolling off as well saved 1.1 s more but ran
+#: intel 5 % slower (CPU): not taken.
+MODULE_PASS_OPT = 2
 
 
 def quicken() -> dict[str, bool]:
     """Apply the three replacements in this process (a compile worker's), the function passes at
-    ``FUNCTION_PASS_OPT``; which ones took. The household's recorded kernels compiled serially (``python
-    benchmarks/bench_jit_compile.py --repeats 3``, 2026-12-06): 18.6 s CPU with numba as it is, 16.8 s with
-    the three (``quicker_flags`` alone: 19.8 -> 18.9 s, medians of 6 alternated, an earlier day)."""
+    ``FUNCTION_PASS_OPT`` and the module passes at ``MODULE_PASS_OPT`` (neither above a lower ``NUMBA_OPT`` the
+    user set; ``NUMBA_OPT=max`` left as it is); which ones took. The household's recorded kernels compiled
+    serially (``python benchmarks/bench_jit_compile.py --repeats 3``, 2026-12-06): 18.6 s CPU with numba as it
+    is, 16.8 s with the three replacements (``quicker_flags`` alone: 19.8 -> 18.9 s, medians of 6 alternated, an
+    earlier day); the pass levels: above."""
+    from numba.core import config
+
+    level = getattr(config, "OPT", 3)
+    user_max = bool(getattr(level, "is_opt_max", False))
     return {
         "quicker_flags": quicker_flags(),
-        "one_function_pass_manager": one_function_pass_manager(FUNCTION_PASS_OPT),
+        "one_function_pass_manager": one_function_pass_manager(None if user_max else min(FUNCTION_PASS_OPT, level)),
         "overloads_by_inherited_flags": overloads_by_inherited_flags(),
+        "module_passes_at": False if user_max else module_passes_at(min(MODULE_PASS_OPT, level)),
     }
+
+
+def module_passes_at(level: int) -> bool:
+    """numba's optimisation level in this process (``numba.core.config.OPT``, which its module pass managers read
+    at every compile) set to ``level``; False when this numba keeps it elsewhere. The code generator already set
+    up (``warmup._set_up_compiler``, before a pool forks) keeps the level it was made with."""
+    from numba.core import config
+
+    kind = getattr(config, "_OptLevel", None)
+    if kind is None or not isinstance(getattr(config, "OPT", None), kind):
+        return False
+    setattr(config, "OPT", kind(int(level)))  # noqa: B010 - set at run time in numba, untyped
+    return True
 
 
 def quicker_flags() -> bool:

@@ -9,7 +9,7 @@ import sys
 
 from repo_paths import REPO
 
-from holoslam._numba_worker import FUNCTION_PASS_OPT
+from holoslam._numba_worker import FUNCTION_PASS_OPT, MODULE_PASS_OPT
 
 
 def _in_child(code: str, cache, *args: str) -> list[str]:
@@ -127,26 +127,27 @@ def test_quicken_takes_on_this_numba_and_leaves_the_importing_process_alone(tmp_
         "print(*before, *(f'{k}={v}' for k, v in sorted(took.items())))\n"
     )
     assert _in_child(code, tmp_path) == [
-        "False", "False", "one_function_pass_manager=True", "overloads_by_inherited_flags=True", "quicker_flags=True"
+        "False", "False", "module_passes_at=True", "one_function_pass_manager=True",
+        "overloads_by_inherited_flags=True", "quicker_flags=True",
     ]
 
 
-
-def test_a_workers_function_passes_run_at_its_level_and_its_kernels_compute_the_same(tmp_path):
-    """``quicken`` (a compile worker's) builds numba's per-function passes at ``FUNCTION_PASS_OPT``, not numba's
-    own level; the ray caster so compiled counts the same cells, beam for beam, as compiled by numba as it is."""
+def test_a_workers_passes_run_at_its_levels_and_its_kernels_compute_the_same(tmp_path):
+    """``quicken`` (a compile worker's) builds numba's LLVM passes at its levels (``FUNCTION_PASS_OPT``,
+    ``MODULE_PASS_OPT``; numba's cheap inlining pass at 0 as numba's), not at numba's -O3; the ray caster so
+    compiled counts the same cells, beam for beam, as compiled by numba as it is."""
     code = (
         "import hashlib, sys\n"
         "import numpy as np\n"
         "from numba.core import codegen\n"
         "from holoslam import _numba_worker\n"
         "levels = set()\n"
-        "own = codegen.CPUCodegen._function_pass_manager\n"
-        "def spy(self, **kw):\n"
-        "    levels.add(str(kw.get('opt', 'numba')))\n"
-        "    return own(self, **kw)\n"
-        "codegen.CPUCodegen._function_pass_manager = spy\n"
-        "took = _numba_worker.quicken()['one_function_pass_manager'] if sys.argv[1] == '1' else 'off'\n"
+        "own = codegen.create_pass_builder\n"
+        "def spy(tm, opt=2, **kw):\n"
+        "    levels.add(str(int(opt)))\n"
+        "    return own(tm, opt=opt, **kw)\n"
+        "codegen.create_pass_builder = spy\n"
+        "took = _numba_worker.quicken()['module_passes_at'] if sys.argv[1] == '1' else 'off'\n"
         "from holoslam.maps import _raycast_fast as rf\n"
         "rng = np.random.default_rng(7)\n"
         "n, h, w = 5000, 60, 80\n"
@@ -161,6 +162,6 @@ def test_a_workers_function_passes_run_at_its_level_and_its_kernels_compute_the_
     (tmp_path / "b").mkdir()
     own = _in_child(code, tmp_path / "a", "0")
     quick = _in_child(code, tmp_path / "b", "1")
-    assert own[:3] == ["off", "numba", "True"]
-    assert quick[:3] == ["True", str(FUNCTION_PASS_OPT), "True"]
+    assert own[:3] == ["off", "0,3", "True"]
+    assert quick[:3] == ["True", f"0,{FUNCTION_PASS_OPT},{MODULE_PASS_OPT}", "True"]
     assert quick[3] == own[3]
