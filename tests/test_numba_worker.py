@@ -20,6 +20,14 @@ def _in_child(code: str, cache, *args: str) -> list[str]:
     return out.stdout.split()
 
 
+def _own_and_quick(code: str, tmp_path) -> tuple[list[str], list[str]]:
+    """``code``'s printed words with numba as it is (argument "0") and with the worker's replacement ("1"), each in
+    a fresh interpreter and its own empty numba cache."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    return _in_child(code, tmp_path / "a", "0"), _in_child(code, tmp_path / "b", "1")
+
+
 def test_compile_workers_flags_methods_are_numbas_own_results(tmp_path):
     """``quicker_flags`` (a compile worker's): numba's ``Flags.values`` and ``hash`` give what numba's own
     methods give, for the default flags and for flags with options set (to their defaults too), copies equal
@@ -65,10 +73,7 @@ def test_one_function_pass_manager_gives_numbas_machine_code(tmp_path):
         "asm = disp.inspect_asm(types)\n"
         "print(took, len(asm) > 1000, hashlib.sha256(asm.encode()).hexdigest())\n"
     )
-    (tmp_path / "a").mkdir()
-    (tmp_path / "b").mkdir()
-    own = _in_child(code, tmp_path / "a", "0")
-    quick = _in_child(code, tmp_path / "b", "1")
+    own, quick = _own_and_quick(code, tmp_path)
     assert own[:2] == ["off", "True"] and quick[:2] == ["True", "True"]
     assert quick[2] == own[2]
 
@@ -105,10 +110,7 @@ def test_an_overload_is_built_once_for_callers_that_differ_only_in_options_it_do
     """``overloads_by_inherited_flags``: ``np.empty(n, np.int64)`` called from a kernel and from one that releases
     the GIL is built once (numba's own key builds it twice), and again for a caller with ``fastmath`` (an option
     its compile inherits); every caller's result is right."""
-    (tmp_path / "a").mkdir()
-    (tmp_path / "b").mkdir()
-    own = _in_child(_OVERLOADS, tmp_path / "a", "0")
-    quick = _in_child(_OVERLOADS, tmp_path / "b", "1")
+    own, quick = _own_and_quick(_OVERLOADS, tmp_path)
     assert own == ["off", "20", "20", "20", "2", "3"]
     assert quick == ["True", "20", "20", "20", "1", "2"]
 
@@ -158,10 +160,7 @@ def test_a_workers_passes_run_at_its_levels_and_its_kernels_compute_the_same(tmp
         "digest = hashlib.sha256(hits.tobytes() + misses.tobytes()).hexdigest()\n"
         "print(took, ','.join(sorted(levels)), int(misses.sum()) > 10000, digest)\n"
     )
-    (tmp_path / "a").mkdir()
-    (tmp_path / "b").mkdir()
-    own = _in_child(code, tmp_path / "a", "0")
-    quick = _in_child(code, tmp_path / "b", "1")
+    own, quick = _own_and_quick(code, tmp_path)
     assert own[:3] == ["off", "0,3", "True"]
     assert quick[:3] == ["True", f"0,{FUNCTION_PASS_OPT},{MODULE_PASS_OPT}", "True"]
     assert quick[3] == own[3]
