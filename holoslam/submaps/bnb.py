@@ -223,9 +223,9 @@ def _candidates(grids: PrecomputedGrids, b_pts, seed_aTb, window_xy_m, window_th
     n = math.ceil(wt / step - 1e-9) if wt > 0 else 0
     k = np.arange(-n, n + 1, dtype=np.float64)
     angles = seed[2] + (k * (wt / n) if n else k)
-    rows, cols, cells_box = _kernels().discretise(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), angles,
-                                       seed[0], seed[1], grids.origin[0], grids.origin[1], grids.res,
-                                       float(_MAX_CELLS))
+    rows, cols, cells_box = _kernels().discretise(
+        np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), angles, seed[0], seed[1],
+        grids.origin[0], grids.origin[1], grids.res, float(_MAX_CELLS))
     wx, wy = _window_cells(window_xy_m, grids.res)
     return _Candidates(angles, rows, cols, cells_box, (-wx, wx, -wy, wy), seed)
 
