@@ -25,7 +25,8 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["FUNCTION_PASS_OPT", "MODULE_PASS_OPT", "module_passes_at", "quicken", "quicker_flags", "one_function_pass_manager", "overloads_by_inherited_flags"]
+__all__ = ["FUNCTION_PASS_OPT", "MODULE_PASS_OPT", "quicken", "quicker_flags", "one_function_pass_manager",
+           "overloads_by_inherited_flags", "module_passes_at"]
 
 
 #: the optimisation level of the per-function passes numba runs on each function as its IR is added to a library
@@ -58,9 +59,10 @@ def quicken() -> dict[str, bool]:
 
     level = getattr(config, "OPT", 3)
     user_max = bool(getattr(level, "is_opt_max", False))
+    function_opt = None if user_max else min(FUNCTION_PASS_OPT, level)
     return {
         "quicker_flags": quicker_flags(),
-        "one_function_pass_manager": one_function_pass_manager(None if user_max else min(FUNCTION_PASS_OPT, level)),
+        "one_function_pass_manager": one_function_pass_manager(function_opt),
         "overloads_by_inherited_flags": overloads_by_inherited_flags(),
         "module_passes_at": False if user_max else module_passes_at(min(MODULE_PASS_OPT, level)),
     }

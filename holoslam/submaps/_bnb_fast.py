@@ -11,7 +11,8 @@ quantised (uint8, ``q = ceil((p - lo) / step)``, so ``lo + q * step >= p``) and 
 (cells outside the grid count as the outside value), i.e. the block of w x w fine cells *starting* at fine cell
 (i - w + 1, j - w + 1). A point in fine cell (r, c) shifted by the candidate offset (x, y) looks up level d at
 (r + y + w - 1, c + x + w - 1): the bound of every offset in [x, x + w) x [y, y + w). The levels are built
-in numpy by :func:`holoslam.submaps.bnb.precompute` (once per submap, as quick as a kernel: not worth one's compile).
+in numpy by :func:`holoslam.submaps.bnb.precompute` (once per submap, as quick as a kernel: not worth one's
+compile).
 
 Scores are sums over the points (the caller divides by N): exact ones in float64 of the float32 cells, in
 point order (the same additions as the numpy reference, so the two agree bit for bit); bounds are
@@ -136,7 +137,8 @@ def _defer(buf, n, a, x, y, d, bound):  # pragma: no cover - compiled
 
 @nb.njit(**JIT, inline="always")  # one call site: no kernel of its own to compile
 def _workspace(box, d_top, defer):  # pragma: no cover - compiled
-    """:func:`descend`'s arrays: the top level's node counts (nx, ny), the depth-first stack (angle, x, y, level, bound), the children scratch (cx, cy, cs) and the set-aside buffer."""
+    """:func:`descend`'s arrays: the top level's node counts (nx, ny), the depth-first stack (angle, x, y, level,
+    bound), the children scratch (cx, cy, cs) and the set-aside buffer."""
     w = 1 << d_top
     cap = 4 * d_top + 4
     st = (np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64),
@@ -161,8 +163,8 @@ def _top_node(k, nx, ny, x_lo, y_lo, d_top, top):  # pragma: no cover - compiled
 
 
 @nb.njit(**JIT)
-def descend(prob, levels, starts, rows, cols, bb, box, d_top, quant, best0, top, order, k0, seeds, centres, ex, first,
-            defer):  # pragma: no cover - compiled
+def descend(prob, levels, starts, rows, cols, bb, box, d_top, quant, best0, top, order, k0, seeds, centres, ex,
+            first, defer):  # pragma: no cover - compiled
     """Depth-first branch and bound (Hess et al. 2016, Alg. 3; best child first) over angles 0..A-1 (rows/cols
     (A, N): the points' cells at each angle) and integer offsets box = (x_lo, x_hi, y_lo, y_hi), below the top
     level d_top whose bounds and order :func:`top_bounds` gave (``bb``: :func:`discretise`'s cell boxes): first
