@@ -1,4 +1,5 @@
-"""A compile worker's numba, quicker by exact equivalents of three of its internals and two lighter pass levels.
+"""A compile worker's numba, quicker by exact equivalents of three of its internals, two lighter pass levels, no
+SSA reconstruction and a rarer garbage collector.
 
 Only the processes of :mod:`holoslam.warmup`'s compile pools call :func:`quicken` (their initializer): a user's
 process keeps numba as it is. Each replacement gives what numba's own code gives, for less CPU, and each is
@@ -13,20 +14,27 @@ skipped (numba left as it is, the function returns False) when this numba lacks 
   machine code, not the kernels' results: measured at the two settings);
 * :func:`overloads_by_inherited_flags`: an ``@overload``'s implementation (``np.empty``, ``max``...) compiled once
   per argument types and per value of the options a compile inherits from its caller, instead of once per whole
-  set of the caller's options: the others (``nogil``, the wrappers) never reach the implementation's compile.
+  set of the caller's options: the others (``nogil``, the wrappers) never reach the implementation's compile;
+* :func:`without_ssa`: numba's functions typed and lowered without its SSA reconstruction, as numba compiles
+  what it inlines (one type per variable, unified over its assignments): the household's kernels all compile
+  so and every output of its run is the same, byte for byte;
+* :func:`collect_rarely`: Python's cyclic garbage collector left to the objects the compiles make
+  (``gc.freeze`` of what the worker inherited and imported) and run rarely (``COLLECTOR_THRESHOLDS``): numba's
+  compiles make objects by the million, and the default thresholds traverse them all again and again.
 
 Measured: :func:`quicken`.
 """
 
 from __future__ import annotations
 
+import gc
 import inspect
 import re
 from collections.abc import Mapping
 from typing import Any
 
 __all__ = ["FUNCTION_PASS_OPT", "MODULE_PASS_OPT", "quicken", "quicker_flags", "one_function_pass_manager",
-           "overloads_by_inherited_flags", "module_passes_at"]
+           "overloads_by_inherited_flags", "module_passes_at", "COLLECTOR_THRESHOLDS", "collect_rarely", "without_ssa"]
 
 
 #: the optimisation level of the per-function passes numba runs on each function as its IR is added to a library
@@ -47,11 +55,19 @@ FUNCTION_PASS_OPT = 1
 #: intel 5 % slower (CPU): not taken.
 MODULE_PASS_OPT = 2
 
+#: the cyclic garbage collector's thresholds in a compile worker (Python's: 700, 10, 10): a young collection
+#: every 10,000 net allocations, the older generations practically never (a worker lives for one pool). With
+#: Python's own, the collector took 2.6-2.8 s of the household's record compiled serially (16.3-16.7 s CPU,
+#: ``gc.callbacks``, 2026-12-07), 2.3 s of it in full collections of numba's ever larger heap; at these, 0.3 s
+#: (14.2 s CPU) for a peak of 368 MB instead of 251 MB. Collecting older generations at all cost ~0.7 s more
+#: (10,000, 100, 1,000: 0.9 s, 329 MB); no collector at all, 450 MB.
+COLLECTOR_THRESHOLDS = (10_000, 1_000, 1_000)
+
 
 def quicken() -> dict[str, bool]:
     """Apply the three replacements in this process (a compile worker's), the function passes at
     ``FUNCTION_PASS_OPT`` and the module passes at ``MODULE_PASS_OPT`` (neither above a lower ``NUMBA_OPT`` the
-    user set; ``NUMBA_OPT=max`` left as it is); which ones took. The household's recorded kernels compiled
+    user set; ``NUMBA_OPT=max`` left as it is) and the collector's thresholds; which ones took. The household's recorded kernels compiled
     serially (``python benchmarks/bench_jit_compile.py --repeats 3``, 2026-12-06): 18.6 s CPU with numba as it
     is, 16.8 s with the three replacements (``quicker_flags`` alone: 19.8 -> 18.9 s, medians of 6 alternated, an
     earlier day); the pass levels: above."""
@@ -61,11 +77,38 @@ def quicken() -> dict[str, bool]:
     user_max = bool(getattr(level, "is_opt_max", False))
     function_opt = None if user_max else min(FUNCTION_PASS_OPT, level)
     return {
+        "without_ssa": without_ssa(),  # first: a default of numba's flags, read by quicker_flags' first call
         "quicker_flags": quicker_flags(),
         "one_function_pass_manager": one_function_pass_manager(function_opt),
         "overloads_by_inherited_flags": overloads_by_inherited_flags(),
         "module_passes_at": False if user_max else module_passes_at(min(MODULE_PASS_OPT, level)),
+        "collect_rarely": collect_rarely(),
     }
+
+
+def without_ssa() -> bool:
+    """numba's compiles in this process without its SSA reconstruction (``Flags.enable_ssa``'s default off: the
+    pass numba skips when it compiles a function to inline); False when this numba's flags lack the option. A
+    kernel that would not type so fails in the worker and is compiled by the run as numba does. Measured on the
+    household's record compiled serially: 16.5 -> 15.6 s CPU (medians of 5 alternated, 2026-12-07), the same
+    outputs of its run byte for byte but the timings, its warm run as quick (6.26 -> 6.24 s, medians of 6
+    alternated with each cache), intel at full rate too (27.3 -> 26.4 s, 2 each) with the same trajectory."""
+    from numba.core.compiler import Flags
+
+    option = getattr(Flags, "options", {}).get("enable_ssa")
+    if option is None or not isinstance(getattr(option, "_default", None), bool):
+        return False
+    option._default = False  # numba's Option keeps its default in a slot, read by the flag's property
+    return True
+
+
+def collect_rarely(thresholds: tuple[int, int, int] = COLLECTOR_THRESHOLDS) -> bool:
+    """The objects this process holds now moved out of the cyclic collector's reach (``gc.freeze``: a forked
+    worker's inheritance and its imports, never garbage for the pool's lifetime, and not traversed, so their
+    pages stay shared with the parent), and the collector's thresholds set to ``thresholds``."""
+    gc.freeze()
+    gc.set_threshold(*thresholds)
+    return True
 
 
 def module_passes_at(level: int) -> bool:

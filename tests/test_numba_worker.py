@@ -9,7 +9,7 @@ import sys
 
 from repo_paths import REPO
 
-from holoslam._numba_worker import FUNCTION_PASS_OPT, MODULE_PASS_OPT
+from holoslam._numba_worker import COLLECTOR_THRESHOLDS, FUNCTION_PASS_OPT, MODULE_PASS_OPT
 
 
 def _in_child(code: str, cache, *args: str) -> list[str]:
@@ -129,9 +129,54 @@ def test_quicken_takes_on_this_numba_and_leaves_the_importing_process_alone(tmp_
         "print(*before, *(f'{k}={v}' for k, v in sorted(took.items())))\n"
     )
     assert _in_child(code, tmp_path) == [
-        "False", "False", "module_passes_at=True", "one_function_pass_manager=True",
-        "overloads_by_inherited_flags=True", "quicker_flags=True",
+        "False", "False", "collect_rarely=True", "module_passes_at=True", "one_function_pass_manager=True",
+        "overloads_by_inherited_flags=True", "quicker_flags=True", "without_ssa=True",
     ]
+
+
+def test_without_ssa_compiles_without_numbas_ssa_pass_to_the_same_result(tmp_path):
+    """``without_ssa`` (a compile worker's): a kernel whose variable changes type (an int, then a float sum) is
+    compiled without numba's SSA reconstruction and returns what numba's own compile returns; the flag's
+    default is back to numba's in a process that did not call it."""
+    code = (
+        "import sys\n"
+        "import numba as nb\n"
+        "from numba.core.compiler import Flags\n"
+        "from holoslam import _numba_worker\n"
+        "took = _numba_worker.without_ssa() if sys.argv[1] == '1' else 'off'\n"
+        "@nb.njit\n"
+        "def f(n):\n"
+        "    x = 0\n"
+        "    for i in range(n):\n"
+        "        x = x + 0.5 * i\n"
+        "    return x\n"
+        "r = f(7)\n"
+        "passes = f.overloads[f.signatures[0]].metadata['pipeline_times']['nopython']\n"
+        "print(took, r, any(k.endswith('_reconstruct_ssa') for k in passes), Flags().enable_ssa)\n"
+    )
+    own, quick = _own_and_quick(code, tmp_path)
+    assert own == ["off", "10.5", "True", "True"]
+    assert quick == ["True", "10.5", "False", "False"]
+
+
+def test_a_compile_worker_collects_rarely_and_its_parent_as_before(tmp_path):
+    """``collect_rarely`` in the first run's compile workers: the collector's thresholds are
+    ``COLLECTOR_THRESHOLDS`` and what the worker held when it started is frozen out of its reach; the process
+    that started the pool keeps its own thresholds and freezes nothing."""
+    code = (
+        "import gc\n"
+        "from holoslam import warmup\n"
+        "def facts():\n"
+        "    return gc.get_threshold(), gc.get_freeze_count() > 0\n"
+        "before = facts()\n"
+        "pool = warmup.compile_in_background([], workers=1, wait_for=())\n"
+        "worker = pool.submit(facts).result()\n"
+        "pool.shutdown()\n"
+        "print(repr(before).replace(' ', ''), repr(worker).replace(' ', ''), repr(facts()).replace(' ', ''))\n"
+    )
+    before, worker, after = _in_child(code, tmp_path)
+    assert worker == repr((COLLECTOR_THRESHOLDS, True)).replace(" ", "")
+    assert before == after and before.endswith(",False)") and before != worker
 
 
 def test_a_workers_passes_run_at_its_levels_and_its_kernels_compute_the_same(tmp_path):
