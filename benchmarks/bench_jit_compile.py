@@ -5,7 +5,7 @@ so nothing compiled before counts:
 
 1. ``--record``: a pipeline run of the bundled household log records the kernel signatures it compiles
    (``holoslam/_kernel_signatures.txt``, read by ``holoslam warmup`` and the first run), then a serial compile of
-   them measures each one's seconds, written into the record.
+   them with the workers' numba measures each one's seconds, written into the record.
 2. Per kernel: the serial compile (one process, with the numba of the pools' workers), the table of the
    slowest signatures and the total per module.
 3. The whole warm-up (``holoslam.warmup.warm_up``): one process with numba as it is, one with the workers'
@@ -74,7 +74,9 @@ def record() -> None:
 def write_seconds() -> None:
     from holoslam.warmup import SIGNATURES_FILE, load_signatures
 
-    serial = json.loads(_child(COMPILE, "1", "plain"))
+    # with the numba of the pools' workers, which compile the record in a first run and in ``holoslam warmup``:
+    # the seconds the first run's notice estimates from
+    serial = json.loads(_child(COMPILE, "1", "quick"))
     seconds: dict[tuple[str, str, str], float] = {}
     for module, function, s, _err in serial["done"]:
         seconds[(module, function)] = seconds.get((module, function), 0.0) + s
