@@ -16,8 +16,9 @@ skipped (numba left as it is, the function returns False) when this numba lacks 
   per argument types and per value of the options a compile inherits from its caller, instead of once per whole
   set of the caller's options: the others (``nogil``, the wrappers) never reach the implementation's compile;
 * :func:`without_ssa`: numba's functions typed and lowered without its SSA reconstruction, as numba compiles
-  what it inlines (one type per variable, unified over its assignments): the household's kernels all compile
-  so and every output of its run is the same, byte for byte;
+  what it inlines (one type per variable, unified over its assignments): a deviation in the IR numba hands to
+  LLVM, like the pass levels; the household's kernels all compile so and every output of its run is the same,
+  byte for byte;
 * :func:`collect_rarely`: Python's cyclic garbage collector left to the objects the compiles make
   (``gc.freeze`` of what the worker inherited and imported) and run rarely (``COLLECTOR_THRESHOLDS``): numba's
   compiles make objects by the million, and the default thresholds traverse them all again and again.
@@ -67,10 +68,10 @@ COLLECTOR_THRESHOLDS = (10_000, 1_000, 1_000)
 def quicken() -> dict[str, bool]:
     """Apply the three replacements in this process (a compile worker's), the function passes at
     ``FUNCTION_PASS_OPT`` and the module passes at ``MODULE_PASS_OPT`` (neither above a lower ``NUMBA_OPT`` the
-    user set; ``NUMBA_OPT=max`` left as it is) and the collector's thresholds; which ones took. The household's recorded kernels compiled
-    serially (``python benchmarks/bench_jit_compile.py --repeats 3``, 2026-12-06): 18.6 s CPU with numba as it
-    is, 16.8 s with the three replacements (``quicker_flags`` alone: 19.8 -> 18.9 s, medians of 6 alternated, an
-    earlier day); the pass levels: above."""
+    user set; ``NUMBA_OPT=max`` left as it is), no SSA pass and the collector's thresholds; which ones took. The
+    household's recorded kernels compiled serially (``python benchmarks/bench_jit_compile.py --repeats 3``):
+    18.6 s CPU with numba as it is, 16.8 s with the three replacements (2026-12-06; ``quicker_flags`` alone: 19.8
+    -> 18.9 s, medians of 6 alternated, an earlier day); 17.4 against 12.3 s with all of them (2026-12-07)."""
     from numba.core import config
 
     level = getattr(config, "OPT", 3)
