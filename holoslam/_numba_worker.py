@@ -78,7 +78,8 @@ def quicken() -> dict[str, bool]:
     user_max = bool(getattr(level, "is_opt_max", False))
     function_opt = None if user_max else min(FUNCTION_PASS_OPT, level)
     return {
-        "without_ssa": without_ssa(),  # first: a default of numba's flags, read by quicker_flags' first call
+        # before any compile: a default of numba's flags, which quicker_flags' ``values`` caches at its first call
+        "without_ssa": without_ssa(),
         "quicker_flags": quicker_flags(),
         "one_function_pass_manager": one_function_pass_manager(function_opt),
         "overloads_by_inherited_flags": overloads_by_inherited_flags(),

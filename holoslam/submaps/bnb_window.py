@@ -31,7 +31,7 @@ class SearchWindow:
         c = self.cand
         self.top, self.order = bnb._kernels().top_bounds(pre.prob, pre.levels, pre.starts, c.rows, c.cols,
                                                          c.cells_box, c.box, self.d_top, self.quant)
-        a = self.cand.angles
+        a = c.angles
         self.angle_step = abs(float(a[1] - a[0])) if a.size > 1 else math.pi
         self.margin = -1.0  # best()'s margin: the nodes it set aside (aside) and where its top level stopped
         self.aside, self.k_break = np.zeros((0, 5)), 0
